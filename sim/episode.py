@@ -1,0 +1,38 @@
+"""The record of one episode: 2 Hz observations for the model, 40 Hz traces for the eyes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS
+from sim.disturbances import FallingObject
+from sim.faults import FaultSpec
+
+
+@dataclass
+class Episode:
+    """One run of a skill. `observations[k]` is taken at t = 0.5 k s (k = 0..14)."""
+
+    observations: np.ndarray  # (15, 25) float64, channels in CHANNEL_NAMES order
+    skill: str
+    seed: int
+    fault: FaultSpec | None
+    disturbance: FallingObject | None
+    success: bool  # cube centre within 1 cm of its target at t = 7.5 s
+    cube_error_m: float
+    plan: np.ndarray  # (15, 7) the joint plan that was executed (rad)
+    t_hi: np.ndarray  # (301,) s, 40 Hz from t = 0 to 7.5
+    qpos_hi: np.ndarray  # (301, 7) measured joint angles
+    command_hi: np.ndarray  # (301, 7) joint targets applied to the servos (after faults/hook)
+    ee_hi: np.ndarray  # (301, 3) tool centre point
+    cube_hi: np.ndarray  # (301, 3) cube centre
+    box_hi: np.ndarray  # (301, 3) falling box centre
+    channel_names: tuple[str, ...] = CHANNEL_NAMES
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def joints(self) -> np.ndarray:
+        """(15, 7) joint channels."""
+        return self.observations[:, JOINT_CHANNELS]

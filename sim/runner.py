@@ -1,0 +1,220 @@
+"""Run episodes: reset the workcell for a seed, track a 2 Hz joint plan at 40 Hz, observe at 2 Hz.
+
+`run_episode` plans a skill by IK and executes it; `execute_plan` executes any 2 Hz joint plan
+(e.g. one recalled by a model). The loop per 40 Hz tick is: the controller interpolates the plan
+linearly between observation steps (target plus velocity feed-forward); an optional
+`correction_hook` may replace the target; then every effect (fault, disturbance) acts; then
+10 physics steps of 2.5 ms. MuJoCo warnings or a diverging state raise `SimulationError`: an
+unstable episode is never returned as data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Callable
+
+import mujoco
+import numpy as np
+from dm_control import mjcf
+
+from sim.config import SIM
+from sim.disturbances import FallingObject, make_effect
+from sim.effects import Effect, Tick
+from sim.episode import Episode
+from sim.faults import FaultSpec, JointLock
+from sim.panda import Q_MAX, Q_MIN
+from sim.scene import BOX_PARK, CUBE_HALF, SceneHandles, build_scene
+from sim.skills import SKILLS, make_plan, sample_variation, skill_spec, target_position
+
+N_NOISY = 14  # 12 wrench + 2 finger channels get sensor noise
+
+
+class SimulationError(RuntimeError):
+    """MuJoCo reported a warning or the state diverged; the episode's data is not trustworthy."""
+
+
+@dataclass
+class ControlState:
+    """What a correction hook sees at each 40 Hz tick."""
+
+    tick: int
+    time_s: float
+    step: int  # observation block k (the tick moves from t_k towards t_k+1)
+    q: np.ndarray  # (7,) measured joint angles
+    qd: np.ndarray  # (7,) measured joint velocities
+    ee: np.ndarray  # (3,) tool centre point
+    target: np.ndarray  # (7,) the plan's target for the end of this tick
+    observations: np.ndarray  # (k + 1, 25) observations so far
+
+
+CorrectionHook = Callable[[ControlState], "np.ndarray | None"]
+
+
+@dataclass
+class World:
+    """The compiled workcell and, resolved once through `physics.bind`, where its state lives."""
+
+    physics: mjcf.Physics
+    scene: SceneHandles
+    arm_qpos: np.ndarray  # qpos addresses of joints 1..7
+    arm_dof: np.ndarray
+    finger_qpos: np.ndarray
+    arm_act: np.ndarray
+    grip_act: int
+    tcp_site: int
+    cube_body: int
+    box_body: int
+    wrench_adr: np.ndarray  # sensordata addresses in channel order (left f, left t, right f, right t)
+    box_inertial: tuple[float, np.ndarray]  # the falling box's compiled mass and inertia (disturbances change them)
+
+    @property
+    def qpos(self) -> np.ndarray:
+        return self.physics.data.qpos[self.arm_qpos]
+
+
+@lru_cache(maxsize=None)
+def world() -> World:
+    """One compiled workcell per process (compiling costs ~50 ms; resetting is cheap)."""
+    scene = build_scene(SIM.timing.timestep_s)
+    physics = mjcf.Physics.from_mjcf_model(scene.root)
+    p = scene.panda
+    sensors = [s for pair in zip(p.force_sensors, p.torque_sensors) for s in pair]
+    wrench = np.concatenate([physics.bind(s).adr + np.arange(3) for s in sensors])
+    return World(physics, scene, physics.bind(p.joints).qposadr.copy(), physics.bind(p.joints).dofadr.copy(),
+                 physics.bind(p.finger_joints).qposadr.copy(), physics.bind(p.actuators).element_id.copy(),
+                 int(physics.bind(p.gripper).element_id), int(physics.bind(p.tcp).element_id),
+                 int(physics.bind(scene.cube_body).element_id), int(physics.bind(scene.box_body).element_id),
+                 wrench, (float(physics.bind(scene.box_body).mass), physics.bind(scene.box_body).inertia.copy()))
+
+
+def _rng(skill: str, seed: int) -> np.random.Generator:
+    return np.random.default_rng((int(seed), SKILLS.index(skill)))
+
+
+def _reset(w: World, plan0: np.ndarray, cube_xy: np.ndarray, cube_yaw: float) -> np.ndarray:
+    """Put the arm at the plan's start, the cube on the table; return the sensors' tare."""
+    physics, scene = w.physics, w.scene
+    physics.reset()
+    physics.bind(scene.box_body).mass, physics.bind(scene.box_body).inertia = w.box_inertial
+    physics.bind(scene.panda.joints).qpos = plan0
+    physics.bind(scene.panda.finger_joints).qpos = SIM.servo.gripper_open_m
+    physics.bind(scene.cube).qpos = [*cube_xy, CUBE_HALF, np.cos(cube_yaw / 2), 0, 0, np.sin(cube_yaw / 2)]
+    physics.bind(scene.box).qpos = [*BOX_PARK, 1, 0, 0, 0]
+    physics.bind(scene.panda.actuators).ctrl = plan0
+    physics.bind(scene.panda.gripper).ctrl = SIM.servo.gripper_open_m
+    physics.forward()
+    return physics.data.sensordata[w.wrench_adr].copy()
+
+
+def _check(physics: mjcf.Physics, counts: np.ndarray) -> None:
+    if counts.any():
+        names = [mujoco.mjtWarning(i).name for i in np.flatnonzero(counts)]
+        raise SimulationError(f"MuJoCo warnings at t={physics.data.time:.3f}s: {names}")
+
+
+def _observe(w: World, gripper: float, tare: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    physics = w.physics
+    data = physics.data
+    mujoco.mj_forward(physics.model.ptr, data.ptr)
+    fingers = data.qpos[w.finger_qpos] + noise[12:] * SIM.noise.finger_m
+    scale = np.tile(np.r_[[SIM.noise.force_n] * 3, [SIM.noise.torque_nm] * 3], 2)
+    wrench = data.sensordata[w.wrench_adr] - tare + noise[:12] * scale
+    return np.concatenate([w.qpos, data.site_xpos[w.tcp_site], fingers, [gripper], wrench])
+
+
+def _execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube_xy: np.ndarray,
+             cube_yaw: float, noise: np.ndarray, effects: list[Effect], hook: CorrectionHook | None,
+             fault: FaultSpec | None, disturbance: FallingObject | None) -> Episode:
+    timing, w = SIM.timing, world()
+    physics, scene = w.physics, w.scene
+    model, data = physics.model.ptr, physics.data.ptr
+    tare = _reset(w, joints[0], cube_xy, cube_yaw)
+    for effect in effects:
+        effect.initialize(physics, scene)
+    warnings = physics.data.warning.number  # a live view of MuJoCo's warning counters
+    kv_over_kp = np.asarray(SIM.servo.kv) / np.asarray(SIM.servo.kp)
+    block, n = timing.ticks_per_step, timing.n_steps
+    hi = {key: [] for key in ("q", "cmd", "ee", "cube", "box")}
+
+    def record(command: np.ndarray) -> None:
+        hi["q"].append(w.qpos)
+        hi["cmd"].append(command.copy())
+        hi["ee"].append(data.site_xpos[w.tcp_site].copy())
+        hi["cube"].append(data.xpos[w.cube_body].copy())
+        hi["box"].append(data.xpos[w.box_body].copy())
+
+    record(joints[0])
+    obs = []
+    for index in range(n * block):
+        k, sub = divmod(index, block)
+        if sub == 0:
+            obs.append(_observe(w, gripper[k], tare, noise[k]))
+        nxt = joints[min(k + 1, n - 1)]
+        tick = Tick(index, index / timing.control_hz, k, joints, joints[k] + (sub + 1) / block * (nxt - joints[k]),
+                    (nxt - joints[k]) * timing.observation_hz, bool(gripper[k]))
+        if hook is not None:
+            state = ControlState(index, tick.time_s, k, w.qpos, data.qvel[w.arm_dof].copy(),
+                                 data.site_xpos[w.tcp_site].copy(), tick.target.copy(), np.array(obs))
+            corrected = hook(state)
+            if corrected is not None:
+                tick.target = np.asarray(corrected, dtype=float).reshape(7)
+        for effect in effects:
+            effect.before_tick(physics, scene, tick)
+        target = np.clip(tick.target, Q_MIN, Q_MAX)
+        data.ctrl[w.arm_act] = target + kv_over_kp * tick.velocity
+        data.ctrl[w.grip_act] = SIM.servo.gripper_closed_m if tick.gripper_closed else SIM.servo.gripper_open_m
+        mujoco.mj_step(model, data, timing.substeps)
+        _check(physics, warnings)
+        record(target)
+    observations = np.array(obs)
+    if not np.isfinite(observations).all():
+        raise SimulationError("non-finite observation")
+    cube_error = float(np.linalg.norm(hi["cube"][-1] - target_position(skill)))
+    return Episode(observations=observations, skill=skill, seed=int(seed), fault=fault, disturbance=disturbance,
+                   success=cube_error < SIM.success_tolerance_m, cube_error_m=cube_error, plan=joints.copy(),
+                   t_hi=np.arange(n * block + 1) / timing.control_hz, qpos_hi=np.array(hi["q"]),
+                   command_hi=np.array(hi["cmd"]), ee_hi=np.array(hi["ee"]), cube_hi=np.array(hi["cube"]),
+                   box_hi=np.array(hi["box"]))
+
+
+def _effects(fault: FaultSpec | None, disturbance: FallingObject | None) -> list[Effect]:
+    return ([] if fault is None else [JointLock(fault)]) + make_effect(disturbance)
+
+
+def run_episode(skill: str, seed: int, fault: FaultSpec | None = None,
+                disturbance: FallingObject | None = None) -> Episode:
+    """Plan `skill` for `seed` by IK and execute it, optionally with a fault and/or a disturbance."""
+    skill_spec(skill)
+    rng = _rng(skill, seed)
+    variation = sample_variation(skill, rng)
+    plan = make_plan(skill, variation)
+    noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
+    return _execute(skill, seed, plan.joints, plan.gripper, variation.cube_xy, variation.cube_yaw, noise,
+                    _effects(fault, disturbance), None, fault, disturbance)
+
+
+def execute_plan(joint_plan: np.ndarray, gripper_plan: np.ndarray, seed: int,
+                 correction_hook: CorrectionHook | None = None, disturbance: FallingObject | None = None,
+                 skill: str = SKILLS[0], fault: FaultSpec | None = None) -> Episode:
+    """Execute a (15, 7) joint plan (rad) and (15,) gripper toggles given at 2 Hz.
+
+    The scene (cube pose, sensor noise) is the one `run_episode(skill, seed)` would see, so a
+    recalled plan can be compared with the demonstration of the same seed. `correction_hook`,
+    if given, is called before every 40 Hz tick with a `ControlState` and may return a (7,)
+    joint target replacing the plan's for that tick (None keeps it); faults and disturbances
+    still act after it. Targets are clipped to the joint limits.
+    """
+    skill_spec(skill)
+    joints = np.asarray(joint_plan, dtype=float)
+    gripper = np.asarray(gripper_plan, dtype=float)
+    n = SIM.timing.n_steps
+    if joints.shape != (n, 7) or not np.isfinite(joints).all():
+        raise ValueError(f"joint_plan must be a finite ({n}, 7) array, got shape {joints.shape}")
+    if gripper.shape != (n,) or not np.isin(gripper, (0.0, 1.0)).all():
+        raise ValueError(f"gripper_plan must be a ({n},) array of 0/1, got {gripper!r}")
+    rng = _rng(skill, seed)
+    variation = sample_variation(skill, rng)
+    noise = rng.standard_normal((n, N_NOISY))
+    return _execute(skill, seed, joints, gripper, variation.cube_xy, variation.cube_yaw, noise,
+                    _effects(fault, disturbance), correction_hook, fault, disturbance)

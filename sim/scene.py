@@ -1,0 +1,63 @@
+"""The workcell, composed with `dm_control.mjcf`: floor, table, cube and a parked falling box.
+
+The Panda's base sits at the world origin on the table's surface (z = 0), as a bench-mounted
+arm does, so the table top is where a lowered hand first hits. The falling box rests on the
+floor far from the arm until a `FallingObject` disturbance teleports it above the arm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from dm_control import mjcf
+
+from sim.panda import ARM_CONTYPE, PandaHandles, build_panda
+
+CUBE_HALF = 0.025  # a 5 cm cube, comfortably inside the Franka Hand's 8 cm stroke
+CUBE_MASS = 0.1
+BOX_HALF = (0.06, 0.06, 0.04)
+BOX_PARK = (-1.5, 1.5, 0.04 - 0.75)  # on the floor, behind the robot
+TABLE_TOP, FLOOR_Z = 0.0, -0.75
+WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 1 | ARM_CONTYPE
+
+
+@dataclass
+class SceneHandles:
+    """Element handles of the composed scene."""
+
+    root: mjcf.RootElement
+    panda: PandaHandles
+    cube: mjcf.Element  # free joint
+    cube_body: mjcf.Element
+    box: mjcf.Element  # free joint of the falling box
+    box_body: mjcf.Element
+    table: mjcf.Element
+
+
+def build_scene(timestep_s: float) -> SceneHandles:
+    """Compose the Panda into the workcell."""
+    root = mjcf.RootElement(model="workcell")
+    root.option.timestep = timestep_s
+    root.option.cone = "elliptic"  # elliptic friction cones hold a pinched cube without creep
+    root.option.impratio = 10
+    contact = dict(contype=WORLD_CONTYPE, conaffinity=WORLD_CONAFFINITY)
+
+    root.worldbody.add("light", pos=(0, 0, 3), dir=(0, 0, -1))
+    root.worldbody.add("geom", name="floor", type="plane", size=(3, 3, 0.1), pos=(0, 0, FLOOR_Z),
+                       rgba=(0.5, 0.55, 0.6, 1), **contact)
+    table = root.worldbody.add("geom", name="table", type="box", size=(0.45, 0.7, 0.375),
+                               pos=(0.35, 0, TABLE_TOP - 0.375), rgba=(0.6, 0.45, 0.3, 1), **contact)
+
+    cube_body = root.worldbody.add("body", name="cube", pos=(0.5, 0, CUBE_HALF))
+    cube = cube_body.add("freejoint", name="cube_free")
+    cube_body.add("geom", name="cube_geom", type="box", size=(CUBE_HALF,) * 3, mass=CUBE_MASS,
+                  friction=(1.0, 0.02, 0.002), condim=4, rgba=(0.85, 0.2, 0.2, 1), **contact)
+
+    box_body = root.worldbody.add("body", name="falling_box", pos=BOX_PARK)
+    box = box_body.add("freejoint", name="falling_box_free")
+    box_body.add("geom", name="falling_box_geom", type="box", size=BOX_HALF, mass=5.0,
+                 rgba=(0.3, 0.3, 0.8, 1), **contact)
+
+    panda = build_panda()
+    root.attach(panda.root)
+    return SceneHandles(root, panda, cube, cube_body, box, box_body, table)
