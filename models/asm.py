@@ -1,0 +1,186 @@
+"""A Neural ASM: the tPC network with what it needs to face raw sensorimotor data.
+
+It bundles the network, the per-channel normaliser, the channel names, calibrations
+(precisions and thresholds per recall setting) and the provenance of its training
+data. Everything the service or an experiment asks of a trained model goes through
+this class; it is what a checkpoint stores.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from models import recall as recall_
+from models.calibration import Calibration, calibration_key, error_spread, set_thresholds
+from models.config import FAST, SCORING, TPCConfig
+from models.normaliser import Normaliser
+from models.scoring import SequenceScore, StepScore, energy
+from models.tpc import TemporalPC
+from models.train import train
+
+
+def as_sequences(data: np.ndarray, width: int, what: str = "sequences") -> np.ndarray:
+    """Check raw data is (N, T, width) or (T, width) and finite; returns (N, T, width)."""
+    arr = np.asarray(data, np.float64)
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[-1] != width:
+        raise ValueError(f"{what} must have shape (N, T, {width}) or (T, {width}), got {arr.shape}")
+    if arr.shape[1] == 0:
+        raise ValueError(f"{what} have no time steps")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{what} contain NaN or inf")
+    return arr
+
+
+class NeuralASM:
+    def __init__(
+        self,
+        net: TemporalPC,
+        normaliser: Normaliser,
+        channel_names: Sequence[str],
+        calibrations: dict[str, Calibration] | None = None,
+        provenance: dict[str, Any] | None = None,
+        history: list[float] | None = None,
+    ) -> None:
+        if len(channel_names) != net.obs_size:
+            raise ValueError(f"{len(channel_names)} channel names for {net.obs_size} channels")
+        self.net = net
+        self.normaliser = normaliser
+        self.channel_names = tuple(channel_names)
+        self.calibrations = dict(calibrations or {})
+        self.provenance = dict(provenance or {})
+        self.history = list(history or [])
+
+    @classmethod
+    def fit(
+        cls,
+        sequences: np.ndarray,
+        channel_names: Sequence[str],
+        config: TPCConfig = FAST,
+        progress: bool = True,
+        provenance: dict[str, Any] | None = None,
+    ) -> "NeuralASM":
+        """Fit the normaliser, train the network and estimate precisions on the data.
+
+        The precisions estimated here come from the training sequences themselves and
+        are optimistic; ``calibrate`` replaces them with estimates from held-out
+        normal episodes.
+        """
+        data = as_sequences(sequences, len(channel_names))
+        normaliser = Normaliser.fit(data)
+        net = TemporalPC(len(channel_names), config)
+        history = train(net, normaliser.normalise(data), progress=progress)
+        model = cls(net, normaliser, channel_names, provenance=provenance, history=history)
+        for mode in recall_.RECALL_MODES:
+            errors = model.errors(data, mode, 1)
+            model.calibrations[calibration_key(mode, 1)] = Calibration(
+                mode, 1, error_spread(errors), source="training sequences"
+            )
+        return model
+
+    @property
+    def config(self) -> TPCConfig:
+        return self.net.config
+
+    @property
+    def obs_size(self) -> int:
+        return self.net.obs_size
+
+    def _rng(self) -> np.random.Generator:
+        # Recall with a random initial state stays reproducible for a given model.
+        return np.random.default_rng(self.config.seed)
+
+    def recall(self, cue: np.ndarray, horizon: int) -> np.ndarray:
+        """Offline recall of (N, horizon, D) from a raw cue (N, T_n, D): the skill's plan."""
+        x = self.normaliser.normalise(as_sequences(cue, self.obs_size, "cue"))
+        out = recall_.offline_recall(self.net, x, horizon, self._rng())
+        return self.normaliser.denormalise(out)
+
+    def errors(self, sequences: np.ndarray, mode: str = "offline", cue_steps: int = 1) -> np.ndarray:
+        """Normalised prediction errors (N, T, D) of raw sequences under a recall mode."""
+        x = self.normaliser.normalise(as_sequences(sequences, self.obs_size))
+        return x - recall_.run(self.net, x, mode, cue_steps, self._rng())  # type: ignore[arg-type]
+
+    def calibration(self, mode: str, cue_steps: int) -> Calibration | None:
+        return self.calibrations.get(calibration_key(mode, cue_steps))
+
+    def error_std(self, mode: str, cue_steps: int, weighted: bool) -> np.ndarray | None:
+        if not weighted:
+            return None
+        calibration = self.calibration(mode, cue_steps)
+        if calibration is None:
+            raise KeyError(
+                f"no calibration for recall {mode!r} cued from {cue_steps} step(s); "
+                f"have {sorted(self.calibrations)}: calibrate first or score unweighted"
+            )
+        return calibration.error_std
+
+    def score(
+        self,
+        sequences: np.ndarray,
+        mode: str = "offline",
+        cue_steps: int = 1,
+        weighted: bool = True,
+    ) -> SequenceScore:
+        std = self.error_std(mode, cue_steps, weighted)
+        errors = self.errors(sequences, mode, cue_steps)
+        x = self.normaliser.normalise(as_sequences(sequences, self.obs_size))
+        expected = self.normaliser.denormalise(x - errors)
+        return SequenceScore(expected, errors, energy(errors, std))
+
+    def calibrate(
+        self,
+        precision_sequences: np.ndarray,
+        threshold_sequences: np.ndarray,
+        mode: str = "offline",
+        cue_steps: int = 1,
+        fprs: tuple[float, ...] = SCORING.fprs,
+        source: str = "held-out normal episodes",
+    ) -> Calibration:
+        """Estimate precisions on one set of normal episodes and thresholds on another."""
+        calibration = Calibration(
+            mode, cue_steps, error_spread(self.errors(precision_sequences, mode, cue_steps)), source
+        )
+        set_thresholds(calibration, self.errors(threshold_sequences, mode, cue_steps), fprs)
+        self.calibrations[calibration.key] = calibration
+        return calibration
+
+    def stream(self, mode: str = "offline", cue_steps: int = 1, weighted: bool = True) -> "SkillStream":
+        return SkillStream(self, mode, cue_steps, weighted)
+
+
+class SkillStream:
+    """One episode scored step by step, as the service sees it: ``step(x) -> StepScore``."""
+
+    def __init__(self, model: NeuralASM, mode: str, cue_steps: int, weighted: bool) -> None:
+        self.model = model
+        self.error_std = model.error_std(mode, cue_steps, weighted)
+        self.recaller = recall_.Recaller(model.net, 1, mode, cue_steps, model._rng())  # type: ignore[arg-type]
+
+    @property
+    def t(self) -> int:
+        return self.recaller.t
+
+    def step(self, observation: np.ndarray) -> StepScore:
+        model = self.model
+        raw = np.asarray(observation, np.float64)
+        if raw.shape != (model.obs_size,):
+            raise ValueError(f"observation must have {model.obs_size} values, got shape {raw.shape}")
+        if not np.isfinite(raw).all():
+            bad = [model.channel_names[i] for i in np.flatnonzero(~np.isfinite(raw))]
+            raise ValueError(f"observation has NaN or inf in channel(s) {bad}")
+        t = self.t
+        x = model.normaliser.normalise(raw)[None]
+        expected = self.recaller.step(x)[0]
+        errors = x[0] - expected
+        std = None if self.error_std is None else self.error_std[min(t, len(self.error_std) - 1)][None]
+        return StepScore(
+            step=t,
+            expected=model.normaliser.denormalise(expected),
+            errors=errors,
+            energy=float(energy(errors[None], std)[0]),
+            prediction=model.normaliser.denormalise(self.recaller.forecast()[0]),
+        )

@@ -1,0 +1,65 @@
+"""Precisions and fault thresholds from normal episodes.
+
+A calibration belongs to one recall setting (mode, cue length). It holds the expected
+spread of each channel's normalised prediction error at each step (the precisions of
+the observation layer) and energy thresholds at chosen false-positive rates: one for
+all steps, one per step, and one for an episode's peak energy. Spreads and thresholds
+should come from different normal episodes; estimating both on the same ones makes
+the measured false-positive rate optimistic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from models.config import SCORING
+from models.scoring import energy
+
+
+@dataclass
+class Calibration:
+    mode: str
+    cue_steps: int
+    error_std: np.ndarray  # (T, D), normalised units
+    source: str  # where the spreads and thresholds came from, for provenance
+    thresholds: dict[float, float] = field(default_factory=dict)
+    step_thresholds: dict[float, np.ndarray] = field(default_factory=dict)
+    episode_thresholds: dict[float, float] = field(default_factory=dict)
+
+    @property
+    def key(self) -> str:
+        return calibration_key(self.mode, self.cue_steps)
+
+
+def calibration_key(mode: str, cue_steps: int) -> str:
+    return f"{mode}:{cue_steps}"
+
+
+def error_spread(errors: np.ndarray, floor: float = SCORING.error_std_floor) -> np.ndarray:
+    """Per-step, per-channel RMS of normalised errors (N, T, D) -> (T, D), floored."""
+    rms = np.sqrt((errors.astype(np.float64) ** 2).mean(axis=0))
+    return np.maximum(rms, floor)
+
+
+def quantile_threshold(energies: np.ndarray, fpr: float) -> float:
+    """Energy above which a fraction ``fpr`` of the given normal energies lie."""
+    if not 0 < fpr < 1:
+        raise ValueError(f"false-positive rate must be in (0, 1), got {fpr}")
+    return float(np.quantile(energies, 1.0 - fpr, method="higher"))
+
+
+def set_thresholds(
+    calibration: Calibration,
+    errors: np.ndarray,
+    fprs: tuple[float, ...] = SCORING.fprs,
+) -> None:
+    """Thresholds from normalised errors (N, T, D) of normal episodes, weighted energy."""
+    e = energy(errors, calibration.error_std)
+    for fpr in fprs:
+        calibration.thresholds[fpr] = quantile_threshold(e, fpr)
+        calibration.step_thresholds[fpr] = np.array(
+            [quantile_threshold(e[:, t], fpr) for t in range(e.shape[1])]
+        )
+        calibration.episode_thresholds[fpr] = quantile_threshold(e.max(axis=1), fpr)

@@ -1,0 +1,171 @@
+"""Checkpoints: one safetensors file holding the weights and a JSON metadata header.
+
+Tensors: ``W_H``, ``W_F``, ``normaliser.mean``, ``normaliser.std`` and, per
+calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std`` and
+``calibration.<key>.step_thresholds``. The header entry ``neural_asm`` is a JSON
+document with the format version, the TPCConfig, the channel names, each
+calibration's thresholds and source, the data provenance and the training energy
+curve. No pickle is involved; writes go to a temporary file that replaces the target
+only once complete, so a crash never leaves a half-written checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors import SafetensorError
+from safetensors.torch import load as st_load
+from safetensors.torch import save as st_save
+
+from models.asm import NeuralASM
+from models.calibration import Calibration
+from models.config import TPCConfig
+from models.normaliser import Normaliser
+from models.tpc import TemporalPC
+
+FORMAT_VERSION = 1
+HEADER_KEY = "neural_asm"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint is missing, corrupt, truncated or does not fit its own metadata."""
+
+
+def _package_version() -> str:
+    try:
+        return version("neural-asm")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _f32(a: np.ndarray) -> torch.Tensor:
+    return torch.from_numpy(np.ascontiguousarray(a, np.float32))
+
+
+def _f64(a: np.ndarray) -> torch.Tensor:
+    return torch.from_numpy(np.ascontiguousarray(a, np.float64))
+
+
+def to_bytes(model: NeuralASM) -> bytes:
+    tensors = {
+        "W_H": model.net.W_H.contiguous(),
+        "W_F": model.net.W_F.contiguous(),
+        "normaliser.mean": _f64(model.normaliser.mean),
+        "normaliser.std": _f64(model.normaliser.std),
+    }
+    calibrations = []
+    for key, cal in model.calibrations.items():
+        fprs = sorted(cal.step_thresholds)
+        tensors[f"calibration.{key}.error_std"] = _f64(cal.error_std)
+        if fprs:
+            tensors[f"calibration.{key}.step_thresholds"] = _f64(
+                np.stack([cal.step_thresholds[f] for f in fprs])
+            )
+        calibrations.append(
+            {
+                "key": key,
+                "mode": cal.mode,
+                "cue_steps": cal.cue_steps,
+                "source": cal.source,
+                "fprs": fprs,
+                "thresholds": [cal.thresholds[f] for f in fprs],
+                "episode_thresholds": [cal.episode_thresholds[f] for f in fprs],
+            }
+        )
+    meta = {
+        "format_version": FORMAT_VERSION,
+        "package_version": _package_version(),
+        "config": model.config.to_dict(),
+        "channel_names": list(model.channel_names),
+        "calibrations": calibrations,
+        "provenance": model.provenance,
+        "history": model.history,
+    }
+    return st_save(tensors, metadata={HEADER_KEY: json.dumps(meta)})
+
+
+def save(model: NeuralASM, path: str | os.PathLike[str]) -> Path:
+    """Write atomically: a temporary file in the same folder, then os.replace."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = to_bytes(model)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_header(data: bytes, where: str) -> dict[str, Any]:
+    """The JSON metadata of checkpoint bytes, without building the model."""
+    try:
+        header_len = int.from_bytes(data[:8], "little")
+        header = json.loads(data[8 : 8 + header_len])
+        meta = json.loads(header["__metadata__"][HEADER_KEY])
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{where} is not a Neural ASM checkpoint (no readable metadata)") from exc
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise CheckpointError(
+            f"{where} has format version {meta.get('format_version')!r}; "
+            f"this software reads version {FORMAT_VERSION}"
+        )
+    return meta
+
+
+def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
+    meta = read_header(data, where)
+    try:
+        tensors = st_load(data)
+    except (SafetensorError, ValueError, RuntimeError) as exc:
+        raise CheckpointError(f"{where} is corrupt or truncated: {exc}") from exc
+    try:
+        config = TPCConfig.from_dict(meta["config"])
+        names = meta["channel_names"]
+        net = TemporalPC(len(names), config)
+        net.load_weights(tensors["W_H"], tensors["W_F"])
+        normaliser = Normaliser(tensors["normaliser.mean"].numpy(), tensors["normaliser.std"].numpy())
+        calibrations = {}
+        for c in meta["calibrations"]:
+            fprs = [float(f) for f in c["fprs"]]
+            steps = tensors.get(f"calibration.{c['key']}.step_thresholds")
+            calibrations[c["key"]] = Calibration(
+                mode=c["mode"],
+                cue_steps=int(c["cue_steps"]),
+                error_std=tensors[f"calibration.{c['key']}.error_std"].numpy(),
+                source=c["source"],
+                thresholds=dict(zip(fprs, c["thresholds"])),
+                step_thresholds={f: steps[i].numpy() for i, f in enumerate(fprs)},
+                episode_thresholds=dict(zip(fprs, c["episode_thresholds"])),
+            )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"{where} does not match its own metadata: {exc}") from exc
+    if normaliser.mean.shape != (len(names),) or normaliser.std.shape != (len(names),):
+        raise CheckpointError(f"{where}: normaliser has {normaliser.mean.shape} values for {len(names)} channels")
+    for cal in calibrations.values():
+        if cal.error_std.ndim != 2 or cal.error_std.shape[1] != len(names):
+            raise CheckpointError(f"{where}: calibration {cal.key} has shape {cal.error_std.shape}")
+    if not all(torch.isfinite(t).all() for t in tensors.values()):
+        raise CheckpointError(f"{where} holds NaN or inf values")
+    return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"))
+
+
+def load(path: str | os.PathLike[str]) -> NeuralASM:
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError as exc:
+        raise CheckpointError(f"no checkpoint at {path}") from exc
+    return from_bytes(data, str(path))

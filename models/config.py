@@ -1,0 +1,104 @@
+"""Configuration of the tPC network and its training, in one typed place.
+
+Two presets exist. ``FAITHFUL`` is the paper's setting (Methods, "Network training
+details"): H=256, Adam lr 1e-4, 1000 learning iterations, batch size 1, K=100
+inference iterations at gamma=1e-2. ``FAST`` is the default: the same network and
+inference, but all demonstrations relax in one batch and learn at a larger rate for
+fewer epochs. ``benchmarks/bench_models.py`` compares the two on held-out recall.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, Literal
+
+Optimizer = Literal["adam", "sgd"]
+InitialState = Literal["zeros", "random"]
+
+
+@dataclass(frozen=True)
+class TPCConfig:
+    """Hyper-parameters of a Neural ASM (paper eqs. 1-6)."""
+
+    hidden_size: int = 256
+    inference_steps: int = 100  # K
+    inference_rate: float = 1e-2  # gamma
+    learning_rate: float = 2e-3
+    # Cosine decay to this fraction of learning_rate by the last epoch; 1 keeps it constant.
+    lr_final_fraction: float = 0.01
+    epochs: int = 600
+    batch_size: int = 0  # 0: every training sequence in one batch
+    optimizer: Optimizer = "adam"
+    # zhat before step 0. "zeros" makes the first observation alone set the hidden
+    # state, so recall from a cue is deterministic and skills are told apart by their
+    # cue; "random" is the reference code's U(+-sqrt(6/H)) resampled every epoch.
+    initial_state: InitialState = "zeros"
+    # Upper bound on the spectral norm of W_F, enforced by projection after every
+    # update. None derives it from stability of the relaxation (see tpc.stable_wf_norm).
+    wf_max_norm: float | None = 3.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        positive = ("hidden_size", "inference_steps", "inference_rate", "learning_rate", "epochs")
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ValueError(f"TPCConfig.{name} must be > 0, got {getattr(self, name)!r}")
+        if not 0 < self.lr_final_fraction <= 1:
+            raise ValueError(
+                f"TPCConfig.lr_final_fraction must be in (0, 1], got {self.lr_final_fraction}"
+            )
+        if self.batch_size < 0:
+            raise ValueError(f"TPCConfig.batch_size must be >= 0, got {self.batch_size}")
+        if self.optimizer not in ("adam", "sgd"):
+            raise ValueError(f"TPCConfig.optimizer must be 'adam' or 'sgd', got {self.optimizer!r}")
+        if self.initial_state not in ("zeros", "random"):
+            raise ValueError(
+                f"TPCConfig.initial_state must be 'zeros' or 'random', got {self.initial_state!r}"
+            )
+        if self.wf_max_norm is not None and not self.wf_max_norm > 0:
+            raise ValueError(f"TPCConfig.wf_max_norm must be > 0 or None, got {self.wf_max_norm}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "TPCConfig":
+        known = {f.name for f in fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown TPCConfig fields: {sorted(unknown)}")
+        return cls(**data)
+
+    def with_(self, **changes: Any) -> "TPCConfig":
+        return replace(self, **changes)
+
+
+FAITHFUL = TPCConfig(
+    hidden_size=256,
+    inference_steps=100,
+    inference_rate=1e-2,
+    learning_rate=1e-4,
+    lr_final_fraction=1.0,
+    epochs=1000,
+    batch_size=1,
+    optimizer="adam",
+    initial_state="random",
+    wf_max_norm=None,
+)
+FAST = TPCConfig()
+PRESETS: dict[str, TPCConfig] = {"fast": FAST, "faithful": FAITHFUL}
+
+
+@dataclass(frozen=True)
+class ScoringConfig:
+    """How prediction errors become energies, precisions and thresholds."""
+
+    # Floor on the expected spread of a normalised prediction error. Spreads estimated
+    # from ~20 episodes can be near zero for a channel that barely varies (a toggle),
+    # which would give it an unbounded precision.
+    error_std_floor: float = 0.05
+    # False-positive rates (per step) at which thresholds are calibrated.
+    fprs: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
+
+
+SCORING = ScoringConfig()

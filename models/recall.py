@@ -1,0 +1,111 @@
+"""Recall (memory expression): offline and online, one step at a time.
+
+Offline recall infers z from the first ``cue_steps`` observations, then rolls the
+hidden state forward with W_H alone: the plan is fixed after the cue. Online recall
+infers z from the true observation at every step and predicts the next one.
+
+At every step the network first says what it expects, then sees the observation:
+- cue steps: z is inferred from x; the expectation is the reconstruction W_F f(z);
+- offline, after the cue: z = W_H f(zhat), expectation W_F f(z), no inference;
+- online, after the cue: expectation W_F f(W_H f(zhat)), then z is inferred from x.
+The eq. 6 relaxation of x-hat starts at, and stays at, the forward prediction
+W_F f(z): with x-hat free that is the minimum of eq. 5 (see relax_observation).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from models.tpc import TemporalPC
+
+RecallMode = Literal["offline", "online"]
+RECALL_MODES: tuple[str, ...] = ("offline", "online")
+
+
+def check_recall(mode: str, cue_steps: int) -> None:
+    if mode not in RECALL_MODES:
+        raise ValueError(f"recall mode must be one of {RECALL_MODES}, got {mode!r}")
+    if cue_steps < 1:
+        raise ValueError(f"cue_steps must be >= 1, got {cue_steps}")
+
+
+class Recaller:
+    """The hidden state of a batch of sequences during recall."""
+
+    def __init__(
+        self,
+        net: TemporalPC,
+        batch: int,
+        mode: RecallMode = "offline",
+        cue_steps: int = 1,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        check_recall(mode, cue_steps)
+        self.net, self.mode, self.cue_steps = net, mode, cue_steps
+        self.zhat = net.initial_state(batch, rng or np.random.default_rng(0))
+        self.t = 0
+
+    @property
+    def infers_now(self) -> bool:
+        return self.t < self.cue_steps or self.mode == "online"
+
+    def step(self, x: np.ndarray | None) -> np.ndarray:
+        """Advance one step given observation x (B, D); returns what was expected of it."""
+        prior = self.net.prior(self.zhat)
+        if self.infers_now:
+            if x is None:
+                raise ValueError(f"step {self.t} needs an observation in {self.mode} recall")
+            z = self.net.infer(prior, x)
+            expected = self.net.observe(z if self.t < self.cue_steps else prior)
+        else:
+            z = prior
+            expected = self.net.observe(z)
+        self.zhat = z
+        self.t += 1
+        return expected
+
+    def forecast(self) -> np.ndarray:
+        """Prediction of the next observation, W_F f(W_H f(zhat))."""
+        return self.net.observe(self.net.prior(self.zhat))
+
+
+def run(
+    net: TemporalPC,
+    sequences: np.ndarray,
+    mode: RecallMode = "offline",
+    cue_steps: int = 1,
+    rng: np.random.Generator | None = None,
+) -> np.ndarray:
+    """Expectations (N, T, D) for normalised sequences (N, T, D) under one recall mode."""
+    recaller = Recaller(net, len(sequences), mode, cue_steps, rng)
+    return np.stack([recaller.step(sequences[:, t]) for t in range(sequences.shape[1])], axis=1)
+
+
+def offline_recall(
+    net: TemporalPC, cue: np.ndarray, horizon: int, rng: np.random.Generator | None = None
+) -> np.ndarray:
+    """Recall (N, horizon, D) from a normalised cue (N, T_n, D): the model's plan."""
+    cue_steps = cue.shape[1]
+    if horizon < cue_steps:
+        raise ValueError(f"horizon {horizon} is shorter than the cue ({cue_steps} steps)")
+    recaller = Recaller(net, len(cue), "offline", cue_steps, rng)
+    out = [recaller.step(cue[:, t] if t < cue_steps else None) for t in range(horizon)]
+    return np.stack(out, axis=1)
+
+
+def relax_observation(
+    net: TemporalPC, z: np.ndarray, x_hat: np.ndarray | None = None, steps: int | None = None
+) -> np.ndarray:
+    """Eq. 6: x-hat <- x-hat - gamma * eps_x with eps_x = x-hat - W_F f(z).
+
+    By default x-hat starts at the forward prediction W_F f(z), where eps_x is zero and
+    it stays: that is why recall uses the forward prediction directly.
+    """
+    gamma = net.config.inference_rate
+    target = net.observe(z)
+    x_hat = target.copy() if x_hat is None else np.array(x_hat, np.float32)
+    for _ in range(net.config.inference_steps if steps is None else steps):
+        x_hat -= gamma * (x_hat - target)
+    return x_hat

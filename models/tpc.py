@@ -1,0 +1,127 @@
+"""The temporal predictive coding network of the paper (Methods, eqs. 1-6).
+
+The energy at step mu is (eq. 1)
+
+    F = ||z - W_H f(zhat_prev)||^2 + ||x - W_F f(z)||^2,   f = tanh, no biases.
+
+torch holds the parameters and the optimiser. The relaxation of z (eq. 2) runs on
+numpy views of the same memory: it is a loop of ~8 tiny operations repeated K=100
+times per step, where torch's per-call overhead (~3 us) costs about three times
+numpy's (measured in benchmarks/bench_models.py), and no autograd is needed because
+the learning rules (eqs. 3-4) are local Hebbian products written out below.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from models.config import TPCConfig
+
+
+def stable_wf_norm(inference_rate: float, margin: float = 0.5) -> float:
+    """Largest ||W_F||_2 for which the relaxation of eq. 2 cannot diverge.
+
+    Gradient descent on F in z is stable while gamma < 2 / lambda_max of its Hessian,
+    I + D W_F^T W_F D with D = diag(f'(z)), |f'| <= 1. So lambda_max <= 1 + ||W_F||^2,
+    and ||W_F||^2 < 2/gamma - 1 suffices; ``margin`` keeps us well inside that bound.
+    """
+    return math.sqrt(margin * (2.0 / inference_rate - 1.0))
+
+
+class TemporalPC:
+    """Weights W_H (H x H) and W_F (D x H) and the inference and learning rules."""
+
+    def __init__(self, obs_size: int, config: TPCConfig) -> None:
+        self.config = config
+        self.obs_size = obs_size
+        h = config.hidden_size
+        gen = torch.Generator().manual_seed(config.seed)
+        # nn.Linear's Kaiming-uniform initialisation, U(+-1/sqrt(fan_in)), as the paper says.
+        bound = 1.0 / math.sqrt(h)
+        self.W_H = (torch.rand(h, h, generator=gen) * 2 - 1) * bound
+        self.W_F = (torch.rand(obs_size, h, generator=gen) * 2 - 1) * bound
+        self._bind_views()
+
+    def _bind_views(self) -> None:
+        self.w_h = self.W_H.numpy()
+        self.w_f = self.W_F.numpy()
+
+    def load_weights(self, W_H: torch.Tensor, W_F: torch.Tensor) -> None:
+        h = self.config.hidden_size
+        if tuple(W_H.shape) != (h, h) or tuple(W_F.shape) != (self.obs_size, h):
+            raise ValueError(
+                f"weight shapes W_H {tuple(W_H.shape)}, W_F {tuple(W_F.shape)} do not match "
+                f"hidden_size={h}, obs_size={self.obs_size}"
+            )
+        self.W_H = W_H.detach().to(torch.float32).contiguous().clone()
+        self.W_F = W_F.detach().to(torch.float32).contiguous().clone()
+        self._bind_views()
+
+    @property
+    def wf_max_norm(self) -> float:
+        cap = self.config.wf_max_norm
+        return stable_wf_norm(self.config.inference_rate) if cap is None else cap
+
+    def initial_state(self, batch: int, rng: np.random.Generator) -> np.ndarray:
+        """zhat before step 0 (see TPCConfig.initial_state)."""
+        h = self.config.hidden_size
+        if self.config.initial_state == "zeros":
+            return np.zeros((batch, h), np.float32)
+        bound = math.sqrt(6.0 / h)
+        return rng.uniform(-bound, bound, (batch, h)).astype(np.float32)
+
+    def prior(self, zhat_prev: np.ndarray) -> np.ndarray:
+        """Temporal prediction of the hidden state, W_H f(zhat_prev)."""
+        return np.tanh(zhat_prev) @ self.w_h.T
+
+    def observe(self, z: np.ndarray) -> np.ndarray:
+        """Prediction of the observation from a hidden state, W_F f(z)."""
+        return np.tanh(z) @ self.w_f.T
+
+    def infer(self, prior: np.ndarray, x: np.ndarray, steps: int | None = None) -> np.ndarray:
+        """Relax z from the prior towards the observation x (eq. 2), K fixed steps.
+
+        z <- z + gamma * (-eps_z + f'(z) * (eps_x @ W_F)),
+        eps_z = z - prior, eps_x = x - W_F f(z). No convergence test, as in the paper.
+        """
+        steps = self.config.inference_steps if steps is None else steps
+        gamma = np.float32(self.config.inference_rate)
+        w_f, w_ft = self.w_f, self.w_f.T
+        z = prior.copy()
+        gamma_prior = gamma * prior
+        for _ in range(steps):
+            fz = np.tanh(z)
+            eps_x = x - fz @ w_ft
+            drive = eps_x @ w_f
+            drive *= 1.0 - fz * fz
+            # z - gamma * (z - prior) + gamma * drive, in place.
+            z *= 1.0 - gamma
+            z += gamma_prior
+            drive *= gamma
+            z += drive
+        return z
+
+    def hebbian_gradients(
+        self, zhat_prev: np.ndarray, prior: np.ndarray, z: np.ndarray, x: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """Negative Hebbian terms of eqs. 3-4, averaged over the batch, and the energy F."""
+        batch = x.shape[0]
+        fz = np.tanh(z)
+        eps_z = z - prior
+        eps_x = x - fz @ self.w_f.T
+        grad_h = -(eps_z.T @ np.tanh(zhat_prev)) / batch
+        grad_f = -(eps_x.T @ fz) / batch
+        energy = float((eps_z * eps_z).sum() + (eps_x * eps_x).sum()) / batch
+        return grad_h, grad_f, energy
+
+    def project(self) -> None:
+        """Keep ||W_F||_2 <= wf_max_norm so that inference stays stable (see stable_wf_norm)."""
+        cap = self.wf_max_norm
+        if float(np.linalg.norm(self.w_f)) <= cap:  # Frobenius >= spectral: nothing to do
+            return
+        norm = float(np.linalg.norm(self.w_f, 2))
+        if norm > cap:
+            self.W_F.mul_(cap / norm)

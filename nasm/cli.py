@@ -1,0 +1,142 @@
+"""The ``nasm`` command line: train, recall and score Neural ASMs, and everything else
+the packages offer (simulated demonstrations, the service, the experiments)."""
+
+from __future__ import annotations
+
+import json
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # before torch: its matrices here are tiny
+os.environ.setdefault("MUJOCO_GL", "disable")
+
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+import typer  # noqa: E402
+
+from models import checkpoint  # noqa: E402
+from models.asm import NeuralASM  # noqa: E402
+from models.config import PRESETS  # noqa: E402
+from models.recall import RECALL_MODES  # noqa: E402
+from nasm.data import SYNTHETIC, load_sequences  # noqa: E402
+
+torch.set_num_threads(1)
+app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
+
+try:  # the simulator's commands, when its dependencies are installed
+    from sim.cli import app as sim_app
+
+    app.add_typer(sim_app)
+except ImportError:  # pragma: no cover
+    pass
+
+
+def _fail(message: str) -> None:
+    typer.secho(message, fg="red", err=True)
+    raise typer.Exit(2)
+
+
+def _load_model(path: Path) -> NeuralASM:
+    try:
+        return checkpoint.load(path)
+    except checkpoint.CheckpointError as exc:
+        _fail(str(exc))
+        raise
+
+
+def _check_mode(mode: str) -> None:
+    if mode not in RECALL_MODES:
+        _fail(f"--mode must be one of {', '.join(RECALL_MODES)}, got {mode!r}")
+
+
+@app.command()
+def train(
+    data: str = typer.Argument(SYNTHETIC, help="'synthetic', an .npz of sequences, or an .mcap episode set"),
+    out: Path = typer.Option(Path("runs/models/model.safetensors"), help="checkpoint to write"),
+    preset: str = typer.Option("fast", help=f"hyper-parameter preset: {', '.join(PRESETS)}"),
+    epochs: int | None = typer.Option(None, help="override the preset's epochs"),
+    hidden: int | None = typer.Option(None, help="override the preset's hidden size"),
+    seed: int = typer.Option(0, help="seed of the weights and the training order"),
+) -> None:
+    """Train a Neural ASM on demonstrations and write a checkpoint."""
+    if preset not in PRESETS:
+        _fail(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}")
+    config = PRESETS[preset].with_(seed=seed)
+    if epochs is not None:
+        config = config.with_(epochs=epochs)
+    if hidden is not None:
+        config = config.with_(hidden_size=hidden)
+    seqs = load_sequences(data)
+    provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs.data)}
+    model = NeuralASM.fit(seqs.data, seqs.channel_names, config, provenance=provenance)
+    checkpoint.save(model, out)
+    typer.echo(f"trained on {len(seqs.data)} sequences; final energy {model.history[-1]:.4g}; wrote {out}")
+
+
+@app.command()
+def recall(
+    model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"),
+    data: str = typer.Argument(SYNTHETIC, help="sequences to cue from and compare with"),
+    cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
+) -> None:
+    """Offline recall from the first observations; prints the error of each recalled sequence."""
+    model = _load_model(model_path)
+    seqs = load_sequences(data)
+    steps = seqs.data.shape[1]
+    plan = model.recall(seqs.data[:, :cue_steps], steps)
+    err = model.normaliser.normalise(plan) - model.normaliser.normalise(seqs.data)
+    mse = (err[:, cue_steps:] ** 2).mean(axis=(1, 2))
+    for label in sorted(set(seqs.labels.tolist())):
+        pick = seqs.labels == label
+        typer.echo(f"{label:>16}: recall MSE {mse[pick].mean():.4f} (normalised units, {pick.sum()} sequences)")
+    typer.echo(f"{'all':>16}: recall MSE {mse.mean():.4f}")
+
+
+@app.command()
+def score(
+    model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"),
+    data: str = typer.Argument(SYNTHETIC, help="sequences to score"),
+    mode: str = typer.Option("offline", help="recall mode: offline or online"),
+    cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
+    weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)"),
+    as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON"),
+) -> None:
+    """Energy of every step of every sequence, and the channel with the largest error."""
+    _check_mode(mode)
+    model = _load_model(model_path)
+    seqs = load_sequences(data)
+    try:
+        result = model.score(seqs.data, mode, cue_steps, weighted)
+    except (KeyError, ValueError) as exc:
+        _fail(str(exc.args[0]))
+    if as_json:
+        typer.echo(json.dumps({"energy": result.energy.round(6).tolist()}))
+        return
+    worst = np.abs(result.errors).max(axis=1).argmax(axis=1)
+    for i, e in enumerate(result.energy):
+        typer.echo(
+            f"{i:4d} {seqs.labels[i]:>12}: mean energy {e.mean():8.3f}, peak {e.max():8.3f} at step "
+            f"{e.argmax():2d}, largest error in {model.channel_names[worst[i]]}"
+        )
+
+
+@app.command()
+def info(model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)")) -> None:
+    """Print a checkpoint's configuration, channels, calibrations and provenance."""
+    model = _load_model(model_path)
+    summary = {
+        "config": model.config.to_dict(),
+        "channels": list(model.channel_names),
+        "calibrations": {
+            k: {"source": c.source, "thresholds": c.thresholds} for k, c in model.calibrations.items()
+        },
+        "provenance": model.provenance,
+        "epochs_trained": len(model.history),
+        "final_energy": model.history[-1] if model.history else None,
+    }
+    typer.echo(json.dumps(summary, indent=2, default=str))
+
+
+if __name__ == "__main__":
+    app()

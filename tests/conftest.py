@@ -1,0 +1,33 @@
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MUJOCO_GL", "disable")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import torch  # noqa: E402
+
+from models.asm import NeuralASM  # noqa: E402
+from models.config import FAST  # noqa: E402
+from models.synthetic import make_skills, split  # noqa: E402
+
+torch.set_num_threads(1)
+
+# Small but real: three skills, distinct starts, noisy repetitions.
+SMALL = FAST.with_(hidden_size=96, epochs=250)
+
+
+@pytest.fixture(scope="session")
+def skills():
+    return split(make_skills(n_skills=3, repetitions=12, steps=15, channels=10, seed=3), 2)
+
+
+@pytest.fixture(scope="session")
+def trained(skills):
+    train, _ = skills
+    return NeuralASM.fit(train.sequences, train.channel_names, SMALL, progress=False)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(0)

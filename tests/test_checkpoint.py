@@ -1,0 +1,76 @@
+import json
+
+import numpy as np
+import pytest
+
+from models import checkpoint
+from models.checkpoint import CheckpointError
+
+
+def test_round_trip_gives_identical_predictions(trained, skills, tmp_path):
+    _, test = skills
+    train, _ = skills
+    trained.calibrate(train.sequences, test.sequences, "online", 1, source="test")
+    path = checkpoint.save(trained, tmp_path / "m.safetensors")
+    loaded = checkpoint.load(path)
+    assert loaded.channel_names == trained.channel_names and loaded.config == trained.config
+    for mode in ("offline", "online"):
+        a, b = trained.score(test.sequences, mode), loaded.score(test.sequences, mode)
+        assert np.array_equal(a.energy, b.energy) and np.array_equal(a.expected, b.expected)
+    cal_a, cal_b = trained.calibration("online", 1), loaded.calibration("online", 1)
+    assert cal_a.thresholds == cal_b.thresholds and cal_b.source == "test"
+    assert np.array_equal(cal_a.step_thresholds[0.01], cal_b.step_thresholds[0.01])
+    assert list(tmp_path.iterdir()) == [path]  # no temporary file left behind
+
+
+def test_truncated_checkpoint_is_rejected(trained, tmp_path):
+    path = checkpoint.save(trained, tmp_path / "m.safetensors")
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(CheckpointError, match="corrupt or truncated"):
+        checkpoint.load(path)
+
+
+def test_garbage_and_missing_files_are_rejected(tmp_path):
+    bad = tmp_path / "bad.safetensors"
+    bad.write_bytes(b"\x00" * 64)
+    with pytest.raises(CheckpointError, match="not a Neural ASM checkpoint"):
+        checkpoint.load(bad)
+    with pytest.raises(CheckpointError, match="no checkpoint"):
+        checkpoint.load(tmp_path / "absent.safetensors")
+
+
+def _rewrite_header(data: bytes, edit) -> bytes:
+    n = int.from_bytes(data[:8], "little")
+    header = json.loads(data[8 : 8 + n])
+    meta = json.loads(header["__metadata__"]["neural_asm"])
+    edit(meta)
+    header["__metadata__"]["neural_asm"] = json.dumps(meta)
+    raw = json.dumps(header).encode()
+    raw += b" " * (-len(raw) % 8)
+    return len(raw).to_bytes(8, "little") + raw + data[8 + n :]
+
+
+def test_mismatched_metadata_is_rejected(trained, tmp_path):
+    path = checkpoint.save(trained, tmp_path / "m.safetensors")
+    data = path.read_bytes()
+    fewer = _rewrite_header(data, lambda m: m.__setitem__("channel_names", m["channel_names"][:-1]))
+    with pytest.raises(CheckpointError, match="does not match"):
+        checkpoint.from_bytes(fewer)
+    newer = _rewrite_header(data, lambda m: m.__setitem__("format_version", 99))
+    with pytest.raises(CheckpointError, match="format version 99"):
+        checkpoint.from_bytes(newer)
+
+
+def test_failed_write_leaves_previous_checkpoint_intact(trained, tmp_path, monkeypatch):
+    path = checkpoint.save(trained, tmp_path / "m.safetensors")
+    before = path.read_bytes()
+
+    def boom(*_):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(checkpoint.os, "fsync", boom)
+    with pytest.raises(OSError, match="disk full"):
+        checkpoint.save(trained, path)
+    assert path.read_bytes() == before
+    assert list(tmp_path.iterdir()) == [path]

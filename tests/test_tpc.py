@@ -1,0 +1,147 @@
+"""The network: learning, implicit skill recognition, recall modes, scoring."""
+
+import numpy as np
+import pytest
+
+from models import recall
+from models.asm import NeuralASM
+from models.config import FAITHFUL, TPCConfig
+from models.tpc import TemporalPC, stable_wf_norm
+
+from conftest import SMALL
+
+
+def test_training_lowers_energy_tenfold(trained):
+    assert trained.history[-1] < trained.history[0] / 10
+
+
+def test_offline_recall_recognises_every_skill_from_first_observation(trained, skills):
+    train, test = skills
+    x = trained.normaliser.normalise(test.sequences)
+    plan = trained.normaliser.normalise(trained.recall(test.sequences[:, :1], 15))
+    means = np.stack([trained.normaliser.normalise(train.sequences[train.skills == s]).mean(0) for s in range(3)])
+    # distance of every recalled plan to every skill's mean trajectory
+    dist = ((plan[:, None, 1:] - means[None, :, 1:]) ** 2).mean(axis=(2, 3))
+    assert (dist.argmin(axis=1) == test.skills).all()
+    err = ((plan - x)[:, 1:] ** 2).mean()
+    between = min(((means[a] - means[b]) ** 2).mean() for a in range(3) for b in range(a + 1, 3))
+    assert err < between / 20
+
+
+def test_online_recall_beats_offline(trained, skills):
+    _, test = skills
+    off = (trained.errors(test.sequences, "offline")[:, 1:] ** 2).mean()
+    on = (trained.errors(test.sequences, "online")[:, 1:] ** 2).mean()
+    assert on < off
+
+
+def test_perturbed_channel_raises_energy_and_is_isolated(trained, skills):
+    _, test = skills
+    seq = test.sequences[0].copy()
+    channel, step = 4, 7
+    seq[step:, channel] += 6 * trained.normaliser.std[channel]
+    for mode in ("offline", "online"):
+        clean = trained.score(test.sequences[:1], mode, weighted=False)
+        bad = trained.score(seq, mode, weighted=False)
+        assert bad.energy[0, step] > 10 * clean.energy[0, step]
+        assert np.abs(bad.errors[0, step]).argmax() == channel
+
+
+def test_stream_matches_sequence_scoring(trained, skills):
+    _, test = skills
+    for mode in ("offline", "online"):
+        whole = trained.score(test.sequences[1], mode)
+        stream = trained.stream(mode)
+        steps = [stream.step(x) for x in test.sequences[1]]
+        np.testing.assert_allclose([s.energy for s in steps], whole.energy[0], rtol=1e-4)
+        np.testing.assert_allclose(steps[3].expected, whole.expected[0, 3], rtol=1e-4, atol=1e-6)
+        # the forecast made at step t is what online recall expects at t + 1
+        if mode == "online":
+            np.testing.assert_allclose(steps[3].prediction, whole.expected[0, 4], rtol=1e-4, atol=1e-6)
+
+
+def test_stream_rejects_bad_observations(trained):
+    stream = trained.stream("online")
+    with pytest.raises(ValueError, match="10 values"):
+        stream.step(np.zeros(9))
+    bad = np.zeros(10)
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match="ch3"):
+        stream.step(bad)
+
+
+def test_predictions_are_in_original_units(trained, skills):
+    _, test = skills
+    shifted = test.sequences + 100.0  # far outside the data: predictions must not follow
+    plan = trained.recall(test.sequences[:, :1], 15)
+    assert np.abs(plan.mean() - test.sequences.mean()) < 0.5
+    assert np.abs(trained.recall(shifted[:, :1], 15).mean() - shifted.mean()) > 50
+
+
+def test_same_seed_same_weights_and_predictions(skills):
+    train, test = skills
+    cfg = SMALL.with_(epochs=20)
+    a = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False)
+    b = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False)
+    assert np.array_equal(a.net.w_h, b.net.w_h) and np.array_equal(a.net.w_f, b.net.w_f)
+    assert np.array_equal(a.recall(test.sequences[:, :1], 15), b.recall(test.sequences[:, :1], 15))
+    c = NeuralASM.fit(train.sequences, train.channel_names, cfg.with_(seed=1), progress=False)
+    assert not np.array_equal(a.net.w_f, c.net.w_f)
+
+
+@pytest.mark.parametrize("name", ["faithful", "fast"])
+def test_both_modes_learn(skills, name):
+    train, test = skills
+    base = FAITHFUL if name == "faithful" else SMALL
+    cfg = base.with_(hidden_size=96, epochs=40 if name == "faithful" else 200)
+    model = NeuralASM.fit(train.sequences[::3], train.channel_names, cfg, progress=False)
+    assert model.history[-1] < model.history[0] / 3
+    untrained = NeuralASM.fit(train.sequences[::3], train.channel_names, cfg.with_(epochs=1), progress=False)
+    after = (model.errors(test.sequences, "online")[:, 1:] ** 2).mean()
+    before = (untrained.errors(test.sequences, "online")[:, 1:] ** 2).mean()
+    assert after < before / 2
+
+
+def test_wf_guard_keeps_the_relaxation_descending(rng):
+    """Past the bound on ||W_F|| the relaxation of eq. 2 climbs the energy; projected, it descends."""
+    cfg = TPCConfig(hidden_size=64, wf_max_norm=None)
+    net = TemporalPC(10, cfg)
+    bound = stable_wf_norm(cfg.inference_rate)
+    net.W_F.mul_(5 * bound / float(np.linalg.norm(net.w_f, 2)))  # what unchecked growth leads to
+    x = rng.standard_normal((30, 10)).astype(np.float32)
+    prior = 0.1 * rng.standard_normal((30, 64)).astype(np.float32)
+
+    def energy(z):
+        return ((z - prior) ** 2).sum(1) + ((x - net.observe(z)) ** 2).sum(1)
+
+    assert (energy(net.infer(prior, x)) > energy(prior)).mean() > 0.5
+    net.project()
+    assert np.linalg.norm(net.w_f, 2) <= bound * (1 + 1e-5)
+    assert (energy(net.infer(prior, x)) < energy(prior)).all()
+
+
+def test_long_training_5000_epochs_is_finite(skills):
+    train, _ = skills
+    small = train.sequences[::10]
+    cfg = TPCConfig(hidden_size=16, inference_steps=10, epochs=5000, learning_rate=3e-3, lr_final_fraction=1.0)
+    model = NeuralASM.fit(small, train.channel_names, cfg, progress=False)
+    assert np.isfinite(model.history).all()
+    assert model.history[-1] < model.history[0]
+    assert np.linalg.norm(model.net.w_f, 2) <= cfg.wf_max_norm * (1 + 1e-5)
+
+
+def test_xhat_relaxation_converges_to_forward_prediction(trained, rng):
+    z = rng.standard_normal((2, trained.config.hidden_size)).astype(np.float32)
+    forward = trained.net.observe(z)
+    np.testing.assert_allclose(recall.relax_observation(trained.net, z), forward)
+    moved = recall.relax_observation(trained.net, z, forward + 1.0, steps=2000)
+    np.testing.assert_allclose(moved, forward, atol=1e-4)
+
+
+def test_config_rejects_bad_values():
+    with pytest.raises(ValueError, match="inference_rate"):
+        TPCConfig(inference_rate=0)
+    with pytest.raises(ValueError, match="optimizer"):
+        TPCConfig(optimizer="rmsprop")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="recall mode"):
+        recall.check_recall("sideways", 1)
