@@ -176,11 +176,12 @@ class SkillStream:
         x = model.normaliser.normalise(raw)[None]
         expected = self.recaller.step(x)[0]
         errors = x[0] - expected
-        std = None if self.error_std is None else self.error_std[min(t, len(self.error_std) - 1)][None]
+        weighted = errors if self.error_std is None else errors / self.error_std[min(t, len(self.error_std) - 1)]
         return StepScore(
             step=t,
             expected=model.normaliser.denormalise(expected),
             errors=errors,
-            energy=float(energy(errors[None], std)[0]),
+            weighted_errors=weighted,
+            energy=float(energy(weighted[None])[0]),
             prediction=model.normaliser.denormalise(self.recaller.forecast()[0]),
         )

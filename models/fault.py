@@ -1,0 +1,64 @@
+"""Fault decisions: compare a step's energy with a calibrated threshold, and isolate.
+
+Detection: the step is faulty when its energy exceeds the threshold calibrated on
+normal episodes at a chosen per-step false-positive rate (one threshold for all steps,
+or a time-varying one per step). Isolation: the joint whose channel has the largest
+absolute (precision-weighted, when the energy is) prediction error, as in the paper.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from models.calibration import Calibration
+from models.scoring import StepScore
+
+JOINT_PREFIX = "joint"
+
+
+def joint_channels(channel_names: Sequence[str]) -> list[int]:
+    """Indices of the joint-angle channels (named joint1..joint7)."""
+    return [i for i, n in enumerate(channel_names) if n.startswith(JOINT_PREFIX)]
+
+
+@dataclass(frozen=True)
+class FaultDecision:
+    fault: bool
+    energy: float
+    threshold: float
+    isolated_joint: str | None  # name of the joint channel with the largest |error|
+    ranked_channels: list[tuple[str, float]]  # (name, |weighted error|), largest first
+
+
+def threshold_for(calibration: Calibration, fpr: float, step: int, per_step: bool = False) -> float:
+    table = calibration.step_thresholds if per_step else calibration.thresholds
+    if fpr not in table:
+        raise KeyError(f"no threshold at false-positive rate {fpr}; calibrated: {sorted(table)}")
+    if per_step:
+        steps = table[fpr]
+        return float(steps[min(step, len(steps) - 1)])
+    return float(table[fpr])
+
+
+def isolate(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> tuple[str | None, list[tuple[str, float]]]:
+    magnitude = np.abs(weighted_errors)
+    order = np.argsort(-magnitude, kind="stable")
+    ranked = [(channel_names[i], float(magnitude[i])) for i in order]
+    joints = joint_channels(channel_names)
+    isolated = channel_names[joints[int(magnitude[joints].argmax())]] if joints else None
+    return isolated, ranked
+
+
+def decide(
+    score: StepScore,
+    calibration: Calibration,
+    channel_names: Sequence[str],
+    fpr: float = 0.01,
+    per_step: bool = False,
+) -> FaultDecision:
+    threshold = threshold_for(calibration, fpr, score.step, per_step)
+    isolated, ranked = isolate(score.weighted_errors, channel_names)
+    return FaultDecision(score.energy > threshold, score.energy, threshold, isolated, ranked)
