@@ -1,6 +1,6 @@
 """A falling object that hits the arm mid-episode (the paper's reactive-correction scenario).
 
-The box rests on the floor behind the robot. At `release_s` it is placed `drop_height_m` above
+The box hovers out of reach behind the robot. At `release_s` it is placed `drop_height_m` above
 the current position of the target link and thrown down at `speed_m_s`, so it hits the arm
 wherever the skill has taken it. With gravity-compensated, moderately stiff servos a 5 kg box at
 4 m/s deflects the hand by about 5 cm (measured in tests and sim/README.md).
@@ -63,6 +63,7 @@ class FallingObjectEffect:
         body = physics.bind(scene.box_body)  # mass changes only now: until release the run is the twin's
         hx, hy, hz = BOX_HALF
         body.mass = self.spec.mass_kg
+        body.gravcomp = 0.0
         body.inertia = np.array([hy**2 + hz**2, hx**2 + hz**2, hx**2 + hy**2]) * self.spec.mass_kg / 3
         link = scene.panda.root.find("body", f"link{self.spec.target_link}")
         above = physics.bind(link).xpos + np.array([0.0, 0.0, self.spec.drop_height_m + BOX_HALF[2]])

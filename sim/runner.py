@@ -66,7 +66,7 @@ class World:
     cube_body: int
     box_body: int
     wrench_adr: np.ndarray  # sensordata addresses in channel order (left f, left t, right f, right t)
-    box_inertial: tuple[float, np.ndarray]  # the falling box's compiled mass and inertia (disturbances change them)
+    box_defaults: tuple[float, np.ndarray, float]  # falling box mass, inertia, gravcomp (disturbances change them)
 
     @property
     def qpos(self) -> np.ndarray:
@@ -85,7 +85,8 @@ def world() -> World:
                  physics.bind(p.finger_joints).qposadr.copy(), physics.bind(p.actuators).element_id.copy(),
                  int(physics.bind(p.gripper).element_id), int(physics.bind(p.tcp).element_id),
                  int(physics.bind(scene.cube_body).element_id), int(physics.bind(scene.box_body).element_id),
-                 wrench, (float(physics.bind(scene.box_body).mass), physics.bind(scene.box_body).inertia.copy()))
+                 wrench, (float(physics.bind(scene.box_body).mass), physics.bind(scene.box_body).inertia.copy(),
+                         float(physics.bind(scene.box_body).gravcomp)))
 
 
 def _rng(skill: str, seed: int) -> np.random.Generator:
@@ -96,7 +97,8 @@ def _reset(w: World, plan0: np.ndarray, cube_xy: np.ndarray, cube_yaw: float) ->
     """Put the arm at the plan's start, the cube on the table; return the sensors' tare."""
     physics, scene = w.physics, w.scene
     physics.reset()
-    physics.bind(scene.box_body).mass, physics.bind(scene.box_body).inertia = w.box_inertial
+    box = physics.bind(scene.box_body)
+    box.mass, box.inertia, box.gravcomp = w.box_defaults
     physics.bind(scene.panda.joints).qpos = plan0
     physics.bind(scene.panda.finger_joints).qpos = SIM.servo.gripper_open_m
     physics.bind(scene.cube).qpos = [*cube_xy, CUBE_HALF, np.cos(cube_yaw / 2), 0, 0, np.sin(cube_yaw / 2)]
@@ -135,16 +137,17 @@ def _execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cub
     warnings = physics.data.warning.number  # a live view of MuJoCo's warning counters
     kv_over_kp = np.asarray(SIM.servo.kv) / np.asarray(SIM.servo.kp)
     block, n = timing.ticks_per_step, timing.n_steps
-    hi = {key: [] for key in ("q", "cmd", "ee", "cube", "box")}
+    hi = {key: np.empty((n * block + 1, width)) for key, width in
+          (("q", 7), ("cmd", 7), ("ee", 3), ("cube", 3), ("box", 3))}
 
-    def record(command: np.ndarray) -> None:
-        hi["q"].append(w.qpos)
-        hi["cmd"].append(command.copy())
-        hi["ee"].append(data.site_xpos[w.tcp_site].copy())
-        hi["cube"].append(data.xpos[w.cube_body].copy())
-        hi["box"].append(data.xpos[w.box_body].copy())
+    def record(row: int, command: np.ndarray) -> None:
+        hi["q"][row] = data.qpos[w.arm_qpos]
+        hi["cmd"][row] = command
+        hi["ee"][row] = data.site_xpos[w.tcp_site]
+        hi["cube"][row] = data.xpos[w.cube_body]
+        hi["box"][row] = data.xpos[w.box_body]
 
-    record(joints[0])
+    record(0, joints[0])
     obs = []
     for index in range(n * block):
         k, sub = divmod(index, block)
@@ -161,21 +164,20 @@ def _execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cub
                 tick.target = np.asarray(corrected, dtype=float).reshape(7)
         for effect in effects:
             effect.before_tick(physics, scene, tick)
-        target = np.clip(tick.target, Q_MIN, Q_MAX)
+        target = np.minimum(np.maximum(tick.target, Q_MIN), Q_MAX)
         data.ctrl[w.arm_act] = target + kv_over_kp * tick.velocity
         data.ctrl[w.grip_act] = SIM.servo.gripper_closed_m if tick.gripper_closed else SIM.servo.gripper_open_m
         mujoco.mj_step(model, data, timing.substeps)
         _check(physics, warnings)
-        record(target)
+        record(index + 1, target)
     observations = np.array(obs)
     if not np.isfinite(observations).all():
         raise SimulationError("non-finite observation")
     cube_error = float(np.linalg.norm(hi["cube"][-1] - target_position(skill)))
     return Episode(observations=observations, skill=skill, seed=int(seed), fault=fault, disturbance=disturbance,
                    success=cube_error < SIM.success_tolerance_m, cube_error_m=cube_error, plan=joints.copy(),
-                   t_hi=np.arange(n * block + 1) / timing.control_hz, qpos_hi=np.array(hi["q"]),
-                   command_hi=np.array(hi["cmd"]), ee_hi=np.array(hi["ee"]), cube_hi=np.array(hi["cube"]),
-                   box_hi=np.array(hi["box"]))
+                   t_hi=np.arange(n * block + 1) / timing.control_hz, qpos_hi=hi["q"],
+                   command_hi=hi["cmd"], ee_hi=hi["ee"], cube_hi=hi["cube"], box_hi=hi["box"])
 
 
 def _effects(fault: FaultSpec | None, disturbance: FallingObject | None) -> list[Effect]:

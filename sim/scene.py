@@ -1,8 +1,9 @@
 """The workcell, composed with `dm_control.mjcf`: floor, table, cube and a parked falling box.
 
 The Panda's base sits at the world origin on the table's surface (z = 0), as a bench-mounted
-arm does, so the table top is where a lowered hand first hits. The falling box rests on the
-floor far from the arm until a `FallingObject` disturbance teleports it above the arm.
+arm does, so the table top is where a lowered hand first hits. The falling box hovers
+out of reach, gravity-compensated (so it costs no contact solving), until a `FallingObject`
+disturbance moves it above the arm and lets gravity act on it.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from sim.panda import ARM_CONTYPE, PandaHandles, build_panda
 CUBE_HALF = 0.025  # a 5 cm cube, comfortably inside the Franka Hand's 8 cm stroke
 CUBE_MASS = 0.1
 BOX_HALF = (0.06, 0.06, 0.04)
-BOX_PARK = (-1.5, 1.5, 0.04 - 0.75)  # on the floor, behind the robot
+BOX_PARK = (-1.5, 1.5, 1.0)  # hovering (gravity-compensated) behind the robot: no contacts to solve
 TABLE_TOP, FLOOR_Z = 0.0, -0.75
 WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 1 | ARM_CONTYPE
 
@@ -53,7 +54,7 @@ def build_scene(timestep_s: float) -> SceneHandles:
     cube_body.add("geom", name="cube_geom", type="box", size=(CUBE_HALF,) * 3, mass=CUBE_MASS,
                   friction=(1.0, 0.02, 0.002), condim=4, rgba=(0.85, 0.2, 0.2, 1), **contact)
 
-    box_body = root.worldbody.add("body", name="falling_box", pos=BOX_PARK)
+    box_body = root.worldbody.add("body", name="falling_box", pos=BOX_PARK, gravcomp=1)
     box = box_body.add("freejoint", name="falling_box_free")
     box_body.add("geom", name="falling_box_geom", type="box", size=BOX_HALF, mass=5.0,
                  rgba=(0.3, 0.3, 0.8, 1), **contact)

@@ -1,0 +1,235 @@
+"""Episode sets and their files: MCAP as the source of truth, a `.npz` cache beside it.
+
+Sets (seed ranges from `sim.config.Seeds`, disjoint so no fault or held-out episode reuses a
+demonstration's variation):
+
+- `demos`: 10 demonstrations per skill, seeds 0..9;
+- `normal`: held-out normal episodes for threshold calibration, seeds 10000..;
+- `faults`: the paper's 980 joint-lock faults, each with its own seed 100000 + i;
+- `twins`: the same 980 seeds without a fault, so what a fault changes can be measured exactly.
+
+File format, one `<set>.mcap` per set (JSON-schema channels, zstd chunks):
+
+- topic `/episode` (schema `nasm.Episode`), one message per episode, log time = episode
+  index x 7.5 s: `index, skill, seed, fault ({joint, time_s, overshoot_deg} or null),
+  disturbance (or null), success, cube_error_m, channel_names, warnings, plan` (15 x 7 rad) and
+  `hi_rate` (40 Hz `t, qpos, command, ee, cube, box` as float32 lists);
+- topic `/observation` (schema `nasm.Observation`), one message per 2 Hz step, log time =
+  the episode's start + k x 0.5 s: `episode, step, time_s, values` (25 floats, CHANNEL_NAMES
+  order).
+
+`<set>.npz` holds the same data as arrays (observations (N, 15, 25), ...) plus the MCAP's size
+and mtime; `load_episodes` uses it only while it matches the MCAP, else decodes the MCAP.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+import orjson
+from mcap.reader import make_reader
+from mcap.writer import Writer
+from tqdm import tqdm
+
+from sim.config import SIM
+from sim.disturbances import FallingObject
+from sim.episode import Episode
+from sim.faults import FaultSpec, fault_grid
+from sim.skills import SKILLS
+
+KINDS = ("demos", "normal", "faults", "twins")
+HI_RATE = ("t_hi", "qpos_hi", "command_hi", "ee_hi", "cube_hi", "box_hi")
+EPISODE_SCHEMA = {
+    "title": "nasm.Episode", "type": "object",
+    "properties": {"index": {"type": "integer"}, "skill": {"type": "string"}, "seed": {"type": "integer"},
+                   "fault": {"type": ["object", "null"]}, "disturbance": {"type": ["object", "null"]},
+                   "success": {"type": "boolean"}, "cube_error_m": {"type": "number"},
+                   "channel_names": {"type": "array", "items": {"type": "string"}},
+                   "warnings": {"type": "array"}, "plan": {"type": "array"}, "hi_rate": {"type": "object"}},
+}
+OBSERVATION_SCHEMA = {
+    "title": "nasm.Observation", "type": "object",
+    "properties": {"episode": {"type": "integer"}, "step": {"type": "integer"}, "time_s": {"type": "number"},
+                   "values": {"type": "array", "items": {"type": "number"}, "minItems": 25, "maxItems": 25}},
+}
+
+
+@dataclass(frozen=True)
+class Job:
+    """One episode to run."""
+
+    skill: str
+    seed: int
+    fault: FaultSpec | None = None
+    disturbance: FallingObject | None = None
+
+
+def demonstrations(n_per_skill: int = 10) -> list[Job]:
+    return [Job(skill, SIM.seeds.demos + i) for skill in SKILLS for i in range(n_per_skill)]
+
+
+def held_out_normal(n: int = 200) -> list[Job]:
+    return [Job(SKILLS[i % len(SKILLS)], SIM.seeds.held_out + i) for i in range(n)]
+
+
+def faults() -> list[Job]:
+    return [Job(skill, SIM.seeds.faults + i, spec) for i, (skill, spec) in enumerate(fault_grid())]
+
+
+def twins() -> list[Job]:
+    return [Job(job.skill, job.seed) for job in faults()]
+
+
+def jobs_for(kind: str, n_demos: int = 10, n_normal: int = 200) -> list[Job]:
+    """The jobs of set `kind` (one of KINDS)."""
+    table = {"demos": lambda: demonstrations(n_demos), "normal": lambda: held_out_normal(n_normal),
+             "faults": faults, "twins": twins}
+    if kind not in table:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    return table[kind]()
+
+
+def run_job(job: Job) -> Episode | str:
+    """Run one job; a failed episode comes back as its error message (never as data)."""
+    from sim.runner import SimulationError, run_episode
+    from sim.skills import PlanError
+
+    try:
+        return run_episode(job.skill, job.seed, job.fault, job.disturbance)
+    except (SimulationError, PlanError) as err:
+        return f"{job.skill} seed {job.seed}: {err}"
+
+
+def run_jobs(jobs: list[Job], workers: int = 2, desc: str = "episodes") -> tuple[list[Episode], list[str]]:
+    """Run jobs over `workers` spawned processes (in order), with a progress bar."""
+    if workers <= 1:
+        results = [run_job(job) for job in tqdm(jobs, desc=desc, unit="ep")]
+    else:
+        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+            results = list(tqdm(pool.map(run_job, jobs, chunksize=8), total=len(jobs), desc=desc, unit="ep"))
+    return [r for r in results if isinstance(r, Episode)], [r for r in results if isinstance(r, str)]
+
+
+def _meta(index: int, ep: Episode) -> dict:
+    return {"index": index, "skill": ep.skill, "seed": ep.seed,
+            "fault": None if ep.fault is None else ep.fault.to_dict(),
+            "disturbance": None if ep.disturbance is None else ep.disturbance.to_dict(),
+            "success": bool(ep.success), "cube_error_m": ep.cube_error_m, "channel_names": list(ep.channel_names),
+            "warnings": ep.warnings}
+
+
+def _episode_message(index: int, ep: Episode) -> dict:
+    return {**_meta(index, ep), "plan": ep.plan,
+            "hi_rate": {name: getattr(ep, name).astype(np.float32) for name in HI_RATE}}
+
+
+def write_mcap(episodes: list[Episode], path: Path) -> None:
+    """Write episodes to `path` (atomically: a temporary file renamed into place)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".mcap.tmp")
+    step_ns = int(1e9 / SIM.timing.observation_hz)
+    episode_ns = step_ns * SIM.timing.n_steps
+    with open(tmp, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile="", library="neural-asm sim")
+        ep_schema = writer.register_schema("nasm.Episode", "jsonschema", json.dumps(EPISODE_SCHEMA).encode())
+        ob_schema = writer.register_schema("nasm.Observation", "jsonschema", json.dumps(OBSERVATION_SCHEMA).encode())
+        ep_channel = writer.register_channel("/episode", "json", ep_schema)
+        ob_channel = writer.register_channel("/observation", "json", ob_schema)
+        for i, ep in enumerate(episodes):
+            start = i * episode_ns
+            writer.add_message(ep_channel, start, orjson.dumps(_episode_message(i, ep), option=orjson.OPT_SERIALIZE_NUMPY),
+                               start, sequence=i)
+            for k, values in enumerate(ep.observations):
+                msg = {"episode": i, "step": k, "time_s": SIM.timing.step_time(k), "values": values}
+                writer.add_message(ob_channel, start + k * step_ns, orjson.dumps(msg, option=orjson.OPT_SERIALIZE_NUMPY),
+                                   start + k * step_ns, sequence=k)
+        writer.finish()
+    os.replace(tmp, path)
+
+
+def _episode_from(meta: dict, observations: np.ndarray) -> Episode:
+    fault = meta["fault"]
+    disturbance = meta["disturbance"]
+    if disturbance is not None:
+        disturbance = FallingObject(**{k: v for k, v in disturbance.items() if k != "kind"})
+    hi = {name: np.asarray(meta["hi_rate"][name], dtype=np.float64) for name in HI_RATE}
+    return Episode(observations=observations, skill=meta["skill"], seed=int(meta["seed"]),
+                   fault=None if fault is None else FaultSpec(**fault), disturbance=disturbance,
+                   success=bool(meta["success"]), cube_error_m=float(meta["cube_error_m"]),
+                   plan=np.asarray(meta["plan"], dtype=np.float64), channel_names=tuple(meta["channel_names"]),
+                   warnings=list(meta["warnings"]), **hi)
+
+
+def read_mcap(path: Path) -> list[Episode]:
+    """Decode an episode set from its MCAP file."""
+    metas: dict[int, dict] = {}
+    values: dict[int, dict[int, list]] = {}
+    with open(path, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages(topics=["/episode", "/observation"]):
+            msg = orjson.loads(message.data)
+            if channel.topic == "/episode":
+                metas[msg["index"]] = msg
+            else:
+                values.setdefault(msg["episode"], {})[msg["step"]] = msg["values"]
+    return [_episode_from(metas[i], np.array([values[i][k] for k in sorted(values[i])], dtype=np.float64))
+            for i in sorted(metas)]
+
+
+def _stamp(mcap_path: Path) -> np.ndarray:
+    stat = mcap_path.stat()
+    return np.array([stat.st_size, stat.st_mtime_ns], dtype=np.int64)
+
+
+def write_cache(episodes: list[Episode], mcap_path: Path) -> Path:
+    """Write the `.npz` cache for `mcap_path` (metadata as one JSON string, 40 Hz traces as float32 like the MCAP)."""
+    metas = [_meta(i, ep) for i, ep in enumerate(episodes)]
+    arrays = {name: np.array([getattr(ep, name) for ep in episodes], dtype=np.float32) for name in HI_RATE}
+    arrays |= {name: np.array([getattr(ep, name) for ep in episodes]) for name in ("plan", "observations")}
+    path = mcap_path.with_suffix(".npz")
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, meta=np.array(orjson.dumps(metas, option=orjson.OPT_SERIALIZE_NUMPY).decode()),
+             stamp=_stamp(mcap_path), **arrays)
+    os.replace(tmp, path)
+    return path
+
+
+def _read_cache(path: Path) -> list[Episode]:
+    with np.load(path) as z:
+        metas = orjson.loads(str(z["meta"]))
+        arrays = {name: z[name] for name in (*HI_RATE, "plan", "observations")}
+    episodes = []
+    for i, meta in enumerate(metas):
+        meta = {**meta, "plan": arrays["plan"][i], "hi_rate": {name: arrays[name][i] for name in HI_RATE}}
+        episodes.append(_episode_from(meta, arrays["observations"][i]))
+    return episodes
+
+
+def load_episodes(path: str | Path) -> list[Episode]:
+    """Read a set back from `<set>.mcap` (through its cache when that is current) or `<set>.npz`."""
+    path = Path(path)
+    if path.suffix == ".npz":
+        return _read_cache(path)
+    cache = path.with_suffix(".npz")
+    if cache.exists():
+        with np.load(cache) as z:
+            current = np.array_equal(z["stamp"], _stamp(path))
+        if current:
+            return _read_cache(cache)
+    return read_mcap(path)
+
+
+def generate(kind: str, out_dir: str | Path = "runs/data", workers: int = 2, n_demos: int = 10,
+             n_normal: int = 200) -> tuple[Path, list[str]]:
+    """Simulate set `kind`, write `<out_dir>/<kind>.mcap` and its cache; return the path and failures."""
+    episodes, failures = run_jobs(jobs_for(kind, n_demos, n_normal), workers, desc=kind)
+    path = Path(out_dir) / f"{kind}.mcap"
+    write_mcap(episodes, path)
+    write_cache(episodes, path)
+    return path, failures
