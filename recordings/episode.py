@@ -1,0 +1,92 @@
+"""One episode (a client run or a service session) recorded to ``.rrd`` and ``.mcap``.
+
+    with EpisodeRecorder("client-...", channel_names, recording_id=rid) as rec:
+        rec.log_step(StepRecord(step=k, observation=x, energy=e, ...))
+        rec.log_world(WorldRecord(time_s=t, link_positions=p, ee=tcp, cube=c))
+
+Both files are closed when the block exits, normally, on Ctrl-C or on an error.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Iterable, Protocol
+
+from recordings.mcap_writer import McapEpisode
+from recordings.paths import DEFAULT_DIR, run_paths
+from recordings.records import StepRecord, WorldRecord
+from recordings.rerun_writer import RerunEpisode
+
+FORMATS = ("rrd", "mcap")
+
+
+class _Writer(Protocol):
+    def write_step(self, r: StepRecord) -> None: ...
+    def write_world(self, w: WorldRecord) -> None: ...
+    def close(self) -> None: ...
+
+
+class EpisodeRecorder:
+    def __init__(
+        self,
+        run_id: str,
+        channel_names: Iterable[str],
+        *,
+        folder: str | Path = DEFAULT_DIR,
+        recording_id: str | None = None,
+        metadata: dict[str, Any] | None = None,
+        step_period_s: float = 0.5,
+        formats: Iterable[str] = FORMATS,
+    ) -> None:
+        names = tuple(channel_names)
+        formats = tuple(formats)
+        unknown = set(formats) - set(FORMATS)
+        if unknown:
+            raise ValueError(f"unknown recording formats {sorted(unknown)}; known: {FORMATS}")
+        self.run_id = run_id
+        self.recording_id = recording_id or run_id
+        rrd, mcap = run_paths(folder, run_id)
+        self.paths: dict[str, Path] = {}
+        self._writers: list[_Writer] = []
+        try:
+            if "rrd" in formats:
+                self._writers.append(RerunEpisode(rrd, names, self.recording_id, step_period_s))
+                self.paths["rrd"] = rrd
+            if "mcap" in formats:
+                writer = McapEpisode(mcap, names, step_period_s)
+                self._writers.append(writer)
+                self.paths["mcap"] = mcap
+                writer.write_metadata(
+                    {"run_id": run_id, "recording_id": self.recording_id, "channel_names": list(names),
+                     **(metadata or {})}
+                )
+        except BaseException:
+            self.close()
+            raise
+
+    def log_step(self, record: StepRecord) -> None:
+        for w in self._writers:
+            w.write_step(record)
+
+    def log_world(self, record: WorldRecord) -> None:
+        for w in self._writers:
+            w.write_world(record)
+
+    def close(self) -> None:
+        """Close every file, even if one fails; idempotent."""
+        writers, self._writers = self._writers, []
+        errors = []
+        for w in writers:
+            try:
+                w.close()
+            except Exception as exc:  # close the others before reporting
+                errors.append(exc)
+        if errors:
+            raise errors[0]
+
+    def __enter__(self) -> "EpisodeRecorder":
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        self.close()
