@@ -24,12 +24,11 @@ from nasm.data import SYNTHETIC, load_sequences  # noqa: E402
 torch.set_num_threads(1)
 app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
 
-try:  # the simulator's commands, when its dependencies are installed
-    from sim.cli import app as sim_app
+from experiments.fault_sweep.cli import faults  # noqa: E402
+from sim.cli import demos  # noqa: E402
 
-    app.add_typer(sim_app)
-except ImportError:  # pragma: no cover
-    pass
+for command in (demos, faults):  # each package owns its commands; mounted here
+    app.command()(command)
 
 
 def _fail(message: str) -> None:

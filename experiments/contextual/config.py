@@ -1,0 +1,68 @@
+"""Every constant of the contextual-inference experiment in one typed place."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+CONDITIONS: tuple[str, ...] = ("plan_and_execute", "plan_only", "execute_only")
+MODELS: tuple[str, ...] = ("neural_asm", "s_to_m", "sm_to_sm")
+
+
+@dataclass(frozen=True)
+class Skill:
+    """One motor plan: a lateral bow on the way to T, then a follow-through direction."""
+
+    name: str
+    bow_m: float  # signed peak deviation from the S->T line (+ = left of the movement)
+    follow_deg: float  # direction of the secondary target from T, relative to S->T
+
+
+# CW: a clockwise curl field pushes the hand right of the movement, so the compensating
+# plan bows left (+); CCW mirrors it. Each perturbation is tied to one secondary target,
+# as the cue-field association in Sheahan et al. The last two only serve the
+# "learning speed vs number of skills" result (Appendix 3).
+SKILLS: tuple[Skill, ...] = (
+    Skill("CW", +0.03, +45.0),
+    Skill("CCW", -0.03, -45.0),
+    Skill("CW_wide", +0.015, +90.0),
+    Skill("CCW_wide", -0.015, -90.0),
+)
+
+
+@dataclass(frozen=True)
+class ContextualConfig:
+    # Task space: a horizontal plane in front of the Panda (base frame, metres).
+    start_xy: tuple[float, float] = (0.30, 0.0)  # S
+    target_xy: tuple[float, float] = (0.50, 0.0)  # T, the central target
+    height_m: float = 0.30
+    follow_m: float = 0.12  # distance from T to a secondary target
+    # Time: reach S->T in reach_steps samples (the last one at T), then follow through.
+    reach_steps: int = 10
+    follow_steps: int = 5
+    # Execute-only: the cue appears at this step (mid-reach), zeros before.
+    cue_onset: int = 5
+    # Trial-to-trial variation of the demonstrations (and of the test trials).
+    start_jitter_m: float = 0.005
+    bow_jitter: float = 0.1  # relative
+    target_jitter_m: float = 0.003
+    # Protocol (paper: 6 participants, 1200 exposure trials, 24 post-exposure trials).
+    seeds: int = 6
+    demos: int = 24  # training demonstrations, split evenly over the skills
+    test_trials: int = 24  # recall trials, split evenly over the skills
+    epochs: int = 1200
+    inference_sweep: tuple[int, ...] = (1, 2, 5, 10, 20, 50, 100, 200)
+    max_skills: int = 4  # energy vs number of skills for 1..max_skills
+    skill_seeds: int = 3  # participants in that side result (each run costs a full training)
+
+    @property
+    def steps(self) -> int:
+        return self.reach_steps + self.follow_steps
+
+    def with_(self, **changes: Any) -> "ContextualConfig":
+        return replace(self, **changes)
+
+
+CONTEXTUAL = ContextualConfig()
+# A reduced protocol for tests and --quick: one seed, few epochs, a short sweep.
+QUICK = CONTEXTUAL.with_(seeds=1, skill_seeds=1, epochs=300, inference_sweep=(1, 5, 20, 100))

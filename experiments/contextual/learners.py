@@ -1,0 +1,86 @@
+"""Train each of the three models on one condition's demonstrations and recall its
+motor plans from the first step of test trials (normalised units throughout)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import torch
+
+from experiments.contextual.dataset import ContextualData
+from models.asm import NeuralASM
+from models.config import TPCConfig
+from models.normaliser import Normaliser
+from models.recall import offline_recall
+from models.rnn import SensorimotorRNN, SensoryToMotorRNN, roll_out, train_rnn
+from models.tpc import TemporalPC
+
+
+@dataclass
+class Fitted:
+    normaliser: Normaliser
+    recalled: np.ndarray  # (N, T, M) motor channels of the test trials, normalised
+    history: list[float]  # energy (tPC) or BPTT loss per epoch
+    # Neural ASM only: inference iterations K at the cue -> recalled motor channels.
+    by_iterations: dict[int, np.ndarray]
+
+
+def recall_with_iterations(
+    net: TemporalPC, cue: np.ndarray, horizon: int, iterations: int
+) -> np.ndarray:
+    """Offline recall with K iterations of cued inference, sharing the trained weights."""
+    probe = TemporalPC(net.obs_size, net.config.with_(inference_steps=iterations))
+    probe.load_weights(net.W_H, net.W_F)
+    return offline_recall(probe, cue, horizon, np.random.default_rng(net.config.seed))
+
+
+def fit_neural_asm(
+    train: ContextualData, test: ContextualData, config: TPCConfig, sweep: tuple[int, ...] = ()
+) -> Fitted:
+    model = NeuralASM.fit(train.sequences, train.channel_names, config, progress=False)
+    x = model.normaliser.normalise(test.sequences)
+    steps, motor = x.shape[1], train.motor
+    recall = lambda k: recall_with_iterations(model.net, x[:, :1], steps, k)[..., motor]  # noqa: E731
+    by_iterations = {k: recall(k) for k in sweep}
+    return Fitted(model.normaliser, recall(config.inference_steps), model.history, by_iterations)
+
+
+def fit_s_to_m(train: ContextualData, test: ContextualData, config: TPCConfig) -> Fitted:
+    """Sensory (cue) at step 0, held -> motor at steps 1..T-1; step 0's motor is observed."""
+    normaliser = Normaliser.fit(train.sequences)
+    x, xt = normaliser.normalise(train.sequences), normaliser.normalise(test.sequences)
+    sensory, motor = train.sensory, train.motor
+    torch.manual_seed(config.seed)
+    net = SensoryToMotorRNN(len(sensory), len(motor), config.hidden_size)
+    history = train_rnn(net, x[:, 0, sensory], x[:, 1:, motor], config)
+    predicted = roll_out(net, xt[:, 0, sensory], xt.shape[1] - 1)
+    return Fitted(normaliser, np.concatenate([xt[:, :1, motor], predicted], axis=1), history, {})
+
+
+def fit_sm_to_sm(train: ContextualData, test: ContextualData, config: TPCConfig) -> Fitted:
+    """All channels at step 0 -> all channels at steps 1..T-1, closed loop."""
+    normaliser = Normaliser.fit(train.sequences)
+    x, xt = normaliser.normalise(train.sequences), normaliser.normalise(test.sequences)
+    torch.manual_seed(config.seed)
+    net = SensorimotorRNN(x.shape[-1], config.hidden_size)
+    history = train_rnn(net, x[:, 0], x[:, 1:], config)
+    predicted = roll_out(net, xt[:, 0], xt.shape[1] - 1)
+    recalled = np.concatenate([xt[:, :1], predicted], axis=1)
+    return Fitted(normaliser, recalled[..., train.motor], history, {})
+
+
+def fit(
+    model: str, train: ContextualData, test: ContextualData, config: TPCConfig,
+    sweep: tuple[int, ...] = (),
+) -> Fitted:
+    """Dispatch on the model's name (config.MODELS); the sweep only applies to the tPC."""
+    if model == "neural_asm":
+        return fit_neural_asm(train, test, config, sweep)
+    baselines: dict[str, Callable[[ContextualData, ContextualData, TPCConfig], Fitted]] = {
+        "s_to_m": fit_s_to_m, "sm_to_sm": fit_sm_to_sm,
+    }
+    if model not in baselines:
+        raise ValueError(f"unknown model {model!r}")
+    return baselines[model](train, test, config)

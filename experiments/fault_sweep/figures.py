@@ -1,0 +1,131 @@
+"""PNG figures of a sweep (matplotlib, Agg)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, weigh  # noqa: E402
+from experiments.fault_sweep.run import SweepResult  # noqa: E402
+from models.calibration import quantile_threshold  # noqa: E402
+from models.fault import joint_channels  # noqa: E402
+
+BEST = ("nasm_online", "precision")
+EXAMPLES = ((5, 3.0, 10.0), (2, 3.0, 10.0))  # (joint, time s, overshoot deg), the paper's two
+
+
+def _save(fig: plt.Figure, path: Path) -> None:
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def detection_vs_fpr(result: SweepResult, out: Path) -> None:
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
+    for ax, weighting in zip(axes, ("raw", "precision")):
+        for name, by_w in result.summary.items():
+            m = by_w[weighting]
+            ax.plot([100 * f for f in FPRS], [100 * m["detection_rate"][f"{f:.2f}"] for f in FPRS], marker="o",
+                    ls="-" if m["family"] == "neural_asm" else "--", label=name)
+        ax.axhline(100 * result.ceilings["oracle_detection_rate"], color="k", lw=0.8, label="oracle (twin)")
+        ax.set(title=f"{weighting} errors", xlabel="per-step false-positive rate (%)", ylabel="faults detected (%)")
+        ax.grid(alpha=0.3)
+    axes[1].legend(fontsize=7, loc="lower right")
+    _save(fig, out / "detection_vs_fpr.png")
+
+
+def energy_distribution(result: SweepResult, out: Path) -> None:
+    name, weighting = BEST
+    w = weigh(result.errors[name], weighting)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    bins = np.logspace(np.log10(max(w.calibration.min(), 1e-2)), np.log10(w.faults.max()), 60)
+    ax.hist(w.calibration.ravel(), bins=bins, alpha=0.6, density=True, label="normal steps (calibration split)")
+    after = w.faults[np.arange(w.faults.shape[1])[None] >= result.bench.fault_step[:, None]]
+    ax.hist(after, bins=bins, alpha=0.5, density=True, label="fault episodes, steps from the fault on")
+    for fpr in (0.01, 0.05):
+        ax.axvline(quantile_threshold(w.calibration, fpr), color="k", ls=":" if fpr == 0.05 else "-",
+                   label=f"threshold at {100 * fpr:.0f} % FPR")
+    ax.set(xscale="log", xlabel=f"energy ({name}, {weighting})", ylabel="density")
+    ax.legend(fontsize=8)
+    _save(fig, out / "energy_distribution.png")
+
+
+def confusion(result: SweepResult, out: Path) -> None:
+    o = result.outcomes[BEST]
+    m = np.zeros((7, 7))
+    for true, got in zip(result.bench.fault_joint, o["isolated_at_fault_step"]):
+        m[true - 1, got - 1] += 1
+    fig, ax = plt.subplots(figsize=(5, 4.5))
+    ax.imshow(m / m.sum(axis=1, keepdims=True), cmap="viridis", vmin=0, vmax=1)
+    for i in range(7):
+        for j in range(7):
+            ax.text(j, i, int(m[i, j]), ha="center", va="center", color="w" if m[i, j] < 70 else "k", fontsize=7)
+    ax.set(xticks=range(7), yticks=range(7), xticklabels=range(1, 8), yticklabels=range(1, 8),
+           xlabel="isolated joint", ylabel="locked joint", title=f"isolation at the fault step\n{BEST[0]}, {BEST[1]}")
+    _save(fig, out / "isolation_confusion.png")
+
+
+def breakdown(result: SweepResult, out: Path) -> None:
+    b = result.bench
+    factors = (("locked joint", b.fault_joint), ("fault time (s)", b.fault_time), ("overshoot (deg)", b.overshoot))
+    shown = [BEST, ("nasm_offline", "precision"), ("nasm_paper_offline", "raw"), ("zscore_pooled", "demo_std"),
+             ("linear_one_step", "precision")]
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4), sharey=True)
+    for ax, (label, values) in zip(axes, factors):
+        levels = np.unique(values)
+        for key in shown:
+            detected = result.outcomes[key]["first_detection_step"] >= 0
+            ax.plot(levels, [100 * detected[values == v].mean() for v in levels], marker="o", label="/".join(key))
+        visible = result.ceilings["visible"]
+        ax.plot(levels, [100 * visible[values == v].mean() for v in levels], "k:", label="oracle (twin)")
+        ax.set(xlabel=label, ylabel=f"detected at {100 * MAIN_FPR:.0f} % FPR (%)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    _save(fig, out / "breakdown.png")
+
+
+def worked_examples(result: SweepResult, out: Path) -> None:
+    b = result.bench
+    names = b.normal.channel_names
+    joints = joint_channels(names)
+    name, weighting = BEST
+    w = weigh(result.errors[name], weighting)
+    skill = b.faults.skills[0]
+    for joint, time_s, overshoot in EXAMPLES:
+        pick = np.flatnonzero((b.fault_joint == joint) & (b.fault_time == time_s) & (b.overshoot == overshoot)
+                              & (b.faults.skills == skill))
+        if not len(pick):
+            continue
+        i = pick[0]
+        threshold = quantile_threshold(w.calibration, MAIN_FPR)
+        steps = np.arange(w.faults.shape[1])
+        fig, axes = plt.subplots(1, 4, figsize=(18, 3.8))
+        axes[0].plot(steps * 0.5, w.faults[i], marker="o", label="energy")
+        axes[0].axhline(threshold, color="r", ls="--", label=f"threshold ({100 * MAIN_FPR:.0f} % FPR)")
+        axes[0].axvline(time_s, color="k", lw=0.8)
+        axes[0].set(yscale="log", xlabel="t (s)", title=f"joint {joint} {overshoot:+.0f} deg at t = {time_s} s")
+        axes[0].legend(fontsize=7)
+        err = np.abs(w.fault_errors[i])
+        axes[1].imshow(err[:, joints].T, aspect="auto", cmap="magma", extent=(-0.25, 7.25, 7.5, 0.5))
+        axes[1].set(xlabel="t (s)", ylabel="joint", title="|proprioceptive error|")
+        wrench = list(range(len(names) - 12, len(names)))
+        axes[2].imshow(err[:, wrench].T, aspect="auto", cmap="magma", extent=(-0.25, 7.25, 11.5, -0.5))
+        axes[2].set(yticks=range(12), yticklabels=[names[k] for k in wrench], xlabel="t (s)",
+                    title="|exteroceptive error| (finger forces/torques)")
+        axes[2].tick_params(axis="y", labelsize=6)
+        col = joints[joint - 1]
+        axes[3].plot(steps * 0.5, np.degrees(b.faults.x[i, :, col]), marker="o", label="fault")
+        axes[3].plot(steps * 0.5, np.degrees(b.twins.x[i, :, col]), ls="--", label="no-fault twin")
+        axes[3].set(xlabel="t (s)", ylabel=f"joint {joint} (deg)")
+        axes[3].legend(fontsize=7)
+        _save(fig, out / f"example_joint{joint}.png")
+
+
+def write_figures(result: SweepResult, out: Path) -> None:
+    for draw in (detection_vs_fpr, energy_distribution, confusion, breakdown, worked_examples):
+        draw(result, out)

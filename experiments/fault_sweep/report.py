@@ -1,0 +1,87 @@
+"""fault_sweep.json, fault_sweep.md and episodes.csv from a sweep."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+from experiments.fault_sweep.metrics import FPRS, MAIN_FPR
+from experiments.fault_sweep.run import SweepResult
+
+PAPER = {
+    "neural_asm": {"detection_rate": "82-83 % (1-5 % FPR)", "isolation": "79.5 %"},
+    "zscore_baseline": {"detection_rate": "74-82 % (1-5 % FPR)", "isolation": "41 %"},
+}
+
+
+def write_json(result: SweepResult, path: Path) -> None:
+    ceiling = {k: v for k, v in result.ceilings.items() if k != "visible"}
+    doc = {
+        "episodes": {
+            "faults": len(result.bench.faults.x),
+            "demonstrations": len(result.bench.normal.demos.x),
+            "normal_precision": len(result.bench.normal.precision.x),
+            "normal_calibration": len(result.bench.normal.calibration.x),
+            "normal_test": len(result.bench.normal.normal_test.x),
+        },
+        "fprs": list(FPRS),
+        "ceilings": ceiling,
+        "paper": PAPER,
+        "methods": result.summary,
+    }
+    path.write_text(json.dumps(doc, indent=2))
+
+
+def pct(x: float | None) -> str:
+    return "-" if x is None else f"{100 * x:.1f}"
+
+
+def write_markdown(result: SweepResult, path: Path) -> None:
+    key = f"{MAIN_FPR:.2f}"
+    lines = [
+        f"| method | errors | detection @1/3/5 % FPR | measured FPR @1 % | episodes falsely flagged @1 % "
+        f"| detection, episode-calibrated @1 % | isolation at fault step | isolation at detection | AUROC "
+        f"| median delay (steps) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, by_weighting in result.summary.items():
+        for weighting, m in by_weighting.items():
+            det = "/".join(pct(m["detection_rate"][f"{f:.2f}"]) for f in (0.01, 0.03, 0.05))
+            lines.append(
+                f"| {name} | {weighting} | {det} | {pct(m['measured_fpr'][key])} "
+                f"| {pct(m['episode_false_alarm_rate'][key])} | {pct(m['detection_rate_episode_calibrated'][key])} "
+                f"| {pct(m['isolation_accuracy_at_fault_step'])} | {pct(m['isolation_accuracy_at_detection'])} "
+                f"| {m['auroc']:.3f} | {m['median_detection_delay_steps']} |"
+            )
+    c = result.ceilings
+    lines += [
+        "",
+        f"Ceilings on the same episodes: oracle detection (fault vs its no-fault twin, > {c['whitening_k_sigma']} "
+        f"normal std in some channel) {pct(c['oracle_detection_rate'])} %, {c['invisible_faults']} faults "
+        f"physically invisible; visible at their own step {pct(c['visible_at_fault_step'])} %; isolation ceiling "
+        f"at the fault step {pct(c['isolation_ceiling_at_fault_step'])} %.",
+        "",
+        "Paper: Neural ASM detects 82-83 % at 1-5 % FPR, isolates 79.5 %; z-score baseline 74-82 %, 41 %.",
+    ]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_csv(result: SweepResult, path: Path) -> None:
+    b = result.bench
+    keys = list(result.outcomes)
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        header = ["episode", "skill", "seed", "joint", "time_s", "step", "overshoot_deg", "visible"]
+        for name, weighting in keys:
+            header += [f"{name}/{weighting}/{col}" for col in
+                       ("first_detection_step", "isolated_at_fault_step", "isolated_at_detection", "peak_energy")]
+        writer.writerow(header)
+        for i in range(len(b.faults.x)):
+            row = [i, b.faults.skills[i], int(b.faults.seeds[i]), int(b.fault_joint[i]), float(b.fault_time[i]),
+                   int(b.fault_step[i]), float(b.overshoot[i]), bool(result.ceilings["visible"][i])]
+            for k in keys:
+                o = result.outcomes[k]
+                row += [int(o["first_detection_step"][i]), int(o["isolated_at_fault_step"][i]),
+                        int(o["isolated_at_detection"][i]), round(float(o["peak_energy"][i]), 4)]
+            writer.writerow(row)

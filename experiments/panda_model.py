@@ -1,0 +1,57 @@
+"""The default Panda model: trained on the simulated demonstrations, calibrated on
+held-out normal episodes, written as a checkpoint the service can host.
+
+Precisions come from one part of the held-out normal episodes and thresholds from
+another (see experiments/fault_sweep/data.py), for both recall modes, cued from one
+observation.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from experiments.fault_sweep.data import EpisodeArrays, NormalSets, load_normal_sets
+from models import checkpoint
+from models.asm import NeuralASM
+from models.config import FAST, TPCConfig
+
+DEFAULT_NAME = "panda"
+
+
+def train_calibrated(
+    demos: EpisodeArrays,
+    precision: EpisodeArrays,
+    calibration: EpisodeArrays,
+    channel_names: tuple[str, ...],
+    config: TPCConfig = FAST,
+    progress: bool = True,
+    provenance: dict | None = None,
+) -> NeuralASM:
+    model = NeuralASM.fit(demos.x, channel_names, config, progress=progress, provenance=provenance)
+    for mode in ("offline", "online"):
+        model.calibrate(precision.x, calibration.x, mode, 1, source="held-out normal episodes (simulated Panda)")
+    return model
+
+
+def provenance_of(bench: NormalSets, data_dir: Path) -> dict:
+    return {
+        "source": "simulated Panda pick-and-place (sim/)",
+        "data_dir": str(data_dir),
+        "demo_seeds": bench.demos.seeds.tolist(),
+        "skills": sorted(set(bench.demos.skills.tolist())),
+        "precision_seeds": bench.precision.seeds.tolist(),
+        "threshold_seeds": bench.calibration.seeds.tolist(),
+    }
+
+
+def ensure_default_model(models_dir: Path, data_dir: Path = Path("runs/data"), progress: bool = True) -> Path:
+    """Return models_dir/panda.safetensors, simulating data and training it if missing."""
+    path = Path(models_dir) / f"{DEFAULT_NAME}.safetensors"
+    if path.exists():
+        return path
+    bench = load_normal_sets(Path(data_dir))
+    model = train_calibrated(
+        bench.demos, bench.precision, bench.calibration, bench.channel_names,
+        progress=progress, provenance=provenance_of(bench, data_dir),
+    )
+    return checkpoint.save(model, path)
