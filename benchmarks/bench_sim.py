@@ -8,9 +8,15 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import time
 
 from sim.dataset import demonstrations, faults, run_jobs
+
+
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def main() -> None:
@@ -18,15 +24,19 @@ def main() -> None:
     t0 = time.perf_counter()
     demos, demo_failures = run_jobs(demonstrations(), workers, desc="demos")
     t_demos = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), _children_cpu()
     sweep, sweep_failures = run_jobs(faults(), workers, desc="faults")
     sweep_seconds = time.perf_counter() - t0
+    cpu_per_episode = (_children_cpu() - cpu0) / len(sweep)  # workers' CPU, incl. their start-up
     print(json.dumps({
         "episodes_per_s": round(len(sweep) / sweep_seconds, 2),
         "sweep_seconds": round(sweep_seconds, 1),
         "placement_success": sum(e.success for e in demos) / len(demonstrations()),
         "demo_seconds_incl_startup": round(t_demos, 1),
         "failed_episodes": len(demo_failures) + len(sweep_failures),
+        "worker_cpu_ms_per_episode": round(1000 * cpu_per_episode, 1),
+        # what two otherwise idle cores would reach; the wall-clock numbers above suffer from other load
+        "episodes_per_s_two_idle_cores": round(workers / cpu_per_episode, 1),
         "workers": workers,
         "cpus": os.cpu_count(),
         "load_average_1min": round(os.getloadavg()[0], 2),

@@ -3,7 +3,7 @@
 The box hovers out of reach behind the robot. At `release_s` it is placed `drop_height_m` above
 the current position of the target link and thrown down at `speed_m_s`, so it hits the arm
 wherever the skill has taken it. With gravity-compensated, moderately stiff servos a 5 kg box at
-4 m/s deflects the hand by about 5 cm (measured in tests and sim/README.md).
+4 m/s deflects the hand by 7-9 cm (measured in tests and sim/README.md).
 """
 
 from __future__ import annotations
