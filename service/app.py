@@ -1,0 +1,58 @@
+"""The FastAPI application: routers, error handlers, body limit and lifespan.
+
+    app = create_app(Settings(models_dir=Path("runs/models")))
+
+The lifespan starts the inference runner, loads the models (building the default one
+on first run when allowed) and closes idle sessions in the background; on shutdown it
+closes every session's recordings.
+"""
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+from importlib.metadata import PackageNotFoundError, version
+
+from fastapi import FastAPI
+
+from service import errors
+from service.limits import BodyLimit
+from service.routers import health, inference, models, sessions, stream
+from service.settings import Settings
+from service.state import ServiceState
+
+
+def _version() -> str:
+    try:
+        return version("neural-asm")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+    settings.check_exposure()
+    state = ServiceState(settings)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        await state.startup()
+        expiry = asyncio.create_task(state.expire_idle_forever())
+        try:
+            yield
+        finally:
+            expiry.cancel()
+            await state.shutdown()
+
+    app = FastAPI(
+        title="Neural ASM service",
+        version=_version(),
+        description="Hosts trained Neural ASM models and scores streamed robot observations: "
+        "next-step predictions, per-channel prediction errors, energy and fault flags.",
+        lifespan=lifespan,
+    )
+    app.state.service = state
+    errors.install(app)
+    for module in (health, models, sessions, inference, stream):
+        app.include_router(module.router)
+    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    return app

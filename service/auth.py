@@ -1,0 +1,24 @@
+"""API-key check: the ``X-API-Key`` header, required whenever a key is configured.
+
+A key is mandatory when the service binds beyond loopback (``Settings.check_exposure``).
+``/healthz`` stays open so that orchestrators can probe liveness without secrets.
+"""
+
+import secrets
+
+from fastapi import HTTPException, Request, Security, status
+from fastapi.security import APIKeyHeader
+
+HEADER = "X-API-Key"
+_header = APIKeyHeader(name=HEADER, auto_error=False, description="required when the server has a key")
+
+
+def key_ok(expected: str | None, given: str | None) -> bool:
+    if not expected:
+        return True
+    return given is not None and secrets.compare_digest(given.encode(), expected.encode())
+
+
+def require_api_key(request: Request, key: str | None = Security(_header)) -> None:
+    if not key_ok(request.app.state.service.settings.api_key, key):
+        raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"missing or wrong {HEADER} header")

@@ -1,0 +1,56 @@
+"""``nasm serve``: the service under uvicorn. Options mirror ``Settings``; unset ones
+come from ``NASM_*`` environment variables, then the defaults."""
+
+from pathlib import Path
+from typing import Any
+
+import typer
+import uvicorn
+from pydantic import ValidationError
+
+from service.embedded import uvicorn_config
+from service.settings import Settings
+
+app = typer.Typer(help="The Neural ASM service.", no_args_is_help=True, pretty_exceptions_show_locals=False)
+
+
+def _help(name: str) -> str:
+    return Settings.model_fields[name].description or ""
+
+
+@app.callback()
+def main() -> None:
+    """The Neural ASM service."""
+
+
+@app.command()
+def serve(
+    host: str | None = typer.Option(None, help=_help("host")),
+    port: int | None = typer.Option(None, help=_help("port")),
+    models_dir: Path | None = typer.Option(None, help=_help("models_dir")),
+    default_model: str | None = typer.Option(None, help=_help("default_model")),
+    build_default_model: bool | None = typer.Option(
+        None, "--build-default-model/--no-build-default-model", help=_help("build_default_model")
+    ),
+    api_key: str | None = typer.Option(None, help=_help("api_key") + " (prefer NASM_API_KEY: argv is visible)"),
+    max_sessions: int | None = typer.Option(None, help=_help("max_sessions")),
+    session_idle_s: float | None = typer.Option(None, help=_help("session_idle_s")),
+    max_body_bytes: int | None = typer.Option(None, help=_help("max_body_bytes")),
+    recordings_dir: Path | None = typer.Option(None, help=_help("recordings_dir")),
+    record: bool | None = typer.Option(None, "--record/--no-record", help=_help("record")),
+    default_fpr: float | None = typer.Option(None, help=_help("default_fpr")),
+    log_level: str = typer.Option("info", help="uvicorn log level"),
+) -> None:
+    """Serve the models in --models-dir over HTTP and websocket (OpenAPI docs at /docs)."""
+    given: dict[str, Any] = {k: v for k, v in locals().items() if k in Settings.model_fields and v is not None}
+    try:
+        settings = Settings(**given)
+        config = uvicorn_config(settings, log_level)
+    except (ValidationError, ValueError) as exc:
+        typer.secho(str(exc), fg="red", err=True)
+        raise typer.Exit(2) from None
+    uvicorn.Server(config).run()
+
+
+if __name__ == "__main__":
+    app()

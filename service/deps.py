@@ -1,0 +1,9 @@
+"""Dependencies shared by the routers."""
+
+from fastapi import Request
+
+from service.state import ServiceState
+
+
+def get_state(request: Request) -> ServiceState:
+    return request.app.state.service

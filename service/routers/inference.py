@@ -1,0 +1,31 @@
+"""One observation step per request. Each call advances its session by one step: call
+``/predict`` or ``/fault`` for a step, not both (the websocket returns both at once)."""
+
+from fastapi import APIRouter, Depends
+
+from service.auth import require_api_key
+from service.deps import get_state
+from service.errors import ERROR_RESPONSES
+from service.payloads import fault_response, predict_response
+from service.schemas import Error, FaultResponse, PredictResponse, StepRequest
+from service.state import ServiceState
+
+router = APIRouter(
+    tags=["inference"],
+    dependencies=[Depends(require_api_key)],
+    responses={**ERROR_RESPONSES, 404: {"model": Error, "description": "unknown session"}},
+)
+
+
+@router.post("/predict", response_model=PredictResponse)
+async def predict(req: StepRequest, state: ServiceState = Depends(get_state)) -> PredictResponse:
+    """Score one observation; returns the next-step prediction, per-channel errors and energy."""
+    session, outcome = await state.step(req.session_id, req)
+    return predict_response(session, outcome)
+
+
+@router.post("/fault", response_model=FaultResponse)
+async def fault(req: StepRequest, state: ServiceState = Depends(get_state)) -> FaultResponse:
+    """Score one observation; returns the fault flag, energy, threshold, isolated joint and ranked channels."""
+    session, outcome = await state.step(req.session_id, req)
+    return fault_response(session, outcome)

@@ -1,0 +1,39 @@
+from fastapi import APIRouter, Depends, Path, status
+
+from service.auth import require_api_key
+from service.deps import get_state
+from service.errors import ERROR_RESPONSES
+from service.payloads import session_info
+from service.schemas import Error, SessionCreate, SessionId, SessionInfo
+from service.state import ServiceState
+
+router = APIRouter(
+    prefix="/sessions",
+    tags=["sessions"],
+    dependencies=[Depends(require_api_key)],
+    responses={**ERROR_RESPONSES, 404: {"model": Error, "description": "unknown model or session"}},
+)
+
+
+@router.post(
+    "",
+    response_model=SessionInfo,
+    status_code=status.HTTP_201_CREATED,
+    responses={429: {"model": Error, "description": "too many open sessions"}},
+)
+async def create_session(params: SessionCreate, state: ServiceState = Depends(get_state)) -> SessionInfo:
+    """Open a session for one episode: its first step is the episode's first observation."""
+    session = await state.open(params)
+    return session_info(session, state.settings.session_idle_s)
+
+
+@router.get("/{session_id}", response_model=SessionInfo)
+async def get_session(session_id: SessionId = Path(), state: ServiceState = Depends(get_state)) -> SessionInfo:
+    return session_info(state.sessions.get(session_id), state.settings.session_idle_s)
+
+
+@router.delete("/{session_id}", response_model=SessionInfo)
+async def delete_session(session_id: SessionId = Path(), state: ServiceState = Depends(get_state)) -> SessionInfo:
+    """Close a session and its recordings; returns its final state."""
+    session = await state.close(session_id)
+    return session_info(session, state.settings.session_idle_s)

@@ -1,0 +1,104 @@
+"""Websocket ``/stream``: a whole episode, step by step, over one connection.
+
+Protocol (JSON text frames, in the spirit of openpi's policy server):
+
+1. The client connects, with the ``X-API-Key`` header when the server has a key (a
+   wrong key closes the handshake with code 1008).
+2. The server sends ``{"type": "metadata", "server": "neural-asm", "protocol": 1,
+   "models": [...], "default_model": ...}``.
+3. The client sends ``{"type": "start", ...}`` with the fields of ``POST /sessions``
+   (model, mode, cue_steps, fpr, per_step, recording_id); the server opens a session
+   (closing the connection's previous one) and answers ``{"type": "started", ...}``
+   with the session's info.
+4. For each observation the client sends ``{"type": "step", "observation": [...]}`` (or
+   ``"channels": {name: value}``); the server answers ``{"type": "step", ...}`` with the
+   ``/fault`` payload plus the ``/predict`` one and ``inference_ms``.
+5. ``{"type": "end"}`` closes the session (answer ``{"type": "ended", ...}``); another
+   ``start`` begins the next episode. Disconnecting closes the session too.
+
+A mistake is answered ``{"type": "error", "status": <4xx>, "detail": "..."}`` and the
+connection stays usable. Messages larger than the body limit close it (code 1009).
+"""
+
+from typing import Any
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect, status
+from pydantic import BaseModel, TypeAdapter, ValidationError
+
+from service.auth import HEADER, key_ok
+from service.errors import ServiceError, describe, undecodable
+from service.payloads import session_info, step_result
+from service.schemas import ClientMessage, EndMessage, SessionCreate, StartMessage
+from service.sessions import Session
+from service.state import ServiceState
+
+PROTOCOL = 1
+router = APIRouter()
+_messages: TypeAdapter[Any] = TypeAdapter(ClientMessage)
+
+
+class _NoSession(ServiceError):
+    status = 409
+
+
+def metadata(state: ServiceState) -> dict[str, Any]:
+    return {"type": "metadata", "server": "neural-asm", "protocol": PROTOCOL,
+            "models": sorted(state.registry.models), "default_model": state.registry.default_name}
+
+
+async def _send(ws: WebSocket, kind: str, body: BaseModel) -> None:
+    """``{"type": kind, **body}``, spliced to avoid serialising the payload twice."""
+    await ws.send_text(f'{{"type":"{kind}",{body.model_dump_json()[1:]}')
+
+
+async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session: Session | None) -> Session | None:
+    """Answer one client message; returns the connection's session afterwards."""
+    message = _messages.validate_json(text)
+    if isinstance(message, StartMessage):
+        if session is not None:
+            await state.close(session.id)
+            session = None
+        session = await state.open(SessionCreate(**message.model_dump(exclude={"type"})))
+        await _send(ws, "started", session_info(session, state.settings.session_idle_s))
+        return session
+    if session is None:
+        raise _NoSession("send a 'start' message before steps or 'end'")
+    if isinstance(message, EndMessage):
+        closed = await state.close(session.id)
+        await _send(ws, "ended", session_info(closed, state.settings.session_idle_s))
+        return None
+    session, outcome = await state.step(session.id, message)
+    await _send(ws, "step", step_result(session, outcome))
+    return session
+
+
+@router.websocket("/stream")
+async def stream(ws: WebSocket) -> None:
+    state: ServiceState = ws.app.state.service
+    if not key_ok(state.settings.api_key, ws.headers.get(HEADER)):
+        await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=f"missing or wrong {HEADER} header")
+        return
+    await ws.accept()
+    await ws.send_json(metadata(state))
+    session: Session | None = None
+    try:
+        while True:
+            frame = await ws.receive()
+            if frame["type"] == "websocket.disconnect":
+                break
+            text = frame.get("text") or frame.get("bytes") or b""
+            try:
+                session = await _handle(ws, state, text, session)
+            except ValidationError as exc:
+                detail, errors = describe(list(exc.errors()))
+                code = 400 if undecodable(errors) else 422
+                await ws.send_json({"type": "error", "status": code, "detail": detail})
+            except ServiceError as exc:
+                if session is not None and session.id not in state.sessions:
+                    session = None  # expired meanwhile
+                await ws.send_json({"type": "error", "status": exc.status, "detail": exc.detail})
+    except WebSocketDisconnect:
+        pass
+    finally:
+        if session is not None and session.id in state.sessions:
+            await state.close(session.id)

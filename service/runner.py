@@ -1,0 +1,168 @@
+"""The one thread where models run, off the event loop, micro-batching concurrent steps.
+
+Handlers never touch a model: they queue a job and await its future. The runner takes
+whatever is waiting, computes all step jobs of distinct sessions together (one forward
+pass per model and recall setting, see ``batching``) and runs other jobs (opening and
+closing sessions, which touch recordings) in arrival order between them. One thread
+keeps torch and BLAS at one intra-op thread, keeps each session's steps in order and
+gives the non-thread-safe MCAP writers a single owner.
+"""
+
+import asyncio
+import logging
+import queue
+import threading
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from typing import Any, Callable, TypeVar
+
+import numpy as np
+import torch
+
+from models.fault import FaultDecision
+from models.scoring import StepScore
+from recordings.records import StepRecord
+from service.batching import StepOutcome, fault_decision, group_key, step_group
+from service.errors import BadObservation
+from service.sessions import Session
+
+log = logging.getLogger("service.runner")
+T = TypeVar("T")
+
+
+@dataclass
+class _Job:
+    loop: asyncio.AbstractEventLoop
+    future: "asyncio.Future[Any]"
+
+
+@dataclass
+class _Call(_Job):
+    fn: Callable[[], Any]
+
+
+@dataclass
+class _Step(_Job):
+    session: Session
+    x: np.ndarray
+
+
+_STOP = object()
+
+
+def _settle(future: "asyncio.Future[Any]", result: Any, error: BaseException | None) -> None:
+    if future.cancelled():  # the client went away
+        return
+    if error is None:
+        future.set_result(result)
+    else:
+        future.set_exception(error)
+
+
+class Runner:
+    def __init__(self) -> None:
+        self._jobs: "queue.SimpleQueue[Any]" = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._serve, name="nasm-runner", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """Finish the queued jobs, then end the thread."""
+        if self._thread.is_alive():
+            self._jobs.put(_STOP)
+            self._thread.join(timeout)
+
+    async def call(self, fn: Callable[[], T]) -> T:
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[T] = loop.create_future()
+        self._jobs.put(_Call(loop, future, fn))
+        return await future
+
+    async def step(self, session: Session, x: np.ndarray) -> StepOutcome:
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[StepOutcome] = loop.create_future()
+        self._jobs.put(_Step(loop, future, session, x))
+        return await future
+
+    def _serve(self) -> None:
+        torch.set_num_threads(1)  # per thread (NOTES.md)
+        while True:
+            jobs = [self._jobs.get()]
+            while not self._jobs.empty():
+                jobs.append(self._jobs.get_nowait())
+            stop = _STOP in jobs
+            self._run([j for j in jobs if j is not _STOP])
+            if stop:
+                return
+
+    def _run(self, jobs: list[_Job]) -> None:
+        steps: list[_Step] = []
+        for job in jobs:
+            if isinstance(job, _Step):
+                steps.append(job)
+                continue
+            self._steps(steps)
+            steps = []
+            assert isinstance(job, _Call)
+            try:
+                result, error = job.fn(), None
+            except Exception as exc:
+                result, error = None, exc
+            job.loop.call_soon_threadsafe(_settle, job.future, result, error)
+        self._steps(steps)
+
+    def _steps(self, steps: list[_Step]) -> None:
+        """Rounds of distinct sessions: a session's second queued step waits for its first."""
+        while steps:
+            round_: dict[int, _Step] = {}
+            later: list[_Step] = []
+            for job in steps:
+                if id(job.session) in round_:
+                    later.append(job)
+                else:
+                    round_[id(job.session)] = job
+            groups: dict[Any, list[_Step]] = defaultdict(list)
+            for job in round_.values():
+                groups[group_key(job.session)].append(job)
+            for group in groups.values():
+                self._compute(group)
+            steps = later
+
+    def _compute(self, jobs: list[_Step]) -> None:
+        start = time.perf_counter()
+        try:
+            scores = step_group([j.session for j in jobs], np.stack([j.x for j in jobs]))
+            outcomes = [None if s is None else (s, fault_decision(j.session, s)) for j, s in zip(jobs, scores)]
+        except Exception as exc:  # a bug, not a client mistake: fail these steps, keep serving
+            log.exception("step batch failed")
+            for j in jobs:
+                j.loop.call_soon_threadsafe(_settle, j.future, None, exc)
+            return
+        elapsed_ms = (time.perf_counter() - start) * 1e3
+        for job, outcome in zip(jobs, outcomes):
+            if outcome is None:
+                error = BadObservation(
+                    "observation: values so far outside the training data that the model's outputs are not finite"
+                )
+                job.loop.call_soon_threadsafe(_settle, job.future, None, error)
+                continue
+            result = StepOutcome(outcome[0], outcome[1], elapsed_ms, len(jobs))
+            job.loop.call_soon_threadsafe(_settle, job.future, result, None)
+        for job, outcome in zip(jobs, outcomes):  # after answering: recording is not on the latency path
+            if outcome is not None:
+                record(job.session, job.x, *outcome)
+
+
+def record(session: Session, x: np.ndarray, score: StepScore, decision: FaultDecision) -> None:
+    if session.recorder is None:
+        return
+    try:
+        session.recorder.log_step(
+            StepRecord(score.step, x, score.expected, score.prediction, score.weighted_errors, score.energy,
+                       decision.threshold, decision.fault, decision.isolated_joint)
+        )
+    except Exception:
+        log.exception("recording of session %s failed; it continues unrecorded", session.id)
+        session.recorder = None

@@ -1,0 +1,144 @@
+"""Request and response bodies of the HTTP and websocket API.
+
+Every number a client sends is finite and bounded (|x| <= 1e6): NaN and inf are refused
+with a 422 naming the field, and 1e39, finite in Python, would be inf in float32.
+"""
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+BOUND = 1e6
+MAX_CHANNELS = 1024
+Value = Annotated[float, Field(ge=-BOUND, le=BOUND, allow_inf_nan=False)]
+SessionId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")]
+RecallMode = Literal["offline", "online"]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Error(BaseModel):
+    """Every 4xx and 5xx body: a message naming the problem (and, for 422, each field)."""
+
+    detail: str
+    errors: list[dict[str, Any]] | None = None
+
+
+class Health(BaseModel):
+    status: Literal["ok"] = "ok"
+    models: int
+    sessions: int
+    uptime_s: float
+
+
+class CalibrationInfo(BaseModel):
+    mode: RecallMode
+    cue_steps: int
+    fprs: list[float] = Field(description="per-step false-positive rates with a threshold")
+    source: str
+
+
+class ModelInfo(BaseModel):
+    name: str
+    channel_names: list[str]
+    hidden_size: int
+    calibrations: list[CalibrationInfo]
+    provenance: dict[str, Any]
+
+
+class SessionCreate(Strict):
+    """One session scores one episode; open a new one for the next episode."""
+
+    model: str | None = Field(None, max_length=128, description="model name; the default model if omitted")
+    mode: RecallMode = Field(
+        "online", description="online: infer from every observation; offline: from the cue, then roll forward"
+    )
+    cue_steps: int = Field(1, ge=1, le=10_000, description="observations the hidden state is inferred from")
+    fpr: float | None = Field(
+        None, gt=0, lt=1, description="per-step false-positive rate of the fault threshold (a calibrated one)"
+    )
+    per_step: bool = Field(False, description="use the time-varying per-step threshold")
+    recording_id: str | None = Field(
+        None,
+        pattern=r"^[A-Za-z0-9._-]{1,128}$",
+        description="Rerun recording id; pass the client's so both files merge into one view",
+    )
+
+
+class SessionInfo(BaseModel):
+    session_id: str
+    model: str
+    mode: RecallMode
+    cue_steps: int
+    fpr: float
+    per_step: bool
+    channel_names: list[str]
+    steps: int = Field(description="observations scored so far")
+    recording_id: str
+    recordings: dict[str, str] = Field(description="files the service writes for this session")
+    idle_expiry_s: float
+
+
+class Observation(Strict):
+    """One observation: a vector in the model's channel order, or values by channel name."""
+
+    observation: list[Value] | None = Field(None, max_length=MAX_CHANNELS)
+    channels: dict[Annotated[str, Field(max_length=64)], Value] | None = Field(None, max_length=MAX_CHANNELS)
+
+    @model_validator(mode="after")
+    def one_form(self) -> "Observation":
+        if (self.observation is None) == (self.channels is None):
+            raise ValueError("give exactly one of 'observation' (a vector) or 'channels' (values by name)")
+        return self
+
+
+class StepRequest(Observation):
+    session_id: SessionId
+
+
+class Timed(BaseModel):
+    session_id: str
+    step: int = Field(description="index of the observation just scored (0 = first)")
+    energy: float = Field(description="precision-weighted squared prediction error of this step")
+    inference_ms: float = Field(description="server-side compute time of the batch this step ran in")
+    batch_size: int = Field(description="steps computed together in that batch")
+
+
+class PredictResponse(Timed):
+    prediction: dict[str, float] = Field(description="forecast of the next observation, original units")
+    expected: dict[str, float] = Field(description="what the model expected of this observation")
+    errors: dict[str, float] = Field(description="weighted prediction errors; energy = sum of squares")
+
+
+class RankedChannel(BaseModel):
+    channel: str
+    error: float = Field(description="|weighted prediction error|")
+
+
+class FaultResponse(Timed):
+    fault: bool
+    threshold: float
+    fpr: float
+    isolated_joint: str | None = Field(description="joint channel with the largest |error|")
+    ranked_channels: list[RankedChannel]
+
+
+class StepResult(PredictResponse, FaultResponse):
+    """A websocket step: the /fault payload plus the /predict one."""
+
+
+class StartMessage(SessionCreate):
+    type: Literal["start"]
+
+
+class StepMessage(Observation):
+    type: Literal["step"]
+
+
+class EndMessage(Strict):
+    type: Literal["end"]
+
+
+ClientMessage = Annotated[StartMessage | StepMessage | EndMessage, Field(discriminator="type")]

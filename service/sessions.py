@@ -1,0 +1,150 @@
+"""Sessions: one per episode, each holding its own recall state and recording.
+
+A session fixes the model, the recall mode (offline or online), the cue length, the
+false-positive rate and whether the threshold varies per step. Sessions idle longer
+than the configured time are closed; the number open at once is capped so one client
+cannot exhaust the server's memory.
+"""
+
+import logging
+import secrets
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from models.asm import NeuralASM, SkillStream
+from models.calibration import Calibration
+from recordings import EpisodeRecorder
+from service.errors import BadObservation, NotCalibrated, TooManySessions, UnknownSession
+from service.registry import ModelRegistry
+from service.schemas import Observation, SessionCreate
+from service.settings import Settings
+
+log = logging.getLogger("service.sessions")
+
+
+@dataclass
+class Session:
+    id: str
+    model_name: str
+    model: NeuralASM
+    stream: SkillStream
+    calibration: Calibration
+    fpr: float
+    per_step: bool
+    recording_id: str
+    recorder: EpisodeRecorder | None = None
+    last_used: float = field(default_factory=time.monotonic)
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        return self.model.channel_names
+
+    def observation(self, req: Observation) -> np.ndarray:
+        """The request's observation as a vector in channel order, or a 422 naming the problem."""
+        names = self.channel_names
+        if req.channels is not None:
+            missing = [n for n in names if n not in req.channels]
+            unknown = sorted(set(req.channels) - set(names))
+            if missing or unknown:
+                raise BadObservation(
+                    f"channels: missing {missing}, unknown {unknown}; model {self.model_name!r} expects {list(names)}"
+                )
+            return np.array([req.channels[n] for n in names], np.float64)
+        assert req.observation is not None
+        if len(req.observation) != len(names):
+            raise BadObservation(
+                f"observation: has {len(req.observation)} values; model {self.model_name!r} expects "
+                f"{len(names)} ({', '.join(names)})"
+            )
+        return np.array(req.observation, np.float64)
+
+    def close(self) -> None:
+        if self.recorder is not None:
+            recorder, self.recorder = self.recorder, None
+            recorder.close()
+
+
+def open_session(params: SessionCreate, registry: ModelRegistry, settings: Settings) -> Session:
+    """Check the recall setting is calibrated, then start its stream and recording."""
+    name, model = registry.get(params.model)
+    fpr = settings.default_fpr if params.fpr is None else params.fpr
+    calibration = model.calibration(params.mode, params.cue_steps)
+    if calibration is None:
+        raise NotCalibrated(
+            f"model {name!r} has no calibration for {params.mode} recall cued from {params.cue_steps} step(s); "
+            f"calibrated: {sorted(model.calibrations)}"
+        )
+    if fpr not in calibration.thresholds:
+        raise NotCalibrated(
+            f"fpr: model {name!r} has no threshold at false-positive rate {fpr} for {calibration.key}; "
+            f"calibrated: {sorted(calibration.thresholds)}"
+        )
+    session_id = secrets.token_hex(16)
+    recording_id = params.recording_id or f"session-{session_id}"
+    session = Session(
+        id=session_id,
+        model_name=name,
+        model=model,
+        stream=model.stream(params.mode, params.cue_steps, weighted=True),
+        calibration=calibration,
+        fpr=fpr,
+        per_step=params.per_step,
+        recording_id=recording_id,
+    )
+    if settings.record:
+        session.recorder = EpisodeRecorder(
+            f"service-{recording_id}-{session_id[:8]}",
+            model.channel_names,
+            folder=settings.recordings_dir,
+            recording_id=recording_id,
+            metadata={"source": "service", "session_id": session_id, "model": name, "mode": params.mode,
+                      "cue_steps": params.cue_steps, "fpr": fpr, "per_step": params.per_step},
+        )
+    return session
+
+
+class SessionStore:
+    def __init__(self, cap: int, idle_s: float) -> None:
+        self.cap = cap
+        self.idle_s = idle_s
+        self._sessions: dict[str, Session] = {}
+
+    def __len__(self) -> int:
+        return len(self._sessions)
+
+    def __contains__(self, session_id: object) -> bool:
+        return session_id in self._sessions
+
+    def check_room(self) -> None:
+        if len(self._sessions) >= self.cap:
+            raise TooManySessions(
+                f"{len(self._sessions)} sessions open, the cap is {self.cap}: delete finished sessions "
+                f"(DELETE /sessions/{{id}}) or wait for idle ones to expire after {self.idle_s:g} s"
+            )
+
+    def add(self, session: Session) -> None:
+        self.check_room()
+        self._sessions[session.id] = session
+
+    def get(self, session_id: str) -> Session:
+        session = self._sessions.get(session_id)
+        if session is None:
+            raise UnknownSession(f"session_id: no open session {session_id!r} (closed, expired or never created)")
+        session.last_used = time.monotonic()
+        return session
+
+    def pop(self, session_id: str) -> Session:
+        session = self.get(session_id)
+        del self._sessions[session_id]
+        return session
+
+    def pop_idle(self, now: float | None = None) -> list[Session]:
+        now = time.monotonic() if now is None else now
+        idle = [s for s in self._sessions.values() if now - s.last_used > self.idle_s]
+        for s in idle:
+            del self._sessions[s.id]
+            log.info("session %s expired after %.0f s idle", s.id, self.idle_s)
+        return idle
