@@ -17,6 +17,9 @@ from experiments.contextual.dataset import HAND_CHANNELS, conditions_data  # noq
 from experiments.contextual.learners import fit  # noqa: E402
 from experiments.contextual.metrics import pead, recall_error  # noqa: E402
 from models.config import TPCConfig  # noqa: E402
+from models.normaliser import Normaliser  # noqa: E402
+from models.tpc import TemporalPC  # noqa: E402
+from models.train import train  # noqa: E402
 
 
 def init_worker() -> None:
@@ -46,6 +49,7 @@ def separation_task(
         "pead": per_cue(pead(hand, cfg), test.skills),
         "demo_pead": per_cue(pead(test.hand, cfg), test.skills),
         "hand_path": per_cue(hand, test.skills),
+        "demo_path": per_cue(test.hand, test.skills),
         "recall_error": recall_error(fitted.recalled, truth),
         "error_by_iterations": {k: recall_error(r, truth) for k, r in fitted.by_iterations.items()},
         "history": fitted.history,
@@ -53,9 +57,15 @@ def separation_task(
 
 
 def skills_task(seed: int, n_skills: int, cfg: ContextualConfig, tpc: TPCConfig) -> dict[str, Any]:
-    """Energy per epoch of a Neural ASM learning n_skills skills (plan-and-execute data,
-    the same number of demonstrations and the same channels whatever n_skills)."""
+    """Energy per epoch of a Neural ASM learning n_skills skills from plan-and-execute data.
+
+    Whatever n_skills, the demonstrations are as many, have the same channels and are
+    z-scored with the statistics of the max_skills data, so that energies are in the
+    same units and only the number of distinct skills differs.
+    """
     init_worker()
-    train = conditions_data(seed, cfg, False, n_skills, cfg.max_skills)["plan_and_execute"]
-    fitted = fit("neural_asm", train, train, tpc.with_(seed=seed))
-    return {"seed": seed, "n_skills": n_skills, "history": fitted.history}
+    data = lambda n: conditions_data(seed, cfg, False, n, cfg.max_skills)["plan_and_execute"]  # noqa: E731
+    normaliser = Normaliser.fit(data(cfg.max_skills).sequences)
+    sequences = normaliser.normalise(data(n_skills).sequences)
+    net = TemporalPC(sequences.shape[-1], tpc.with_(seed=seed))
+    return {"seed": seed, "n_skills": n_skills, "history": train(net, sequences, progress=False)}

@@ -1,0 +1,136 @@
+"""The whole protocol: every (seed, condition, model) training and every (seed, number
+of skills) training, run in parallel worker processes, then summarised over seeds."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import time  # noqa: E402
+from dataclasses import asdict  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
+from multiprocessing import get_context  # noqa: E402
+from typing import Any, Callable, Sequence  # noqa: E402
+
+import numpy as np  # noqa: E402
+from tqdm.auto import tqdm  # noqa: E402
+
+from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig  # noqa: E402
+from experiments.contextual.dataset import MOTOR_CHANNELS, channel_names  # noqa: E402
+from experiments.contextual.tasks import init_worker, separation_task, skills_task  # noqa: E402
+from models.config import TPCConfig  # noqa: E402
+
+Job = tuple[Callable[..., dict[str, Any]], tuple[Any, ...]]
+CUES = tuple(s.name for s in SKILLS[:2])
+
+
+def jobs(cfg: ContextualConfig, tpc: TPCConfig) -> list[Job]:
+    """Every training of the protocol, the Neural ASM's (the slowest) first."""
+    separation = [
+        (separation_task, (seed, condition, model, cfg, tpc))
+        for model in MODELS for seed in range(cfg.seeds) for condition in CONDITIONS
+    ]
+    skills = [
+        (skills_task, (seed, n, cfg, tpc))
+        for seed in range(cfg.skill_seeds) for n in range(1, cfg.max_skills + 1)
+    ]
+    slow = len(CONDITIONS) * cfg.seeds  # the neural_asm block comes first in `separation`
+    return separation[:slow] + skills + separation[slow:]
+
+
+def run_jobs(todo: Sequence[Job], workers: int, progress: bool = True) -> list[dict[str, Any]]:
+    """Run jobs in `workers` spawned processes (in this one if workers <= 1)."""
+    bar = tqdm(total=len(todo), desc="contextual", unit="run", disable=not progress)
+    results = []
+    if workers <= 1:
+        init_worker()
+        for fn, args in todo:
+            results.append(fn(*args))
+            bar.update()
+    else:
+        with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=init_worker) as pool:
+            for future in as_completed([pool.submit(fn, *args) for fn, args in todo]):
+                results.append(future.result())
+                bar.update()
+    bar.close()
+    return results
+
+
+def mean_sd(values: Sequence[float]) -> dict[str, Any]:
+    arr = np.asarray(values, float)
+    sd = float(arr.std(ddof=1)) if len(arr) > 1 else 0.0
+    return {"mean": float(arr.mean()), "sd": sd, "per_seed": arr.tolist()}
+
+
+def epochs_to_threshold(history: Sequence[float], threshold: float) -> int:
+    """First epoch whose energy is below threshold (the number of epochs if never)."""
+    below = np.flatnonzero(np.asarray(history) < threshold)
+    return int(below[0]) if len(below) else len(history)
+
+
+def summarise_skills(runs: list[dict[str, Any]], cfg: ContextualConfig) -> dict[str, Any]:
+    """Energy curves per number of skills, and how many epochs each takes to learn.
+
+    "Learned" means reaching twice the final energy (mean over the last tenth of the
+    epochs) of the same seed's max_skills run: a level every run can reach.
+    """
+    counts = list(range(1, cfg.max_skills + 1))
+    curves = {(r["seed"], r["n_skills"]): np.asarray(r["history"]) for r in runs}
+    seeds = sorted({r["seed"] for r in runs})
+    tail = max(1, len(runs[0]["history"]) // 10)
+    threshold = {s: 2 * float(curves[s, cfg.max_skills][-tail:].mean()) for s in seeds}
+    stacked = [np.stack([curves[s, n] for s in seeds]) for n in counts]
+    return {
+        "n_skills": counts,
+        "mean": [c.mean(0).tolist() for c in stacked],
+        "sd": [c.std(0, ddof=1 if len(seeds) > 1 else 0).tolist() for c in stacked],
+        "epochs_to_learn": [mean_sd([epochs_to_threshold(curves[s, n], threshold[s]) for s in seeds])
+                            for n in counts],
+        "mean_energy": [mean_sd(c.mean(1)) for c in stacked],
+    }
+
+
+def summarise(results: list[dict[str, Any]], cfg: ContextualConfig) -> dict[str, Any]:
+    """Mean and sd over seeds of everything the report and the figures show."""
+    sep = [r for r in results if "condition" in r]
+    pick = lambda c, m: sorted((r for r in sep if r["condition"] == c and r["model"] == m),  # noqa: E731
+                               key=lambda r: r["seed"])
+    out: dict[str, Any] = {k: {} for k in ("pead", "separation", "hand_paths", "recall_error")}
+    out["recall_error_vs_iterations"] = {}
+    for c in CONDITIONS:
+        demos = pick(c, MODELS[0])
+        out["pead"][c] = {"demonstrations": {q: mean_sd([r["demo_pead"][q] for r in demos]) for q in CUES}}
+        out["hand_paths"][c] = {"demonstrations": {q: [r["demo_path"][q] for r in demos] for q in CUES}}
+        out["separation"][c], out["recall_error"][c] = {}, {}
+        for m in MODELS:
+            runs = pick(c, m)
+            out["pead"][c][m] = {q: mean_sd([r["pead"][q] for r in runs]) for q in CUES}
+            out["separation"][c][m] = mean_sd([r["pead"][CUES[0]] - r["pead"][CUES[1]] for r in runs])
+            out["hand_paths"][c][m] = {q: [r["hand_path"][q] for r in runs] for q in CUES}
+            out["recall_error"][c][m] = mean_sd([r["recall_error"] for r in runs])
+        by_k = [mean_sd([r["error_by_iterations"][k] for r in demos]) for k in cfg.inference_sweep]
+        out["recall_error_vs_iterations"][c] = {
+            "iterations": list(cfg.inference_sweep),
+            "mean": [e["mean"] for e in by_k],
+            "sd": [e["sd"] for e in by_k],
+        }
+    out["energy_vs_skills"] = summarise_skills([r for r in results if "n_skills" in r], cfg)
+    return out
+
+
+def run_protocol(
+    cfg: ContextualConfig, tpc: TPCConfig, workers: int = 2, progress: bool = True
+) -> dict[str, Any]:
+    """Train and recall everything; returns the summary that contextual.json stores."""
+    started = time.perf_counter()
+    tpc = tpc.with_(epochs=cfg.epochs)
+    results = run_jobs(jobs(cfg, tpc), workers, progress)
+    summary = summarise(results, cfg)
+    summary["setup"] = {
+        "protocol": asdict(cfg), "tpc": tpc.to_dict(), "workers": workers,
+        "channels": {"motor": list(MOTOR_CHANNELS),
+                     "sensory": [n for n in channel_names(SKILLS[:2]) if n not in MOTOR_CHANNELS]},
+        "runtime_s": round(time.perf_counter() - started, 1),
+    }
+    return summary

@@ -1,0 +1,92 @@
+"""contextual.json and contextual.md: the numbers, and the paper's claims checked on them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from experiments.contextual.config import CONDITIONS, MODELS
+from experiments.contextual.figures import LABELS
+
+PLANNING = ("plan_and_execute", "plan_only")
+
+
+def expressed(summary: dict[str, Any], condition: str, model: str) -> float:
+    """Separation of the two cues' recalled plans as a fraction of the demonstrated one."""
+    demo = summary["pead"][condition]["demonstrations"]
+    return summary["separation"][condition][model]["mean"] / (demo["CW"]["mean"] - demo["CCW"]["mean"])
+
+
+def claims(summary: dict[str, Any]) -> list[tuple[str, bool]]:
+    """The paper's qualitative claims, each with whether this run supports it."""
+    out = []
+    for model in MODELS:
+        opposite = all(summary["pead"][c][model]["CW"]["mean"] > 0 > summary["pead"][c][model]["CCW"]["mean"]
+                       and expressed(summary, c, model) > 0.5 for c in PLANNING)
+        out.append((f"{LABELS[model]}: in both planning conditions the two cues' plans bow apart "
+                    "(opposite signs, > 50 % of the demonstrated separation)", opposite))
+        out.append((f"{LABELS[model]}: in execute-only they do not (< 25 % of the demonstrated separation)",
+                    abs(expressed(summary, "execute_only", model)) < 0.25))
+    sweep = summary["recall_error_vs_iterations"]
+    for c in PLANNING:
+        errors = [e for k, e in zip(sweep[c]["iterations"], sweep[c]["mean"]) if k <= 100]
+        falls = all(a > b for a, b in zip(errors, errors[1:]))
+        out.append((f"Neural ASM, {LABELS[c]}: recall error falls with every increase of the "
+                    f"inference iterations up to K=100", falls))
+    learn = [e["mean"] for e in summary["energy_vs_skills"]["epochs_to_learn"]]
+    out.append(("fewer skills learn faster (epochs to learn grow with the number of skills)",
+                all(a < b for a, b in zip(learn, learn[1:]))))
+    return out
+
+
+def _mm(stats: dict[str, Any]) -> str:
+    return f"{1000 * stats['mean']:+.1f} ± {1000 * stats['sd']:.1f}"
+
+
+def markdown(summary: dict[str, Any]) -> str:
+    setup = summary["setup"]
+    lines = [
+        "# Contextual inference in skill memory separation and expression",
+        "",
+        f"{setup['protocol']['seeds']} seeds x {len(CONDITIONS)} conditions x {len(MODELS)} models, "
+        f"{setup['tpc']['epochs']} learning epochs, {setup['protocol']['test_trials']} recalled trials; "
+        f"hidden size {setup['tpc']['hidden_size']}, learning rate {setup['tpc']['learning_rate']:g}, "
+        f"batch {setup['tpc']['batch_size'] or 'all'}; runtime {setup['runtime_s']:.0f} s on "
+        f"{setup['workers']} worker(s).",
+        "",
+        "## PEAD (mm, mean ± sd over seeds; + = left of S->T)",
+        "",
+        "| condition | model | PEAD cue CW | PEAD cue CCW | separation CW-CCW | % of demonstrated | recall MSE |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for c in CONDITIONS:
+        demo = summary["pead"][c]["demonstrations"]
+        lines.append(f"| {LABELS[c]} | demonstrations | {_mm(demo['CW'])} | {_mm(demo['CCW'])} | "
+                     f"{1000 * (demo['CW']['mean'] - demo['CCW']['mean']):+.1f} | 100 | |")
+        for m in MODELS:
+            p, err = summary["pead"][c][m], summary["recall_error"][c][m]
+            lines.append(f"| {LABELS[c]} | {LABELS[m]} | {_mm(p['CW'])} | {_mm(p['CCW'])} | "
+                         f"{_mm(summary['separation'][c][m])} | {100 * expressed(summary, c, m):.0f} | "
+                         f"{err['mean']:.3f} ± {err['sd']:.3f} |")
+    sweep = summary["recall_error_vs_iterations"]
+    lines += ["", "## Neural ASM recall MSE vs inference iterations K at the cue", "",
+              "| condition | " + " | ".join(f"K={k}" for k in sweep[CONDITIONS[0]]["iterations"]) + " |",
+              "|---|" + "---|" * len(sweep[CONDITIONS[0]]["iterations"])]
+    for c in CONDITIONS:
+        lines.append(f"| {LABELS[c]} | " + " | ".join(f"{e:.3f}" for e in sweep[c]["mean"]) + " |")
+    skills = summary["energy_vs_skills"]
+    lines += ["", "## Learning speed vs number of skills (plan & execute data)", "",
+              "| skills | epochs to learn | mean energy over training |", "|---|---|---|"]
+    for n, e, m in zip(skills["n_skills"], skills["epochs_to_learn"], skills["mean_energy"]):
+        lines.append(f"| {n} | {e['mean']:.0f} ± {e['sd']:.0f} | {m['mean']:.3f} ± {m['sd']:.3f} |")
+    lines += ["", "## The paper's qualitative claims", ""]
+    lines += [f"- [{'x' if ok else ' '}] {text}" for text, ok in claims(summary)]
+    return "\n".join(lines) + "\n"
+
+
+def write(summary: dict[str, Any], out: Path) -> tuple[Path, Path]:
+    json_path, md_path = out / "contextual.json", out / "contextual.md"
+    json_path.write_text(json.dumps(summary, indent=1))
+    md_path.write_text(markdown(summary))
+    return json_path, md_path
