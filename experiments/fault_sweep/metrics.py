@@ -117,29 +117,32 @@ def joints_isolated(joint_err: np.ndarray, rows: np.ndarray, step: np.ndarray) -
     return joint_err[rows, step].argmax(axis=1) + 1
 
 
-def ceilings(faults: np.ndarray, twins: np.ndarray, normal: np.ndarray, channel_names: tuple[str, ...],
-             fault_step: np.ndarray, fault_joint: np.ndarray, k: float = 3.0) -> dict:
+def ceilings(faults: np.ndarray, twins: np.ndarray, normal: np.ndarray, fault_skills: np.ndarray,
+             normal_skills: np.ndarray, channel_names: tuple[str, ...], fault_step: np.ndarray,
+             fault_joint: np.ndarray, k: float = 3.0) -> dict:
     """What an oracle that knows each fault's no-fault twin could reach (normalised inputs).
 
-    Deviation from the twin is whitened by normal variation (per-step std of held-out
-    normal episodes). A fault is *visible* when some channel deviates by more than k
-    normal standard deviations at or after its fault step; it is *isolable at the fault
-    step* when, at that step, its own joint deviates most among the joints and by more
-    than k standard deviations (a 0-degree overshoot changes nothing at its own step).
+    Deviation from the twin is whitened by normal variation (per-skill, per-step std of
+    held-out normal episodes). A fault is *visible* when some channel deviates by more
+    than k normal standard deviations at or after its fault step. The isolation ceiling
+    at the fault step counts faults whose own joint deviates most among the joints at
+    that step, by more than k standard deviations: a 0-degree overshoot changes nothing
+    at its own step, so about 1/7 of the grid cannot be isolated there.
     """
-    sigma = np.maximum(normal.std(axis=0), 1e-3)  # (T, D)
-    dev = np.abs(faults - twins) / sigma[None]
+    sigma = np.ones_like(faults)
+    for skill in np.unique(fault_skills):
+        sigma[fault_skills == skill] = np.maximum(normal[normal_skills == skill].std(axis=0), 1e-3)
+    dev = np.abs(faults - twins) / sigma
+    rows = np.arange(len(dev))
     steps = np.arange(dev.shape[1])
     after = np.where((steps[None] >= fault_step[:, None])[..., None], dev, 0.0)
     visible = after.max(axis=(1, 2)) > k
-    visible_at_step = dev[np.arange(len(dev)), fault_step].max(axis=1) > k
-    joints = np.array(joint_channels(channel_names))
-    at = dev[np.arange(len(dev)), fault_step][:, joints]
+    at = dev[rows, fault_step][:, np.array(joint_channels(channel_names))]
     isolable = (at.argmax(axis=1) + 1 == fault_joint) & (at.max(axis=1) > k)
     return {
         "oracle_detection_rate": float(visible.mean()),
         "invisible_faults": int((~visible).sum()),
-        "visible_at_fault_step": float(visible_at_step.mean()),
+        "visible_at_fault_step": float((dev[rows, fault_step].max(axis=1) > k).mean()),
         "isolation_ceiling_at_fault_step": float(isolable.mean()),
         "whitening_k_sigma": k,
         "visible": visible,

@@ -84,5 +84,6 @@ def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs
             summary[method.name][weighting] = {"family": method.family, **metrics}
             outcomes[(method.name, weighting)] = outcome
     ceiling = ceilings(norm.normalise(bench.faults.x), norm.normalise(bench.twins.x),
-                       norm.normalise(normal.precision.x), names, bench.fault_step, bench.fault_joint)
+                       norm.normalise(normal.precision.x), bench.faults.skills, normal.precision.skills,
+                       names, bench.fault_step, bench.fault_joint)
     return SweepResult(summary, outcomes, ceiling, bench, norm, all_errors)
