@@ -52,13 +52,13 @@ class EmbeddedServer:
 def start_embedded(
     settings: Settings | None = None, log_level: str = "warning", startup_timeout_s: float = 3600.0
 ) -> EmbeddedServer:
-    """Serve on 127.0.0.1 at a free port (or ``settings.port``) from a daemon thread.
+    """Serve on 127.0.0.1 at a free port (``settings.host`` and ``port`` are ignored) from a daemon thread.
 
     The timeout is long because the first run may train the default model.
     """
     settings = (settings or Settings()).model_copy(update={"host": "127.0.0.1"})
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.bind(("127.0.0.1", settings.port if settings.port else 0))
+    sock.bind(("127.0.0.1", 0))
     port = sock.getsockname()[1]
     server = uvicorn.Server(uvicorn_config(settings.model_copy(update={"port": port}), log_level))
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, name="nasm-embedded", daemon=True)

@@ -65,10 +65,18 @@ def undecodable(errors: list[dict[str, Any]]) -> bool:
     return any(e.get("type") == "json_invalid" for e in errors)
 
 
+def json_problem(errors: list[dict[str, Any]]) -> str:
+    """The decoder's own reason (FastAPI puts it in ctx, pydantic in msg); it quotes no input."""
+    e = next(e for e in errors if e.get("type") == "json_invalid")
+    reason = (e.get("ctx") or {}).get("error") or e.get("msg", "")
+    return f"request body is not valid JSON: {reason}"
+
+
 async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
-    text, safe = describe(list(exc.errors()))
-    if undecodable(safe):
-        return JSONResponse(error_body(f"request body is not valid JSON: {text}"), status_code=400)
+    raw = list(exc.errors())
+    if undecodable(raw):
+        return JSONResponse(error_body(json_problem(raw)), status_code=400)
+    text, safe = describe(raw)
     return JSONResponse(error_body(text, safe), status_code=422)
 
 

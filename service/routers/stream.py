@@ -26,7 +26,7 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect, status
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from service.auth import HEADER, key_ok
-from service.errors import ServiceError, describe, undecodable
+from service.errors import ServiceError, describe, json_problem, undecodable
 from service.payloads import session_info, step_result
 from service.schemas import ClientMessage, EndMessage, SessionCreate, StartMessage
 from service.sessions import Session
@@ -90,8 +90,8 @@ async def stream(ws: WebSocket) -> None:
             try:
                 session = await _handle(ws, state, text, session)
             except ValidationError as exc:
-                detail, errors = describe(list(exc.errors()))
-                code = 400 if undecodable(errors) else 422
+                raw = list(exc.errors())
+                code, detail = (400, json_problem(raw)) if undecodable(raw) else (422, describe(raw)[0])
                 await ws.send_json({"type": "error", "status": code, "detail": detail})
             except ServiceError as exc:
                 if session is not None and session.id not in state.sessions:
