@@ -27,6 +27,7 @@ class ServiceState:
         self.started = time.monotonic()
 
     async def startup(self) -> None:
+        self.runner = Runner()  # a fresh thread: an app may be started again after a shutdown
         self.runner.start()
         await self.runner.call(lambda: self.registry.load(self.settings.build_default_model))
 
