@@ -81,11 +81,11 @@ def load_normal_sets(data_dir: Path, n_normal: int = 400, workers: int = 2) -> N
     return split_normal(tuple(sets["demos"][0].channel_names), sets["demos"], sets["normal"])
 
 
-def load_benchmark(data_dir: Path, n_normal: int = 400, workers: int = 2) -> Benchmark:
-    sets = ensure_sets(data_dir, SETS, n_normal, workers)
+def make_benchmark(sets: dict[str, list[Episode]]) -> Benchmark:
+    """Pair the sets of SETS into a benchmark (faults with their twins by seed)."""
     faults = sets["faults"]
     if [e.seed for e in faults] != [e.seed for e in sets["twins"]]:
-        raise ValueError(f"{data_dir}: fault and twin episodes do not pair up by seed")
+        raise ValueError("fault and twin episodes do not pair up by seed")
     specs = [e.fault for e in faults]
     return Benchmark(
         normal=split_normal(tuple(faults[0].channel_names), sets["demos"], sets["normal"]),
@@ -96,3 +96,7 @@ def load_benchmark(data_dir: Path, n_normal: int = 400, workers: int = 2) -> Ben
         fault_time=np.array([s.time_s for s in specs]),
         overshoot=np.array([s.overshoot_deg for s in specs]),
     )
+
+
+def load_benchmark(data_dir: Path, n_normal: int = 400, workers: int = 2) -> Benchmark:
+    return make_benchmark(ensure_sets(data_dir, SETS, n_normal, workers))

@@ -20,7 +20,8 @@ from experiments.fault_sweep.methods import Method, baseline_methods, neural_asm
 from experiments.fault_sweep.metrics import Errors, ceilings, evaluate, weigh
 from experiments.panda_model import provenance_of, train_calibrated
 from models import checkpoint
-from models.config import FAITHFUL, FAST
+from models.asm import NeuralASM
+from models.config import FAITHFUL, FAST, TPCConfig
 from models.normaliser import Normaliser
 
 
@@ -50,40 +51,47 @@ def method_errors(method: Method, bench: Benchmark, norm: Normaliser) -> tuple[E
     return Errors(**errors), (spread or None)
 
 
-def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, workers: int = 2,
-              n_normal: int = 400, fast_epochs: int | None = None) -> SweepResult:
-    bench = load_benchmark(data_dir, n_normal, workers)
-    normal = bench.normal
-    names = normal.channel_names
-    models_dir = out_dir / "models"
-    provenance = provenance_of(normal, data_dir)
-    fast_cfg = FAST if fast_epochs is None else FAST.with_(epochs=fast_epochs)
-    trained = {
-        "nasm": train_calibrated(normal.demos, normal.precision, normal.calibration, names, fast_cfg,
-                                 provenance=provenance),
-        "nasm_paper": train_calibrated(normal.demos, normal.precision, normal.calibration, names,
-                                       FAITHFUL.with_(epochs=paper_epochs), provenance=provenance),
-    }
-    for label, model in trained.items():
-        checkpoint.save(model, models_dir / f"{label}.safetensors")
-    norm = trained["nasm"].normaliser
-    methods = [m for label, model in trained.items() for m in neural_asm_methods(model, label)]
-    methods += baseline_methods(norm.normalise(normal.demos.x), normal.demos.skills)
-
+def score_methods(bench: Benchmark, methods: list[Method], norm: Normaliser) -> SweepResult:
+    """Every method, every weighting, on the same episodes; plus the ceilings."""
     summary: dict = {}
     outcomes: dict = {}
     all_errors: dict = {}
+    names = bench.normal.channel_names
     for method in tqdm(methods, desc="scoring methods"):
         errors, spread = method_errors(method, bench, norm)
         all_errors[method.name] = errors
-        weightings = ["raw", "precision"] + (["demo_std"] if spread is not None else [])
         summary[method.name] = {}
-        for weighting in weightings:
-            w = weigh(errors, weighting, spread)
-            metrics, outcome = evaluate(w, names, bench.fault_step, bench.fault_joint)
+        for weighting in ["raw", "precision"] + (["demo_std"] if spread is not None else []):
+            metrics, outcome = evaluate(weigh(errors, weighting, spread), names, bench.fault_step, bench.fault_joint)
             summary[method.name][weighting] = {"family": method.family, **metrics}
             outcomes[(method.name, weighting)] = outcome
+    normal = bench.normal
     ceiling = ceilings(norm.normalise(bench.faults.x), norm.normalise(bench.twins.x),
                        norm.normalise(normal.precision.x), bench.faults.skills, normal.precision.skills,
                        names, bench.fault_step, bench.fault_joint)
     return SweepResult(summary, outcomes, ceiling, bench, norm, all_errors)
+
+
+def train_models(bench: Benchmark, configs: dict[str, TPCConfig], provenance: dict) -> dict[str, NeuralASM]:
+    normal = bench.normal
+    return {
+        label: train_calibrated(normal.demos, normal.precision, normal.calibration, normal.channel_names, cfg,
+                                provenance=provenance)
+        for label, cfg in configs.items()
+    }
+
+
+def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, workers: int = 2,
+              n_normal: int = 400, fast_epochs: int | None = None) -> SweepResult:
+    bench = load_benchmark(data_dir, n_normal, workers)
+    configs = {
+        "nasm": FAST if fast_epochs is None else FAST.with_(epochs=fast_epochs),
+        "nasm_paper": FAITHFUL.with_(epochs=paper_epochs),
+    }
+    trained = train_models(bench, configs, provenance_of(bench.normal, data_dir))
+    for label, model in trained.items():
+        checkpoint.save(model, out_dir / "models" / f"{label}.safetensors")
+    norm = trained["nasm"].normaliser
+    methods = [m for label, model in trained.items() for m in neural_asm_methods(model, label)]
+    methods += baseline_methods(norm.normalise(bench.normal.demos.x), bench.normal.demos.skills)
+    return score_methods(bench, methods, norm)
