@@ -347,3 +347,24 @@ def test_no_models_is_a_clear_404(tmp_path):
         assert c.get("/models").json() == []
         r = c.post("/sessions", json={})
         assert r.status_code == 404 and "no models loaded" in r.json()["detail"]
+
+
+def test_step_payloads_match_their_declared_schemas(client, episodes, server):
+    from service.schemas import FaultResponse, PredictResponse, StepResult
+
+    sid = open_session(client)["session_id"]
+    x = episodes[0, 0].tolist()
+    PredictResponse.model_validate(client.post("/predict", json={"session_id": sid, "observation": x}).json())
+    FaultResponse.model_validate(client.post("/fault", json={"session_id": sid, "observation": x}).json())
+
+    async def one_step() -> dict:
+        async with websockets.connect(server.url.replace("http", "ws") + "/stream") as ws:
+            await ws.recv()
+            await ws.send('{"type": "start"}')
+            await ws.recv()
+            await ws.send(json.dumps({"type": "step", "observation": x}))
+            return json.loads(await ws.recv())
+
+    step = asyncio.run(one_step())
+    assert step.pop("type") == "step"
+    StepResult.model_validate(step)

@@ -1,12 +1,12 @@
 """One observation step per request. Each call advances its session by one step: call
 ``/predict`` or ``/fault`` for a step, not both (the websocket returns both at once)."""
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, Response
 
 from service.auth import require_api_key
 from service.deps import get_state
 from service.errors import ERROR_RESPONSES
-from service.payloads import fault_response, predict_response
+from service.payloads import fault_payload, json_response, predict_payload
 from service.schemas import Error, FaultResponse, PredictResponse, StepRequest
 from service.state import ServiceState
 
@@ -18,14 +18,14 @@ router = APIRouter(
 
 
 @router.post("/predict", response_model=PredictResponse)
-async def predict(req: StepRequest, state: ServiceState = Depends(get_state)) -> PredictResponse:
+async def predict(req: StepRequest, state: ServiceState = Depends(get_state)) -> Response:
     """Score one observation; returns the next-step prediction, per-channel errors and energy."""
     session, outcome = await state.step(req.session_id, req)
-    return predict_response(session, outcome)
+    return json_response(predict_payload(session, outcome))
 
 
 @router.post("/fault", response_model=FaultResponse)
-async def fault(req: StepRequest, state: ServiceState = Depends(get_state)) -> FaultResponse:
+async def fault(req: StepRequest, state: ServiceState = Depends(get_state)) -> Response:
     """Score one observation; returns the fault flag, energy, threshold, isolated joint and ranked channels."""
     session, outcome = await state.step(req.session_id, req)
-    return fault_response(session, outcome)
+    return json_response(fault_payload(session, outcome))

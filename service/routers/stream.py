@@ -22,12 +22,13 @@ connection stays usable. Messages larger than the body limit close it (code 1009
 
 from typing import Any
 
+import orjson
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect, status
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from service.auth import HEADER, key_ok
 from service.errors import ServiceError, describe, json_problem, undecodable
-from service.payloads import session_info, step_result
+from service.payloads import session_info, step_payload
 from service.schemas import ClientMessage, EndMessage, SessionCreate, StartMessage
 from service.sessions import Session
 from service.state import ServiceState
@@ -47,8 +48,7 @@ def metadata(state: ServiceState) -> dict[str, Any]:
 
 
 async def _send(ws: WebSocket, kind: str, body: BaseModel) -> None:
-    """``{"type": kind, **body}``, spliced to avoid serialising the payload twice."""
-    await ws.send_text(f'{{"type":"{kind}",{body.model_dump_json()[1:]}')
+    await ws.send_text(orjson.dumps({"type": kind, **body.model_dump()}).decode())
 
 
 async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session: Session | None) -> Session | None:
@@ -68,7 +68,7 @@ async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session
         await _send(ws, "ended", session_info(closed, state.settings.session_idle_s))
         return None
     session, outcome = await state.step(session.id, message)
-    await _send(ws, "step", step_result(session, outcome))
+    await ws.send_text(orjson.dumps({"type": "step", **step_payload(session, outcome)}).decode())
     return session
 
 

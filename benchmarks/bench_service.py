@@ -1,0 +1,149 @@
+"""Latency and throughput of the service, over real sockets on loopback.
+
+The service runs under uvicorn in a subprocess (so the client does not share its
+GIL) with a paper-sized model (H=256, K=100, 25 channels) trained briefly on the
+built-in synthetic skills. Measured: /healthz and /predict round trips over HTTP with
+one client, websocket steps with one client, and the steps per second of 64 concurrent
+websocket sessions (where the runner micro-batches). Prints one JSON object last.
+
+    python benchmarks/bench_service.py [--record] [--steps 400]
+"""
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import asyncio  # noqa: E402
+import json  # noqa: E402
+import socket  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import httpx  # noqa: E402
+import numpy as np  # noqa: E402
+import websockets  # noqa: E402
+
+from models import checkpoint  # noqa: E402
+from models.asm import NeuralASM  # noqa: E402
+from models.config import FAST  # noqa: E402
+from models.synthetic import make_skills  # noqa: E402
+
+CHANNELS = tuple(f"joint{i}" for i in range(1, 8)) + tuple(f"ch{i}" for i in range(18))
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def percentiles(ms: list[float]) -> tuple[float, float]:
+    return float(np.percentile(ms, 50)), float(np.percentile(ms, 99))
+
+
+def build_model(folder: Path) -> np.ndarray:
+    data = make_skills(n_skills=2, repetitions=10, channels=25)
+    model = NeuralASM.fit(data.sequences, CHANNELS, FAST.with_(epochs=60), progress=False)
+    model.calibrate(data.sequences, data.sequences, "online", 1)
+    checkpoint.save(model, folder / "bench.safetensors")
+    return data.sequences
+
+
+def start_server(folder: Path, port: int, record: bool) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--models-dir", str(folder),
+           "--recordings-dir", str(folder / "rec"), "--log-level", "warning", "--max-sessions", "128",
+           "--record" if record else "--no-record"]
+    proc = subprocess.Popen(cmd)
+    for _ in range(600):
+        try:
+            if httpx.get(f"http://127.0.0.1:{port}/healthz").status_code == 200:
+                return proc
+        except httpx.TransportError:
+            time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError("service did not start")
+
+
+def http_latencies(url: str, episodes: np.ndarray, steps: int) -> dict[str, float]:
+    out: dict[str, list[float]] = {"healthz": [], "predict": []}
+    with httpx.Client(base_url=url) as c:
+        for _ in range(steps):
+            t = time.perf_counter()
+            c.get("/healthz")
+            out["healthz"].append((time.perf_counter() - t) * 1e3)
+        sid, k = None, 0
+        for i in range(steps):
+            if k == 0:
+                sid = c.post("/sessions", json={}).json()["session_id"]
+            body = {"session_id": sid, "observation": episodes[i % len(episodes), k].tolist()}
+            t = time.perf_counter()
+            r = c.post("/predict", json=body)
+            out["predict"].append((time.perf_counter() - t) * 1e3)
+            assert r.status_code == 200, r.text
+            k = (k + 1) % episodes.shape[1]
+            if k == 0:
+                c.delete(f"/sessions/{sid}")
+    result = {}
+    for name, ms in out.items():
+        result[f"{name}_p50_ms"], result[f"{name}_p99_ms"] = percentiles(ms[10:])
+    return result
+
+
+async def ws_session(url: str, episodes: np.ndarray, steps: int, seed: int) -> tuple[list[float], list[int]]:
+    times, batches = [], []
+    async with websockets.connect(url) as ws:
+        await ws.recv()
+        k = 0
+        for i in range(steps):
+            if k == 0:
+                await ws.send('{"type": "start"}')
+                await ws.recv()
+            x = episodes[(seed + i) % len(episodes), k].tolist()
+            t = time.perf_counter()
+            await ws.send(json.dumps({"type": "step", "observation": x}))
+            reply = json.loads(await ws.recv())
+            times.append((time.perf_counter() - t) * 1e3)
+            batches.append(reply["batch_size"])
+            k = (k + 1) % episodes.shape[1]
+    return times, batches
+
+
+async def fleet(url: str, episodes: np.ndarray, sessions: int, steps: int) -> tuple[float, float]:
+    start = time.perf_counter()
+    results = await asyncio.gather(*(ws_session(url, episodes, steps, s) for s in range(sessions)))
+    elapsed = time.perf_counter() - start
+    batches = [b for _, bs in results for b in bs]
+    return sessions * steps / elapsed, float(np.mean(batches))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--steps", type=int, default=400, help="steps per latency measurement")
+    parser.add_argument("--fleet-steps", type=int, default=60, help="steps per session in the fleet")
+    parser.add_argument("--record", action="store_true", help="let the service record every session")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        episodes = build_model(folder)
+        port = free_port()
+        proc = start_server(folder, port, args.record)
+        try:
+            result = http_latencies(f"http://127.0.0.1:{port}", episodes, args.steps)
+            ws_url = f"ws://127.0.0.1:{port}/stream"
+            ws_times, _ = asyncio.run(ws_session(ws_url, episodes, args.steps, 0))
+            result["ws_p50_ms"], result["ws_p99_ms"] = percentiles(ws_times[10:])
+            result["fleet_steps_per_s"], result["fleet_mean_batch"] = asyncio.run(
+                fleet(ws_url, episodes, 64, args.fleet_steps))
+        finally:
+            proc.terminate()
+            proc.wait(10)
+    result.update(record=args.record, hidden_size=FAST.hidden_size, inference_steps=FAST.inference_steps)
+    print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in result.items()}))
+
+
+if __name__ == "__main__":
+    main()
