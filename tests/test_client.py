@@ -1,0 +1,127 @@
+"""The streaming Panda client against a real uvicorn server on loopback.
+
+A small model is trained on a few simulated Panda demonstrations and calibrated on other
+seeds (the default model takes minutes to build), then the client's ``run_client`` streams
+simulated episodes to ``service.embedded`` over the websocket and records them.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from models import checkpoint
+from models.asm import NeuralASM
+from models.config import FAST
+from recordings.readers import read_mcap, read_rrd_series
+from service.embedded import start_embedded
+from service.settings import Settings
+from sim.channels import CHANNEL_NAMES, JOINT_NAMES
+from sim.client import run_client, summary_line
+from sim.faults import FaultSpec
+from sim.runner import run_episode
+from sim.skills import SKILLS
+
+SKILL = SKILLS[0]
+TEST_SEED = 40  # neither a training nor a calibration seed
+
+
+@pytest.fixture(scope="module")
+def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("models")
+    demos = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(4)])
+    precision = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(10, 15)])
+    thresholds = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(20, 25)])
+    model = NeuralASM.fit(demos, CHANNEL_NAMES, FAST.with_(hidden_size=64, epochs=150), progress=False)
+    for mode in ("offline", "online"):
+        model.calibrate(precision, thresholds, mode, 1)
+    checkpoint.save(model, folder / "panda.safetensors")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def server(model_dir: Path, tmp_path_factory: pytest.TempPathFactory):
+    settings = Settings(models_dir=model_dir, recordings_dir=tmp_path_factory.mktemp("service-recordings"),
+                        build_default_model=False)
+    with start_embedded(settings) as srv:
+        yield srv
+
+
+def _fault_messages(path: str) -> list[dict]:
+    return read_mcap(path)["/fault"]
+
+
+def test_normal_episode_streams_every_step_and_records_what_it_printed(server, tmp_path, capsys):
+    [s] = run_client(SKILL, TEST_SEED, url=server.url, out=tmp_path)
+    printed = capsys.readouterr().out
+
+    assert s.completed and s.error is None
+    assert s.steps_total == s.steps_scored == 15 == len(s.steps)
+    assert [line.step for line in s.steps] == list(range(15))
+    assert s.fault is None and s.fault_step is None and s.reconnects == 0
+    assert s.detected == any(line.fault for line in s.steps)
+    if s.detected:  # a false alarm of the small model: the summary still describes it consistently
+        assert s.first_flag_step == next(line.step for line in s.steps if line.fault)
+    else:
+        assert s.first_flag_step is None and s.isolated_joint is None
+    assert summary_line(s) in printed
+
+    # the live lines: one per step, with the energies returned
+    live = re.findall(r"^step +(\d+) .*energy= *([-0-9.e+]+) +threshold= *([-0-9.e+]+)", printed, re.M)
+    assert [int(k) for k, _, _ in live] == list(range(15))
+    np.testing.assert_allclose([float(e) for _, e, _ in live], s.energies, atol=5e-4, rtol=1e-6)
+
+    # the client's .mcap holds exactly the returned energies, thresholds and flags
+    faults = _fault_messages(s.recordings["mcap"])
+    assert [m["step"] for m in faults] == list(range(15))
+    assert [m["energy"] for m in faults] == s.energies
+    assert [m["threshold"] for m in faults] == [line.threshold for line in s.steps]
+    assert [m["fault"] for m in faults] == [line.fault for line in s.steps]
+    meta = read_mcap(s.recordings["mcap"])["/metadata"][0]
+    assert meta["recording_id"] == s.recording_id and meta["source"] == "client"
+    assert len(read_mcap(s.recordings["mcap"])["/tf"]) == 301  # the whole 40 Hz world trace
+
+    # ... and so does its .rrd
+    steps, values = read_rrd_series(s.recordings["rrd"], "/fault/energy")
+    assert steps.tolist() == list(range(15))
+    np.testing.assert_array_equal(values[:, 0], s.energies)
+
+    # the service recorded the same session under the same Rerun recording id
+    service_mcap = s.service_recordings["mcap"]
+    assert read_mcap(service_mcap)["/metadata"][0]["recording_id"] == s.recording_id
+    assert [m["energy"] for m in _fault_messages(service_mcap)] == s.energies
+
+
+def test_faulty_episode_is_flagged_at_or_after_the_fault_with_a_joint(server, tmp_path):
+    fault = FaultSpec(joint=2, time_s=3.0, overshoot_deg=15.0)
+    [s] = run_client(SKILL, TEST_SEED, fault=fault, url=server.url, out=tmp_path, quiet=True)
+    print(summary_line(s))
+    assert s.completed and s.fault_step == 6
+    assert s.detected
+    assert s.first_flag_step is not None and s.first_flag_step >= 6
+    assert s.isolated_joint in JOINT_NAMES
+    assert s.isolated_joint == s.steps[s.first_flag_step].isolated_joint
+
+
+def test_service_going_away_mid_episode_leaves_readable_recordings(model_dir, tmp_path):
+    settings = Settings(models_dir=model_dir, recordings_dir=tmp_path / "service", build_default_model=False)
+    srv = start_embedded(settings)
+
+    def stop_after_step_3(episode: int, step: int) -> None:
+        if step == 3:
+            srv.stop()
+
+    try:
+        [s] = run_client(SKILL, TEST_SEED, url=srv.url, out=tmp_path, quiet=True, after_step=stop_after_step_3)
+    finally:
+        srv.stop()
+    assert not s.completed
+    assert s.error is not None and "went away" in s.error
+    assert s.steps_scored == 4
+    faults = _fault_messages(s.recordings["mcap"])  # closed properly: read to the end
+    assert [m["energy"] for m in faults] == s.energies
+    _, values = read_rrd_series(s.recordings["rrd"], "/fault/energy")
+    np.testing.assert_array_equal(values[:, 0], s.energies)
