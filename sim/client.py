@@ -21,6 +21,10 @@ a Rerun recording id that is also given to the service session, so the client's 
 If the service goes away mid-episode the client says so; with ``--reconnect`` it opens a
 new session, replays the steps sent so far and carries on. Recordings are closed in all
 cases (normal exit, lost service, Ctrl-C, errors) and stay readable.
+
+Exit codes: 0 done, 2 the service refused (bad API key, unknown model, ...), 3 the service
+went away (or could not be reached), 130 Ctrl-C. ``run_client`` is the function behind the
+CLI; it returns one ``EpisodeSummary`` per episode.
 """
 
 from __future__ import annotations
@@ -472,7 +476,7 @@ def _service(url: str | None, api_key: str | None, models_dir: Path, out: Path, 
 
     _print(f"starting the service in-process (models: {models_dir}; the default Panda model is built on "
            "first run, which takes a few minutes)", quiet)
-    settings = Settings(models_dir=models_dir, recordings_dir=out, api_key=api_key)
+    settings = Settings(models_dir=models_dir, recordings_dir=out, api_key=api_key or None)
     with start_embedded(settings) as server:
         _print(f"service at {server.url}", quiet)
         yield server.url
