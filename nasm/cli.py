@@ -24,12 +24,6 @@ from nasm.data import SYNTHETIC, load_sequences  # noqa: E402
 torch.set_num_threads(1)
 app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
 
-from experiments.fault_sweep.cli import faults  # noqa: E402
-from sim.cli import demos  # noqa: E402
-
-for command in (demos, faults):  # each package owns its commands; mounted here
-    app.command()(command)
-
 
 def _fail(message: str) -> None:
     typer.secho(message, fg="red", err=True)
@@ -136,6 +130,15 @@ def info(model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"
     }
     typer.echo(json.dumps(summary, indent=2, default=str))
 
+
+from experiments.contextual.cli import contextual  # noqa: E402
+from experiments.correction.cli import correction  # noqa: E402
+from experiments.fault_sweep.cli import faults  # noqa: E402
+from service.cli import serve  # noqa: E402
+from sim.cli import demos  # noqa: E402
+
+for command in (demos, faults, correction, contextual, serve):  # each package owns its commands
+    app.command()(command)
 
 if __name__ == "__main__":
     app()
