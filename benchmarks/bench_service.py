@@ -58,14 +58,15 @@ def start_server(folder: Path, port: int, record: bool) -> subprocess.Popen:
            "--recordings-dir", str(folder / "rec"), "--log-level", "warning", "--max-sessions", "128",
            "--record" if record else "--no-record"]
     proc = subprocess.Popen(cmd)
-    for _ in range(600):
+    deadline = time.monotonic() + 300  # importing torch on a loaded machine can take a while
+    while time.monotonic() < deadline and proc.poll() is None:
         try:
             if httpx.get(f"http://127.0.0.1:{port}/healthz").status_code == 200:
                 return proc
         except httpx.TransportError:
-            time.sleep(0.1)
+            time.sleep(0.2)
     proc.kill()
-    raise RuntimeError("service did not start")
+    raise RuntimeError(f"service did not start (exit code {proc.poll()})")
 
 
 def http_latencies(url: str, episodes: np.ndarray, steps: int) -> dict[str, float]:

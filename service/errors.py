@@ -45,6 +45,10 @@ class TooManySessions(ServiceError):
     status = 429
 
 
+class ShuttingDown(ServiceError):
+    status = 503
+
+
 SHOWN = 3  # errors spelled out in the message; all are listed in "errors"
 
 

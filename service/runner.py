@@ -24,7 +24,7 @@ from models.fault import FaultDecision
 from models.scoring import StepScore
 from recordings.records import StepRecord
 from service.batching import StepOutcome, fault_decision, group_key, step_group
-from service.errors import BadObservation
+from service.errors import BadObservation, ShuttingDown
 from service.sessions import Session
 
 log = logging.getLogger("service.runner")
@@ -75,12 +75,16 @@ class Runner:
             self._thread.join(timeout)
 
     async def call(self, fn: Callable[[], T]) -> T:
+        if not self._thread.is_alive():  # shutting down: e.g. closing a session's files
+            return fn()
         loop = asyncio.get_running_loop()
         future: asyncio.Future[T] = loop.create_future()
         self._jobs.put(_Call(loop, future, fn))
         return await future
 
     async def step(self, session: Session, x: np.ndarray) -> StepOutcome:
+        if not self._thread.is_alive():
+            raise ShuttingDown("the service is shutting down; retry against a running one")
         loop = asyncio.get_running_loop()
         future: asyncio.Future[StepOutcome] = loop.create_future()
         self._jobs.put(_Step(loop, future, session, x))
