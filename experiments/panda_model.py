@@ -1,9 +1,10 @@
 """The default Panda model: trained on the simulated demonstrations, calibrated on
 held-out normal episodes, written as a checkpoint the service can host.
 
-Precisions come from one part of the held-out normal episodes and thresholds from
-another (see experiments/fault_sweep/data.py), for both recall modes, cued from one
-observation.
+The precision split of the held-out normal episodes (experiments/fault_sweep/data.py)
+chooses the training epoch kept and gives the error spreads; the calibration split gives
+the thresholds; the test split is left for measuring false-positive rates. Both recall
+modes are calibrated, cued from one observation.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ def train_calibrated(
     progress: bool = True,
     provenance: dict | None = None,
 ) -> NeuralASM:
-    model = NeuralASM.fit(demos.x, channel_names, config, progress=progress, provenance=provenance)
+    model = NeuralASM.fit(demos.x, channel_names, config, progress=progress, provenance=provenance,
+                          validation=precision.x, labels=demos.skills)
     for mode in ("offline", "online"):
         model.calibrate(precision.x, calibration.x, mode, 1, source="held-out normal episodes (simulated Panda)")
     return model

@@ -35,6 +35,18 @@ def as_sequences(data: np.ndarray, width: int, what: str = "sequences") -> np.nd
     return arr
 
 
+def channel_precision(sequences: np.ndarray, labels: np.ndarray | None, floor: float = 0.05) -> np.ndarray:
+    """Relative precision of each channel from normalised demonstrations (N, T, D).
+
+    A channel's spread is the RMS over steps of its std across the sequences of one
+    skill. Channels steadier than the median channel get precision 1; noisier ones
+    (finger forces at contact, say) (median / spread)^2, down to ``floor``.
+    """
+    groups = [sequences] if labels is None else [sequences[labels == k] for k in np.unique(labels)]
+    spread = np.sqrt(np.mean([g.var(axis=0).mean(axis=0) for g in groups], axis=0))
+    return np.clip((np.median(spread) / np.maximum(spread, 1e-9)) ** 2, floor, 1.0)
+
+
 class NeuralASM:
     def __init__(
         self,
@@ -62,17 +74,27 @@ class NeuralASM:
         config: TPCConfig = FAST,
         progress: bool = True,
         provenance: dict[str, Any] | None = None,
+        validation: np.ndarray | None = None,
+        labels: np.ndarray | None = None,
     ) -> "NeuralASM":
         """Fit the normaliser, train the network and estimate precisions on the data.
 
-        The precisions estimated here come from the training sequences themselves and
-        are optimistic; ``calibrate`` replaces them with estimates from held-out
-        normal episodes.
+        Given held-out ``validation`` sequences (raw) and ``config.keep_best_on_held_out``,
+        the weights kept are those of the epoch that recalls them best (see ``train``). ``labels`` (the skill of each
+        sequence) let observation precisions be estimated within skills. The precisions estimated here come
+        from the training sequences themselves and are optimistic; ``calibrate``
+        replaces them with estimates from held-out normal episodes.
         """
         data = as_sequences(sequences, len(channel_names))
         normaliser = Normaliser.fit(data)
         net = TemporalPC(len(channel_names), config)
-        history = train(net, normaliser.normalise(data), progress=progress)
+        if config.observation_precision == "demo_spread":
+            net.set_precision(channel_precision(normaliser.normalise(data), labels))
+        held_out = None
+        if validation is not None and config.keep_best_on_held_out:
+            held_out = normaliser.normalise(as_sequences(validation, len(channel_names)))
+        history, kept = train(net, normaliser.normalise(data), progress=progress, validation=held_out)
+        provenance = {**(provenance or {}), "kept_epoch": kept + 1}
         model = cls(net, normaliser, channel_names, provenance=provenance, history=history)
         for mode in recall_.RECALL_MODES:
             errors = model.errors(data, mode, 1)

@@ -1,6 +1,6 @@
 """Checkpoints: one safetensors file holding the weights and a JSON metadata header.
 
-Tensors: ``W_H``, ``W_F``, ``normaliser.mean``, ``normaliser.std`` and, per
+Tensors: ``W_H``, ``W_F``, ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
 calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std`` and
 ``calibration.<key>.step_thresholds``. The header entry ``neural_asm`` is a JSON
 document with the format version, the TPCConfig, the channel names, each
@@ -57,6 +57,7 @@ def to_bytes(model: NeuralASM) -> bytes:
     tensors = {
         "W_H": model.net.W_H.contiguous(),
         "W_F": model.net.W_F.contiguous(),
+        "precision": model.net.precision.contiguous(),
         "normaliser.mean": _f64(model.normaliser.mean),
         "normaliser.std": _f64(model.normaliser.std),
     }
@@ -135,7 +136,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
         config = TPCConfig.from_dict(meta["config"])
         names = meta["channel_names"]
         net = TemporalPC(len(names), config)
-        net.load_weights(tensors["W_H"], tensors["W_F"])
+        net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"])
         normaliser = Normaliser(tensors["normaliser.mean"].numpy(), tensors["normaliser.std"].numpy())
         calibrations = {}
         for c in meta["calibrations"]:

@@ -36,6 +36,13 @@ class TPCConfig:
     # Upper bound on the spectral norm of W_F, enforced by projection after every
     # update. None derives it from stability of the relaxation (see tpc.stable_wf_norm).
     wf_max_norm: float | None = 3.0
+    # Precision of the observation channels in the energy: "uniform" is the paper's
+    # identity; "demo_spread" trusts each channel in inverse proportion to its spread
+    # across demonstrations of a skill, relative to the median channel, in [0.05, 1].
+    observation_precision: Literal["uniform", "demo_spread"] = "demo_spread"
+    # With held-out sequences given to NeuralASM.fit, keep the weights of the epoch that
+    # recalls them best instead of the last epoch's (the paper keeps the last).
+    keep_best_on_held_out: bool = True
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -54,6 +61,11 @@ class TPCConfig:
         if self.initial_state not in ("zeros", "random"):
             raise ValueError(
                 f"TPCConfig.initial_state must be 'zeros' or 'random', got {self.initial_state!r}"
+            )
+        if self.observation_precision not in ("uniform", "demo_spread"):
+            raise ValueError(
+                "TPCConfig.observation_precision must be 'uniform' or 'demo_spread', "
+                f"got {self.observation_precision!r}"
             )
         if self.wf_max_norm is not None and not self.wf_max_norm > 0:
             raise ValueError(f"TPCConfig.wf_max_norm must be > 0 or None, got {self.wf_max_norm}")
@@ -84,6 +96,8 @@ FAITHFUL = TPCConfig(
     optimizer="adam",
     initial_state="random",
     wf_max_norm=None,
+    observation_precision="uniform",
+    keep_best_on_held_out=False,
 )
 FAST = TPCConfig()
 PRESETS: dict[str, TPCConfig] = {"fast": FAST, "faithful": FAITHFUL}

@@ -43,13 +43,25 @@ class TemporalPC:
         bound = 1.0 / math.sqrt(h)
         self.W_H = (torch.rand(h, h, generator=gen) * 2 - 1) * bound
         self.W_F = (torch.rand(obs_size, h, generator=gen) * 2 - 1) * bound
+        # Precision of each observation channel in the energy, ||x - W_F f(z)||^2_Pi.
+        # All ones is the paper's model; values are kept in (0, 1] so the stability
+        # bound on W_F (stable_wf_norm) is unchanged.
+        self.precision = torch.ones(obs_size)
         self._bind_views()
 
     def _bind_views(self) -> None:
         self.w_h = self.W_H.numpy()
         self.w_f = self.W_F.numpy()
+        self.pi = self.precision.numpy()
 
-    def load_weights(self, W_H: torch.Tensor, W_F: torch.Tensor) -> None:
+    def set_precision(self, precision: np.ndarray) -> None:
+        precision = np.asarray(precision, np.float32)
+        if precision.shape != (self.obs_size,) or not ((precision > 0) & (precision <= 1)).all():
+            raise ValueError(f"precision must be {self.obs_size} values in (0, 1], got {precision!r}")
+        self.precision = torch.from_numpy(precision.copy())
+        self._bind_views()
+
+    def load_weights(self, W_H: torch.Tensor, W_F: torch.Tensor, precision: torch.Tensor | None = None) -> None:
         h = self.config.hidden_size
         if tuple(W_H.shape) != (h, h) or tuple(W_F.shape) != (self.obs_size, h):
             raise ValueError(
@@ -59,6 +71,8 @@ class TemporalPC:
         self.W_H = W_H.detach().to(torch.float32).contiguous().clone()
         self.W_F = W_F.detach().to(torch.float32).contiguous().clone()
         self._bind_views()
+        if precision is not None:
+            self.set_precision(precision.numpy())
 
     @property
     def wf_max_norm(self) -> float:
@@ -84,12 +98,13 @@ class TemporalPC:
     def infer(self, prior: np.ndarray, x: np.ndarray, steps: int | None = None) -> np.ndarray:
         """Relax z from the prior towards the observation x (eq. 2), K fixed steps.
 
-        z <- z + gamma * (-eps_z + f'(z) * (eps_x @ W_F)),
-        eps_z = z - prior, eps_x = x - W_F f(z). No convergence test, as in the paper.
+        z <- z + gamma * (-eps_z + f'(z) * ((Pi eps_x) @ W_F)),
+        eps_z = z - prior, eps_x = x - W_F f(z). No convergence test, as in the paper
+        (whose Pi is the identity).
         """
         steps = self.config.inference_steps if steps is None else steps
         gamma = np.float32(self.config.inference_rate)
-        w_f, w_ft = self.w_f, self.w_f.T
+        w_f, w_ft = self.w_f * self.pi[:, None], self.w_f.T  # Pi folded into W_F once
         z = prior.copy()
         gamma_prior = gamma * prior
         for _ in range(steps):
@@ -113,8 +128,9 @@ class TemporalPC:
         eps_z = z - prior
         eps_x = x - fz @ self.w_f.T
         grad_h = -(eps_z.T @ np.tanh(zhat_prev)) / batch
-        grad_f = -(eps_x.T @ fz) / batch
-        energy = float((eps_z * eps_z).sum() + (eps_x * eps_x).sum()) / batch
+        weighted = eps_x * self.pi
+        grad_f = -(weighted.T @ fz) / batch
+        energy = float((eps_z * eps_z).sum() + (weighted * eps_x).sum()) / batch
         return grad_h, grad_f, energy
 
     def project(self) -> None:

@@ -14,6 +14,7 @@ import torch
 from tqdm.auto import tqdm
 
 from models.config import TPCConfig
+from models.recall import run
 from models.tpc import TemporalPC
 
 EpochCallback = Callable[[int, float], None]
@@ -71,20 +72,40 @@ def train_epoch(
     return total / count
 
 
+def recall_error(net: TemporalPC, sequences: np.ndarray) -> float:
+    """Mean squared error of offline and online recall after the first step (normalised)."""
+    errors = [sequences - run(net, sequences, mode) for mode in ("offline", "online")]
+    return float(np.mean([(e[:, 1:] ** 2).mean() for e in errors]))
+
+
+def _checked(sequences: np.ndarray, width: int, what: str) -> np.ndarray:
+    sequences = np.ascontiguousarray(sequences, np.float32)
+    if sequences.ndim != 3 or sequences.shape[-1] != width:
+        raise ValueError(f"{what} must have shape (N, T, {width}), got {sequences.shape}")
+    if not np.isfinite(sequences).all():
+        raise ValueError(f"{what} contain NaN or inf")
+    return sequences
+
+
 def train(
     net: TemporalPC,
     sequences: np.ndarray,
     progress: bool = True,
     on_epoch: EpochCallback | None = None,
-) -> list[float]:
-    """Train on normalised sequences (N, T, D); returns the mean energy of every epoch."""
-    sequences = np.ascontiguousarray(sequences, np.float32)
-    if sequences.ndim != 3 or sequences.shape[-1] != net.obs_size:
-        raise ValueError(
-            f"sequences must have shape (N, T, {net.obs_size}), got {sequences.shape}"
-        )
-    if not np.isfinite(sequences).all():
-        raise ValueError("sequences contain NaN or inf")
+    validation: np.ndarray | None = None,
+    eval_every: int = 25,
+) -> tuple[list[float], int]:
+    """Train on normalised sequences (N, T, D).
+
+    Returns the mean energy of every epoch and the epoch whose weights are kept: the
+    last one, or, given held-out ``validation`` sequences, the evaluated epoch with the
+    lowest recall error on them. With ~20 demonstrations the recall error on unseen
+    episodes stops improving long before the training energy does.
+    """
+    sequences = _checked(sequences, net.obs_size, "sequences")
+    if validation is not None:
+        validation = _checked(validation, net.obs_size, "validation sequences")
+    best = (np.inf, net.config.epochs - 1, None)
     rng = np.random.default_rng(net.config.seed)
     optimizer = make_optimizer(net)
     schedule = make_schedule(optimizer, net.config)
@@ -98,7 +119,16 @@ def train(
             history.append(energy)
             if schedule is not None:
                 schedule.step()
-            bar.set_postfix(energy=f"{energy:.4g}", refresh=False)
+            if validation is not None and ((epoch + 1) % eval_every == 0 or epoch + 1 == net.config.epochs):
+                error = recall_error(net, validation)
+                if error < best[0]:
+                    best = (error, epoch, (net.W_H.clone(), net.W_F.clone()))
+                bar.set_postfix(energy=f"{energy:.4g}", held_out=f"{error:.4g}", refresh=False)
+            else:
+                bar.set_postfix(energy=f"{energy:.4g}", refresh=False)
             if on_epoch is not None:
                 on_epoch(epoch, energy)
-    return history
+    if best[2] is not None:
+        net.W_H.copy_(best[2][0])
+        net.W_F.copy_(best[2][1])
+    return history, best[1]

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from models import recall
-from models.asm import NeuralASM
+from models.asm import NeuralASM, channel_precision
 from models.config import FAITHFUL, TPCConfig
 from models.tpc import TemporalPC, stable_wf_norm
+from models.train import recall_error
 
 from conftest import SMALL
 
@@ -145,3 +146,24 @@ def test_config_rejects_bad_values():
         TPCConfig(optimizer="rmsprop")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="recall mode"):
         recall.check_recall("sideways", 1)
+
+
+def test_channel_precision_trusts_steady_channels_more(rng):
+    x = rng.standard_normal((12, 15, 4)) * np.array([0.01, 0.02, 0.5, 2.0])
+    labels = np.repeat(["a", "b"], 6)
+    x[labels == "b"] += 5.0  # skills far apart: between-skill distance must not count
+    pi = channel_precision(x, labels)
+    assert pi[0] == pi[1] == 1.0
+    assert pi[3] < pi[2] < 1.0
+    assert pi.min() >= 0.05
+
+
+def test_keeping_the_best_held_out_epoch(skills):
+    train, test = skills
+    cfg = SMALL.with_(epochs=100, lr_final_fraction=1.0, learning_rate=5e-3)
+    last = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False)
+    best = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False, validation=test.sequences)
+    held_out = best.normaliser.normalise(test.sequences)
+    assert recall_error(best.net, held_out) <= recall_error(last.net, held_out) + 1e-9
+    assert 1 <= best.provenance["kept_epoch"] <= 100
+    assert last.provenance["kept_epoch"] == 100

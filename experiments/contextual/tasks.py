@@ -68,4 +68,4 @@ def skills_task(seed: int, n_skills: int, cfg: ContextualConfig, tpc: TPCConfig)
     normaliser = Normaliser.fit(data(cfg.max_skills).sequences)
     sequences = normaliser.normalise(data(n_skills).sequences)
     net = TemporalPC(sequences.shape[-1], tpc.with_(seed=seed))
-    return {"seed": seed, "n_skills": n_skills, "history": train(net, sequences, progress=False)}
+    return {"seed": seed, "n_skills": n_skills, "history": train(net, sequences, progress=False)[0]}
