@@ -186,24 +186,58 @@ class SkillStream:
     def t(self) -> int:
         return self.recaller.t
 
-    def step(self, observation: np.ndarray) -> StepScore:
-        model = self.model
+    @property
+    def batch_key(self) -> tuple[int, str, int, bool]:
+        """Streams with equal keys can advance together in one ``step_streams`` call."""
+        r = self.recaller
+        return id(self.model), r.mode, r.cue_steps, r.t < r.cue_steps
+
+    def check(self, observation: np.ndarray) -> np.ndarray:
+        """The observation as a float array, or a ValueError naming what is wrong with it."""
+        names = self.model.channel_names
         raw = np.asarray(observation, np.float64)
-        if raw.shape != (model.obs_size,):
-            raise ValueError(f"observation must have {model.obs_size} values, got shape {raw.shape}")
+        if raw.shape != (len(names),):
+            raise ValueError(f"observation must have {len(names)} values, got shape {raw.shape}")
         if not np.isfinite(raw).all():
-            bad = [model.channel_names[i] for i in np.flatnonzero(~np.isfinite(raw))]
+            bad = [names[i] for i in np.flatnonzero(~np.isfinite(raw))]
             raise ValueError(f"observation has NaN or inf in channel(s) {bad}")
-        t = self.t
-        x = model.normaliser.normalise(raw)[None]
-        expected = self.recaller.step(x)[0]
-        errors = x[0] - expected
-        weighted = errors if self.error_std is None else errors / self.error_std[min(t, len(self.error_std) - 1)]
-        return StepScore(
-            step=t,
-            expected=model.normaliser.denormalise(expected),
-            errors=errors,
-            weighted_errors=weighted,
-            energy=float(energy(weighted[None])[0]),
-            prediction=model.normaliser.denormalise(self.recaller.forecast()[0]),
-        )
+        return raw
+
+    def step(self, observation: np.ndarray) -> StepScore:
+        score = step_streams([self], self.check(observation)[None])[0]
+        if score is None:
+            raise FloatingPointError(f"step {self.t}: the model's outputs are not finite")
+        return score
+
+
+def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> list[StepScore | None]:
+    """Advance streams sharing a ``batch_key`` by one raw observation each (B, D), in one
+    relaxation of their stacked hidden states. A stream whose outputs are not finite
+    keeps its state and gets None."""
+    if len({s.batch_key for s in streams}) != 1:
+        raise ValueError("streams stepped together must share model, recall mode, cue length and phase")
+    model = streams[0].model
+    recallers = [s.recaller for s in streams]
+    steps = [r.t for r in recallers]
+    batch = recall_.Recaller(model.net, len(recallers), recallers[0].mode, recallers[0].cue_steps)
+    batch.zhat, batch.t = np.concatenate([r.zhat for r in recallers]), steps[0]
+    x = model.normaliser.normalise(observations)
+    expected = batch.step(x)
+    errors = x - expected
+    spread = np.stack([
+        np.ones(model.obs_size) if s.error_std is None else s.error_std[min(t, len(s.error_std) - 1)]
+        for s, t in zip(streams, steps)
+    ])
+    weighted = errors / spread
+    energies = energy(weighted[:, None])[:, 0]
+    expected_raw = model.normaliser.denormalise(expected)
+    prediction = model.normaliser.denormalise(batch.forecast())
+    finite = np.isfinite(energies) & np.isfinite(prediction).all(1) & np.isfinite(expected_raw).all(1)
+    scores: list[StepScore | None] = []
+    for i, r in enumerate(recallers):
+        if not finite[i]:
+            scores.append(None)
+            continue
+        r.zhat, r.t = batch.zhat[i : i + 1].copy(), r.t + 1
+        scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i]))
+    return scores
