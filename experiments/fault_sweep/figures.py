@@ -15,7 +15,7 @@ from experiments.fault_sweep.run import SweepResult  # noqa: E402
 from models.calibration import quantile_threshold  # noqa: E402
 from models.fault import joint_channels  # noqa: E402
 
-BEST = ("nasm_online", "precision")
+BEST = ("nasm_offline", "precision")  # the paper's setting, precision-weighted
 EXAMPLES = ((5, 3.0, 10.0), (2, 3.0, 10.0))  # (joint, time s, overshoot deg), the paper's two
 
 
@@ -73,8 +73,8 @@ def confusion(result: SweepResult, out: Path) -> None:
 def breakdown(result: SweepResult, out: Path) -> None:
     b = result.bench
     factors = (("locked joint", b.fault_joint), ("fault time (s)", b.fault_time), ("overshoot (deg)", b.overshoot))
-    shown = [BEST, ("nasm_offline", "precision"), ("nasm_paper_offline", "raw"), ("zscore_pooled", "demo_std"),
-             ("linear_one_step", "precision")]
+    shown = [BEST, ("nasm_online", "precision"), ("nasm_paper_offline", "raw"), ("zscore_pooled", "demo_std"),
+             ("zscore_per_skill", "demo_std"), ("linear_one_step", "precision")]
     fig, axes = plt.subplots(1, 3, figsize=(15, 4), sharey=True)
     for ax, (label, values) in zip(axes, factors):
         levels = np.unique(values)
