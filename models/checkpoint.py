@@ -30,7 +30,7 @@ from models.config import TPCConfig
 from models.normaliser import Normaliser
 from models.tpc import TemporalPC
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: observation precisions
 HEADER_KEY = "neural_asm"
 
 
