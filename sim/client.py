@@ -61,7 +61,7 @@ from sim.config import SIM  # noqa: E402
 from sim.disturbances import FallingObject  # noqa: E402
 from sim.episode import Episode  # noqa: E402
 from sim.faults import FaultSpec  # noqa: E402
-from sim.panda import DH_A, DH_ALPHA, DH_D, HAND_YAW, TCP_OFFSET  # noqa: E402
+from sim.panda import dh_frames  # noqa: E402
 from sim.runner import run_episode  # noqa: E402
 from sim.skills import SKILLS  # noqa: E402
 
@@ -287,19 +287,7 @@ def step_line(line: StepLine) -> str:
 
 def link_positions(q: np.ndarray) -> np.ndarray:
     """(10, 3) origins of the base, the 8 DH frames (Franka's table) and the tool centre point."""
-    pose = np.eye(4)
-    points = [pose[:3, 3].copy()]
-    for i in range(8):
-        a, d, alpha = DH_A[i], DH_D[i], DH_ALPHA[i]
-        theta = q[i] if i < 7 else 0.0
-        ca, sa, ct, st = np.cos(alpha), np.sin(alpha), np.cos(theta), np.sin(theta)
-        pose = pose @ np.array([[ct, -st, 0, a], [st * ca, ct * ca, -sa, -d * sa],
-                                [st * sa, ct * sa, ca, d * ca], [0, 0, 0, 1]])
-        points.append(pose[:3, 3].copy())
-    c, s = np.cos(HAND_YAW), np.sin(HAND_YAW)
-    tcp = pose @ np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, TCP_OFFSET], [0, 0, 0, 1]])
-    points.append(tcp[:3, 3].copy())
-    return np.array(points)
+    return np.array([frame[:3, 3] for frame in dh_frames(q)])
 
 
 def world_records(ep: Episode, upto_s: float, start_row: int) -> Iterator[tuple[int, WorldRecord]]:

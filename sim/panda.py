@@ -158,15 +158,23 @@ def build_panda(servo: Servo = SIM.servo) -> PandaHandles:
                         force_sensors, torque_sensors, lock_equalities)
 
 
-def dh_forward(q: np.ndarray) -> np.ndarray:
-    """4x4 pose of the tool centre point from Franka's DH table (a reference independent of MJCF)."""
+def dh_frames(q: np.ndarray) -> list[np.ndarray]:
+    """4x4 poses of the base, the 8 DH frames (Franka's table) and the tool centre point,
+    from the DH product alone (a reference independent of the MJCF)."""
     pose = np.eye(4)
+    frames = [pose]
     for i in range(8):
         a, d, alpha = DH_A[i], DH_D[i], DH_ALPHA[i]
         theta = q[i] if i < 7 else 0.0
         ca, sa, ct, st = np.cos(alpha), np.sin(alpha), np.cos(theta), np.sin(theta)
         pose = pose @ np.array([[ct, -st, 0, a], [st * ca, ct * ca, -sa, -d * sa],
                                 [st * sa, ct * sa, ca, d * ca], [0, 0, 0, 1]])
+        frames.append(pose)
     c, s = np.cos(HAND_YAW), np.sin(HAND_YAW)
-    hand = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, TCP_OFFSET], [0, 0, 0, 1]])
-    return pose @ hand
+    frames.append(pose @ np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, TCP_OFFSET], [0, 0, 0, 1]]))
+    return frames
+
+
+def dh_forward(q: np.ndarray) -> np.ndarray:
+    """4x4 pose of the tool centre point from Franka's DH table."""
+    return dh_frames(q)[-1]
