@@ -1,15 +1,19 @@
 """Fault decisions: compare a step's energy with a calibrated threshold, and isolate.
 
-Detection: the step is faulty when its energy exceeds the threshold calibrated on
-normal episodes at a chosen per-step false-positive rate (one threshold for all steps,
-or a time-varying one per step). Isolation: the joint whose channel has the largest
+Detection: the step is faulty when its energy exceeds a threshold calibrated on normal
+episodes at a chosen false-positive rate. Three kinds: ``step``, one threshold that that
+fraction of normal steps exceed (the paper's percentile); ``per_step``, a time-varying
+one per step; ``episode``, one that the peak energy of that fraction of normal episodes
+exceeds. A monitor cares how often a normal episode raises an alarm, and with 15 chances
+per episode the first two flag several times their rate of whole episodes, so
+``episode`` is the default. Isolation: the joint whose channel has the largest
 absolute (precision-weighted, when the energy is) prediction error, as in the paper.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Literal, Sequence
 
 import numpy as np
 
@@ -17,6 +21,8 @@ from models.calibration import Calibration
 from models.scoring import StepScore
 
 JOINT_PREFIX = "joint"
+ThresholdKind = Literal["step", "per_step", "episode"]
+THRESHOLD_KINDS: tuple[str, ...] = ("step", "per_step", "episode")
 
 
 def joint_channels(channel_names: Sequence[str]) -> list[int]:
@@ -33,11 +39,15 @@ class FaultDecision:
     ranked_channels: list[tuple[str, float]]  # (name, |weighted error|), largest first
 
 
-def threshold_for(calibration: Calibration, fpr: float, step: int, per_step: bool = False) -> float:
-    table = calibration.step_thresholds if per_step else calibration.thresholds
+def threshold_for(calibration: Calibration, fpr: float, step: int, kind: ThresholdKind = "episode") -> float:
+    tables = {"step": calibration.thresholds, "per_step": calibration.step_thresholds,
+              "episode": calibration.episode_thresholds}
+    if kind not in tables:
+        raise ValueError(f"threshold kind must be one of {THRESHOLD_KINDS}, got {kind!r}")
+    table = tables[kind]
     if fpr not in table:
         raise KeyError(f"no threshold at false-positive rate {fpr}; calibrated: {sorted(table)}")
-    if per_step:
+    if kind == "per_step":
         steps = table[fpr]
         return float(steps[min(step, len(steps) - 1)])
     return float(table[fpr])
@@ -57,8 +67,8 @@ def decide(
     calibration: Calibration,
     channel_names: Sequence[str],
     fpr: float = 0.01,
-    per_step: bool = False,
+    kind: ThresholdKind = "episode",
 ) -> FaultDecision:
-    threshold = threshold_for(calibration, fpr, score.step, per_step)
+    threshold = threshold_for(calibration, fpr, score.step, kind)
     isolated, ranked = isolate(score.weighted_errors, channel_names)
     return FaultDecision(score.energy > threshold, score.energy, threshold, isolated, ranked)

@@ -35,4 +35,4 @@ def step_group(sessions: list[Session], xs: np.ndarray) -> list[StepScore | None
 
 
 def fault_decision(session: Session, score: StepScore) -> FaultDecision:
-    return decide(score, session.calibration, session.channel_names, session.fpr, session.per_step)
+    return decide(score, session.calibration, session.channel_names, session.fpr, session.threshold)

@@ -25,7 +25,7 @@ def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
         mode=session.stream.recaller.mode,  # type: ignore[arg-type]
         cue_steps=session.stream.recaller.cue_steps,
         fpr=session.fpr,
-        per_step=session.per_step,
+        threshold=session.threshold,
         channel_names=list(session.channel_names),
         steps=session.stream.t,
         recording_id=session.recording_id,

@@ -8,6 +8,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from models.fault import ThresholdKind
+
 BOUND = 1e6
 MAX_CHANNELS = 1024
 Value = Annotated[float, Field(ge=-BOUND, le=BOUND, allow_inf_nan=False)]
@@ -53,13 +55,18 @@ class SessionCreate(Strict):
 
     model: str | None = Field(None, max_length=128, description="model name; the default model if omitted")
     mode: RecallMode = Field(
-        "online", description="online: infer from every observation; offline: from the cue, then roll forward"
+        "offline",
+        description="offline (the paper's setting): infer from the cue, then roll forward; online: infer from every observation",
     )
     cue_steps: int = Field(1, ge=1, le=10_000, description="observations the hidden state is inferred from")
     fpr: float | None = Field(
-        None, gt=0, lt=1, description="per-step false-positive rate of the fault threshold (a calibrated one)"
+        None, gt=0, lt=1, description="false-positive rate of the fault threshold (one of the calibrated rates)"
     )
-    per_step: bool = Field(False, description="use the time-varying per-step threshold")
+    threshold: ThresholdKind = Field(
+        "episode",
+        description="episode: exceeded by the peak energy of fpr of normal episodes; step: by fpr of normal "
+        "steps (the paper's percentile); per_step: a time-varying threshold, by fpr of normal steps at each step",
+    )
     recording_id: str | None = Field(
         None,
         pattern=r"^[A-Za-z0-9._-]{1,128}$",
@@ -73,7 +80,7 @@ class SessionInfo(BaseModel):
     mode: RecallMode
     cue_steps: int
     fpr: float
-    per_step: bool
+    threshold: ThresholdKind
     channel_names: list[str]
     steps: int = Field(description="observations scored so far")
     recording_id: str

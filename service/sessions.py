@@ -15,6 +15,7 @@ import numpy as np
 
 from models.asm import NeuralASM, SkillStream
 from models.calibration import Calibration
+from models.fault import ThresholdKind
 from recordings import EpisodeRecorder
 from service.errors import BadObservation, NotCalibrated, TooManySessions, UnknownSession
 from service.registry import ModelRegistry
@@ -32,7 +33,7 @@ class Session:
     stream: SkillStream
     calibration: Calibration
     fpr: float
-    per_step: bool
+    threshold: ThresholdKind
     recording_id: str
     recorder: EpisodeRecorder | None = None
     last_used: float = field(default_factory=time.monotonic)
@@ -90,7 +91,7 @@ def open_session(params: SessionCreate, registry: ModelRegistry, settings: Setti
         stream=model.stream(params.mode, params.cue_steps, weighted=True),
         calibration=calibration,
         fpr=fpr,
-        per_step=params.per_step,
+        threshold=params.threshold,
         recording_id=recording_id,
     )
     if settings.record:
@@ -100,7 +101,7 @@ def open_session(params: SessionCreate, registry: ModelRegistry, settings: Setti
             folder=settings.recordings_dir,
             recording_id=recording_id,
             metadata={"source": "service", "session_id": session_id, "model": name, "mode": params.mode,
-                      "cue_steps": params.cue_steps, "fpr": fpr, "per_step": params.per_step},
+                      "cue_steps": params.cue_steps, "fpr": fpr, "threshold": params.threshold},
         )
     return session
 

@@ -79,6 +79,7 @@ class Seeds:
     demos: int = 0
     held_out: int = 10_000
     faults: int = 100_000
+    client: int = 50_000  # episodes the streaming client runs: none of the sets above
 
 
 @dataclass(frozen=True)

@@ -87,9 +87,10 @@ def test_health_and_models(client):
 
 
 def test_session_lifecycle(client):
-    info = open_session(client, mode="offline", fpr=0.05, per_step=True)
+    info = open_session(client, mode="offline", fpr=0.05, threshold="per_step")
     sid = info["session_id"]
-    assert (info["model"], info["mode"], info["fpr"], info["per_step"], info["steps"]) == ("panda", "offline", 0.05, True, 0)
+    assert (info["model"], info["mode"], info["fpr"], info["threshold"], info["steps"]) == (
+        "panda", "offline", 0.05, "per_step", 0)
     assert client.get(f"/sessions/{sid}").json()["session_id"] == sid
     assert client.delete(f"/sessions/{sid}").status_code == 200
     for r in (client.get(f"/sessions/{sid}"), client.delete(f"/sessions/{sid}")):
@@ -98,7 +99,7 @@ def test_session_lifecycle(client):
 
 def test_predict_and_fault_match_the_model(client, episodes, reference):
     """Alternating /predict and /fault steps equal SkillStream.step, in both input forms."""
-    sid = open_session(client)["session_id"]
+    sid = open_session(client, mode="online")["session_id"]
     stream = reference.stream("online", 1)
     calibration = reference.calibration("online", 1)
     for k, x in enumerate(episodes[0]):
@@ -112,7 +113,7 @@ def test_predict_and_fault_match_the_model(client, episodes, reference):
             np.testing.assert_allclose(list(r["errors"].values()), expected.weighted_errors, rtol=1e-4, atol=1e-4)
         else:
             r = client.post("/fault", json=body).json()
-            assert r["threshold"] == pytest.approx(calibration.thresholds[0.01])
+            assert r["threshold"] == pytest.approx(calibration.episode_thresholds[0.01])  # the default kind
             assert r["fault"] == (r["energy"] > r["threshold"])
             assert r["isolated_joint"].startswith("joint")
             errors = [c["error"] for c in r["ranked_channels"]]
@@ -202,7 +203,7 @@ def test_concurrent_websocket_sessions(server, episodes, reference):
 
     results = asyncio.run(all_runs())
     for i, steps in enumerate(results):
-        stream = reference.stream("online", 1)
+        stream = reference.stream("offline", 1)  # the server's default mode
         np.testing.assert_allclose([s["energy"] for s in steps], [stream.step(x).energy for x in episodes[i]], rtol=1e-4)
 
 
