@@ -122,14 +122,12 @@ def speed_accuracy_figure(summary: dict[str, Any], path: Path) -> Path:
 
 
 def energy_figure(summary: dict[str, Any], path: Path) -> Path:
-    """Appendix 3: energy per epoch for 1..N skills (mean over seeds, band: sd)."""
+    """Appendix 3: energy per epoch for 1..N skills (mean over seeds; the sd is in the
+    JSON: mid-training spikes make it larger than the mean, unreadable on a log axis)."""
     curves = summary["energy_vs_skills"]
     fig, ax = plt.subplots(figsize=(5.5, 4))
-    for n, mean, sd in zip(curves["n_skills"], curves["mean"], curves["sd"]):
-        mean, sd = np.asarray(mean), np.asarray(sd)
-        epochs = np.arange(1, len(mean) + 1)
-        (line,) = ax.plot(epochs, mean, lw=1, label=f"{n} skill{'s' if n > 1 else ''}")
-        ax.fill_between(epochs, np.maximum(mean - sd, 1e-6), mean + sd, color=line.get_color(), alpha=0.15)
+    for n, mean in zip(curves["n_skills"], curves["mean"]):
+        ax.plot(np.arange(1, len(mean) + 1), mean, lw=1, label=f"{n} skill{'s' if n > 1 else ''}")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("epoch")
