@@ -210,15 +210,13 @@ def run_correction(model, n_seeds: int = 8, hits=DEFAULT_HITS, gains: Gains = Ga
                     twin = case.twin_corrected if name == "corrected" else case.twin
                     row |= metrics(ep, twin, case.plan, release_s, threshold_deg)
                     row["error"] = None
-                    if (mass, speed) == tuple(example_hit) and not result.example.get(name):
+                    if (mass, speed) == tuple(example_hit) and name not in result.example.get("_eps", {}):
                         result.example.setdefault("_eps", {})[name] = ep
-                        result.example["_case"] = case
+                        result.example.setdefault("_case", case)
                 except Exception as exc:  # SimulationError: counted as not recovered, never dropped
                     row |= {"recovered": False, "success": False, "error": repr(exc)}
                 result.runs.append(row)
                 bar.update(1)
-        if "_eps" in result.example and len(result.example["_eps"]) == 2:
-            result.example["done"] = True
     bar.close()
     result.summary = summarise(result.runs, hits)
     result.seconds = time.perf_counter() - start
@@ -322,7 +320,9 @@ def write_figure(result: Result, path) -> None:
         axes[1].set_title("end-effector deviation")
     for name in ("uncorrected", "corrected"):
         rows = [r for r in result.summary if r["controller"] == name]
-        axes[2].plot(range(len(rows)), [100 * r["recovery_rate"] for r in rows], "o-", color=colours[name], label=name)
+        style = {"uncorrected": dict(ls="--", marker="s", ms=9), "corrected": dict(ls="-", marker="o", ms=5)}[name]
+        axes[2].plot(range(len(rows)), [100 * r["recovery_rate"] for r in rows], color=colours[name], label=name,
+                     **style)
     labels = [f"{r['mass_kg']:g} kg\n{r['speed_m_s']:g} m/s" for r in result.summary if r["controller"] == "corrected"]
     axes[2].set_xticks(range(len(labels)), labels, fontsize=8)
     axes[2].set_ylim(-5, 105)
