@@ -10,6 +10,8 @@ from pathlib import Path
 
 import typer
 
+from sim.parallel import Backend
+
 app = typer.Typer(help="Simulated Panda pick-and-place episode sets.", no_args_is_help=True)
 
 
@@ -24,7 +26,8 @@ class Which(str, Enum):
 def demos(
     sets: Which = typer.Option(Which.demos, "--sets", help="demos, normal (held-out), faults (980 + no-fault twins), or all."),
     out: Path = typer.Option(Path("runs/data"), "--out", help="Output directory."),
-    workers: int = typer.Option(2, "--workers", min=1, help="Worker processes."),
+    workers: int = typer.Option(2, "--workers", min=1, help="Worker processes (CPUs of a local Ray instance)."),
+    backend: Backend = typer.Option("processes", "--backend", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)."),
     n_demos: int = typer.Option(10, "--n-demos", min=1, help="Demonstrations per skill."),
     n_normal: int = typer.Option(200, "--n-normal", min=1, help="Held-out normal episodes."),
 ) -> None:
@@ -34,7 +37,7 @@ def demos(
     kinds = {"demos": ["demos"], "normal": ["normal"], "faults": ["faults", "twins"],
              "all": ["demos", "normal", "faults", "twins"]}[sets.value]
     for kind in kinds:
-        path, failures = generate(kind, out, workers, n_demos, n_normal)
+        path, failures = generate(kind, out, workers, n_demos, n_normal, backend)
         episodes = load_episodes(path)
         placed = sum(e.success for e in episodes)
         typer.echo(f"{kind}: {len(episodes)} episodes -> {path} (cube placed within 1 cm: {placed}/{len(episodes)})")

@@ -26,21 +26,19 @@ from __future__ import annotations
 
 import json
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 import orjson
 from mcap.reader import make_reader
 from mcap.writer import Writer
-from tqdm import tqdm
 
 from sim.config import SIM
 from sim.disturbances import FallingObject
 from sim.episode import Episode
 from sim.faults import FaultSpec, fault_grid
+from sim.parallel import Backend, parallel_map
 from sim.skills import SKILLS
 
 KINDS = ("demos", "normal", "faults", "twins")
@@ -106,13 +104,10 @@ def run_job(job: Job) -> Episode | str:
         return f"{job.skill} seed {job.seed}: {err}"
 
 
-def run_jobs(jobs: list[Job], workers: int = 2, desc: str = "episodes") -> tuple[list[Episode], list[str]]:
-    """Run jobs over `workers` spawned processes (in order), with a progress bar."""
-    if workers <= 1:
-        results = [run_job(job) for job in tqdm(jobs, desc=desc, unit="ep")]
-    else:
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            results = list(tqdm(pool.map(run_job, jobs, chunksize=8), total=len(jobs), desc=desc, unit="ep"))
+def run_jobs(jobs: list[Job], workers: int = 2, desc: str = "episodes",
+             backend: Backend = "processes") -> tuple[list[Episode], list[str]]:
+    """Run jobs over `workers` processes or on Ray (in order), with a progress bar."""
+    results = parallel_map(run_job, [(job,) for job in jobs], workers, backend, desc=desc, unit="ep", chunksize=8)
     return [r for r in results if isinstance(r, Episode)], [r for r in results if isinstance(r, str)]
 
 
@@ -226,9 +221,9 @@ def load_episodes(path: str | Path) -> list[Episode]:
 
 
 def generate(kind: str, out_dir: str | Path = "runs/data", workers: int = 2, n_demos: int = 10,
-             n_normal: int = 200) -> tuple[Path, list[str]]:
+             n_normal: int = 200, backend: Backend = "processes") -> tuple[Path, list[str]]:
     """Simulate set `kind`, write `<out_dir>/<kind>.mcap` and its cache; return the path and failures."""
-    episodes, failures = run_jobs(jobs_for(kind, n_demos, n_normal), workers, desc=kind)
+    episodes, failures = run_jobs(jobs_for(kind, n_demos, n_normal), workers, desc=kind, backend=backend)
     path = Path(out_dir) / f"{kind}.mcap"
     write_mcap(episodes, path)
     write_cache(episodes, path)

@@ -17,6 +17,7 @@ from experiments.contextual.config import CONTEXTUAL, QUICK  # noqa: E402
 from experiments.contextual.dataset import conditions_data  # noqa: E402
 from experiments.contextual.protocol import run_protocol  # noqa: E402
 from models.config import PRESETS  # noqa: E402
+from sim.parallel import Backend  # noqa: E402
 
 app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
 
@@ -26,7 +27,8 @@ def contextual(
     out: Path = typer.Option(Path("runs/contextual"), help="folder for contextual.json/.md and the PNGs"),
     seeds: int | None = typer.Option(None, help="participants (seeds); default 6, 1 with --quick"),
     epochs: int | None = typer.Option(None, help="learning epochs of every model; default 1200, 300 with --quick"),
-    workers: int = typer.Option(2, min=1, help="worker processes (1: run in this process)"),
+    workers: int = typer.Option(2, min=1, help="worker processes (1: run in this process; CPUs of a local Ray instance)"),
+    backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
     preset: str = typer.Option("fast", help=f"tPC hyper-parameters, shared by the RNNs: {', '.join(PRESETS)}"),
     quick: bool = typer.Option(False, help="reduced protocol: 1 seed, 300 epochs, short K sweep"),
 ) -> None:
@@ -41,7 +43,7 @@ def contextual(
     cfg = cfg.with_(**{k: v for k, v in (("seeds", seeds), ("epochs", epochs)) if v is not None})
     cfg = cfg.with_(skill_seeds=min(cfg.skill_seeds, cfg.seeds))
     out.mkdir(parents=True, exist_ok=True)
-    summary = run_protocol(cfg, PRESETS[preset], workers)
+    summary = run_protocol(cfg, PRESETS[preset], workers, backend=backend)
     paths = [
         *report.write(summary, out),
         figures.dataset_figure(conditions_data(0, cfg, False), cfg, out / "dataset.png"),

@@ -9,17 +9,15 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import time  # noqa: E402
 from dataclasses import asdict  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
-from multiprocessing import get_context  # noqa: E402
 from typing import Any, Callable, Sequence  # noqa: E402
 
 import numpy as np  # noqa: E402
-from tqdm.auto import tqdm  # noqa: E402
 
 from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig  # noqa: E402
 from experiments.contextual.dataset import MOTOR_CHANNELS, channel_names  # noqa: E402
 from experiments.contextual.tasks import init_worker, separation_task, skills_task  # noqa: E402
 from models.config import TPCConfig  # noqa: E402
+from sim.parallel import Backend, parallel_map  # noqa: E402
 
 Job = tuple[Callable[..., dict[str, Any]], tuple[Any, ...]]
 CUES = tuple(s.name for s in SKILLS[:2])
@@ -39,22 +37,8 @@ def jobs(cfg: ContextualConfig, tpc: TPCConfig) -> list[Job]:
     return separation[:slow] + skills + separation[slow:]
 
 
-def run_jobs(todo: Sequence[Job], workers: int, progress: bool = True) -> list[dict[str, Any]]:
-    """Run jobs in `workers` spawned processes (in this one if workers <= 1)."""
-    bar = tqdm(total=len(todo), desc="contextual", unit="run", disable=not progress)
-    results = []
-    if workers <= 1:
-        init_worker()
-        for fn, args in todo:
-            results.append(fn(*args))
-            bar.update()
-    else:
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=init_worker) as pool:
-            for future in as_completed([pool.submit(fn, *args) for fn, args in todo]):
-                results.append(future.result())
-                bar.update()
-    bar.close()
-    return results
+def _call(fn: Callable[..., dict[str, Any]], args: tuple[Any, ...]) -> dict[str, Any]:
+    return fn(*args)
 
 
 def mean_sd(values: Sequence[float]) -> dict[str, Any]:
@@ -122,15 +106,17 @@ def summarise(results: list[dict[str, Any]], cfg: ContextualConfig) -> dict[str,
 
 
 def run_protocol(
-    cfg: ContextualConfig, tpc: TPCConfig, workers: int = 2, progress: bool = True
+    cfg: ContextualConfig, tpc: TPCConfig, workers: int = 2, progress: bool = True,
+    backend: Backend = "processes",
 ) -> dict[str, Any]:
     """Train and recall everything; returns the summary that contextual.json stores."""
     started = time.perf_counter()
     tpc = tpc.with_(epochs=cfg.epochs)
-    results = run_jobs(jobs(cfg, tpc), workers, progress)
+    results = parallel_map(_call, [(fn, args) for fn, args in jobs(cfg, tpc)], workers, backend,
+                           init_worker, desc="contextual", unit="run", progress=progress)
     summary = summarise(results, cfg)
     summary["setup"] = {
-        "protocol": asdict(cfg), "tpc": tpc.to_dict(), "workers": workers,
+        "protocol": asdict(cfg), "tpc": tpc.to_dict(), "workers": workers, "backend": backend,
         "channels": {"motor": list(MOTOR_CHANNELS),
                      "sensory": [n for n in channel_names(SKILLS[:2]) if n not in MOTOR_CHANNELS]},
         "runtime_s": round(time.perf_counter() - started, 1),

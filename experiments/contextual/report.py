@@ -54,7 +54,7 @@ def markdown(summary: dict[str, Any]) -> str:
         f"{setup['tpc']['epochs']} learning epochs, {setup['protocol']['test_trials']} recalled trials; "
         f"hidden size {setup['tpc']['hidden_size']}, learning rate {setup['tpc']['learning_rate']:g}, "
         f"batch {setup['tpc']['batch_size'] or 'all'}; runtime {setup['runtime_s']:.0f} s on "
-        f"{setup['workers']} worker(s).",
+        f"{setup['workers']} worker(s) ({setup['backend']}).",
         "",
         "## PEAD (mm, mean ± sd over seeds; + = left of S->T)",
         "",

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from models.config import FAITHFUL
+from sim.parallel import Backend
 
 app = typer.Typer()
 
@@ -18,7 +19,8 @@ def faults(
     paper_epochs: int = typer.Option(FAITHFUL.epochs, help="epochs of the paper-configuration model"),
     fast_epochs: int | None = typer.Option(None, help="override the default model's epochs"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
-    workers: int = typer.Option(2, min=1, help="simulation processes"),
+    workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
+    backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
 ) -> None:
     """Run the 980-fault sweep against baselines; write JSON, markdown, CSV and figures."""
     from experiments.fault_sweep.figures import write_figures
@@ -26,7 +28,7 @@ def faults(
     from experiments.fault_sweep.run import run_sweep
 
     out.mkdir(parents=True, exist_ok=True)
-    result = run_sweep(data, out, paper_epochs, workers, n_normal, fast_epochs)
+    result = run_sweep(data, out, paper_epochs, workers, n_normal, fast_epochs, backend)
     write_json(result, out / "fault_sweep.json")
     write_markdown(result, out / "fault_sweep.md")
     write_csv(result, out / "episodes.csv")

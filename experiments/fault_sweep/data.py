@@ -14,6 +14,7 @@ import numpy as np
 
 from sim.dataset import generate, load_episodes
 from sim.episode import Episode
+from sim.parallel import Backend
 
 SETS = ("demos", "normal", "faults", "twins")
 
@@ -56,13 +57,14 @@ class Benchmark:
     overshoot: np.ndarray  # (F,) degrees
 
 
-def ensure_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int, workers: int) -> dict[str, list[Episode]]:
+def ensure_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int, workers: int,
+                backend: Backend = "processes") -> dict[str, list[Episode]]:
     """Load the sets from data_dir, simulating the missing ones."""
     out = {}
     for kind in kinds:
         path = data_dir / f"{kind}.mcap"
         if not path.exists():
-            generate(kind, data_dir, workers=workers, n_normal=n_normal)
+            generate(kind, data_dir, workers=workers, n_normal=n_normal, backend=backend)
         out[kind] = load_episodes(path)
     return out
 
@@ -98,5 +100,6 @@ def make_benchmark(sets: dict[str, list[Episode]]) -> Benchmark:
     )
 
 
-def load_benchmark(data_dir: Path, n_normal: int = 400, workers: int = 2) -> Benchmark:
-    return make_benchmark(ensure_sets(data_dir, SETS, n_normal, workers))
+def load_benchmark(data_dir: Path, n_normal: int = 400, workers: int = 2,
+                   backend: Backend = "processes") -> Benchmark:
+    return make_benchmark(ensure_sets(data_dir, SETS, n_normal, workers, backend))

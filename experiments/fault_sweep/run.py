@@ -23,6 +23,7 @@ from models import checkpoint
 from models.asm import NeuralASM
 from models.config import FAITHFUL, FAST, TPCConfig
 from models.normaliser import Normaliser
+from sim.parallel import Backend
 
 
 @dataclass
@@ -82,8 +83,8 @@ def train_models(bench: Benchmark, configs: dict[str, TPCConfig], provenance: di
 
 
 def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, workers: int = 2,
-              n_normal: int = 400, fast_epochs: int | None = None) -> SweepResult:
-    bench = load_benchmark(data_dir, n_normal, workers)
+              n_normal: int = 400, fast_epochs: int | None = None, backend: Backend = "processes") -> SweepResult:
+    bench = load_benchmark(data_dir, n_normal, workers, backend)
     configs = {
         "nasm": FAST if fast_epochs is None else FAST.with_(epochs=fast_epochs),
         "nasm_paper": FAITHFUL.with_(epochs=paper_epochs),

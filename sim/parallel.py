@@ -1,0 +1,106 @@
+"""An ordered parallel map over local processes or a Ray cluster.
+
+Simulated episodes and experiment runs are independent, CPU-bound and seeded, so the
+results do not depend on where they run. Local spawned processes are the default; Ray
+(`pip install 'neural-asm[ray]'`) lets a sweep outgrow one machine: it joins the cluster
+named by ``RAY_ADDRESS`` when set, and otherwise starts a local instance with `workers` CPUs.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from typing import Any, Literal
+
+from tqdm.auto import tqdm
+
+Backend = Literal["processes", "ray"]
+BACKENDS: tuple[str, ...] = ("processes", "ray")
+
+
+def parallel_map(
+    fn: Callable[..., Any],
+    args: Sequence[tuple],
+    workers: int = 2,
+    backend: Backend = "processes",
+    initializer: Callable[[], None] | None = None,
+    desc: str = "jobs",
+    unit: str = "job",
+    progress: bool = True,
+    chunksize: int = 1,
+) -> list[Any]:
+    """``[fn(*a) for a in args]``, in order, run on `workers` processes or on Ray.
+
+    `fn` and `initializer` must be importable module-level functions (they are sent to
+    other processes); `initializer` runs once per process before its first job. Local
+    processes take `chunksize` jobs at a time: more amortises many short jobs, 1 balances
+    long uneven ones.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if not args:
+        return []
+    bar = tqdm(total=len(args), desc=desc, unit=unit, disable=not progress)
+    try:
+        if backend == "ray":
+            return _ray_map(fn, args, workers, initializer, bar)
+        if workers == 1:
+            if initializer is not None:
+                initializer()
+            results = []
+            for a in args:
+                results.append(fn(*a))
+                bar.update()
+            return results
+        return _process_map(fn, args, workers, initializer, chunksize, bar)
+    finally:
+        bar.close()
+
+
+def _process_map(fn, args, workers, initializer, chunksize, bar) -> list[Any]:
+    results = []
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=initializer) as pool:
+        for result in pool.map(fn, *zip(*args), chunksize=chunksize):
+            results.append(result)
+            bar.update()
+    return results
+
+
+def _run_initialised(initializer, fn, *args):
+    if initializer is not None:
+        initializer()
+    return fn(*args)
+
+
+def _ray_map(fn, args, workers, initializer, bar) -> list[Any]:
+    try:
+        import ray
+    except ImportError as err:
+        raise RuntimeError("the ray backend needs Ray: pip install 'neural-asm[ray]'") from err
+    started_here = not ray.is_initialized()
+    if started_here:
+        # RAY_ADDRESS, when set, names an existing cluster and ray.init joins it.
+        ray.init(num_cpus=None if _joins_cluster() else workers, include_dashboard=False,
+                 log_to_driver=False, configure_logging=False)
+    try:
+        task = ray.remote(_run_initialised)
+        refs = [task.remote(initializer, fn, *a) for a in args]
+        index = {ref: i for i, ref in enumerate(refs)}
+        results: list[Any] = [None] * len(args)
+        pending = list(refs)
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            results[index[done[0]]] = ray.get(done[0])
+            bar.update()
+        return results
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def _joins_cluster() -> bool:
+    return bool(os.environ.get("RAY_ADDRESS"))
