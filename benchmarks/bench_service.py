@@ -35,6 +35,10 @@ from models.synthetic import make_skills  # noqa: E402
 CHANNELS = tuple(f"joint{i}" for i in range(1, 8)) + tuple(f"ch{i}" for i in range(18))
 
 
+# Online recall: inference (K iterations) on every step, the costlier of the two modes.
+SESSION = {"mode": "online"}
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -48,7 +52,7 @@ def percentiles(ms: list[float]) -> tuple[float, float]:
 def build_model(folder: Path) -> np.ndarray:
     data = make_skills(n_skills=2, repetitions=10, channels=25)
     model = NeuralASM.fit(data.sequences, CHANNELS, FAST.with_(epochs=60), progress=False)
-    model.calibrate(data.sequences, data.sequences, "online", 1)
+    model.calibrate(data.sequences, data.sequences, SESSION["mode"], 1)
     checkpoint.save(model, folder / "bench.safetensors")
     return data.sequences
 
@@ -79,7 +83,7 @@ def http_latencies(url: str, episodes: np.ndarray, steps: int) -> dict[str, floa
         sid, k = None, 0
         for i in range(steps):
             if k == 0:
-                sid = c.post("/sessions", json={}).json()["session_id"]
+                sid = c.post("/sessions", json=SESSION).json()["session_id"]
             body = {"session_id": sid, "observation": episodes[i % len(episodes), k].tolist()}
             t = time.perf_counter()
             r = c.post("/predict", json=body)
@@ -101,7 +105,7 @@ async def ws_session(url: str, episodes: np.ndarray, steps: int, seed: int) -> t
         k = 0
         for i in range(steps):
             if k == 0:
-                await ws.send('{"type": "start"}')
+                await ws.send(json.dumps({"type": "start", **SESSION}))
                 await ws.recv()
             x = episodes[(seed + i) % len(episodes), k].tolist()
             t = time.perf_counter()
