@@ -13,10 +13,10 @@ from typing import Any, Sequence
 import numpy as np
 
 from models import recall as recall_
-from models.calibration import Calibration, calibration_key, error_spread, set_thresholds
+from models.calibration import Calibration, calibration_key, error_precision, error_spread, set_thresholds
 from models.config import FAST, SCORING, TPCConfig
 from models.normaliser import Normaliser
-from models.scoring import SequenceScore, StepScore, energy
+from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
 from models.tpc import TemporalPC
 from models.train import train
 
@@ -129,7 +129,8 @@ class NeuralASM:
     def calibration(self, mode: str, cue_steps: int) -> Calibration | None:
         return self.calibrations.get(calibration_key(mode, cue_steps))
 
-    def error_std(self, mode: str, cue_steps: int, weighted: bool) -> np.ndarray | None:
+    def weighting(self, mode: str, cue_steps: int, weighted: bool) -> Calibration | None:
+        """The calibration whose precisions weigh errors (None: unweighted, the paper's energy)."""
         if not weighted:
             return None
         calibration = self.calibration(mode, cue_steps)
@@ -138,7 +139,7 @@ class NeuralASM:
                 f"no calibration for recall {mode!r} cued from {cue_steps} step(s); "
                 f"have {sorted(self.calibrations)}: calibrate first or score unweighted"
             )
-        return calibration.error_std
+        return calibration
 
     def score(
         self,
@@ -147,11 +148,13 @@ class NeuralASM:
         cue_steps: int = 1,
         weighted: bool = True,
     ) -> SequenceScore:
-        std = self.error_std(mode, cue_steps, weighted)
+        cal = self.weighting(mode, cue_steps, weighted)
         errors = self.errors(sequences, mode, cue_steps)
         x = self.normaliser.normalise(as_sequences(sequences, self.obs_size))
         expected = self.normaliser.denormalise(x - errors)
-        return SequenceScore(expected, errors, energy(errors, std))
+        if cal is None:
+            return SequenceScore(expected, errors, energy(errors))
+        return SequenceScore(expected, errors, energy(errors, cal.error_std, cal.error_precision))
 
     def calibrate(
         self,
@@ -161,11 +164,15 @@ class NeuralASM:
         cue_steps: int = 1,
         fprs: tuple[float, ...] = SCORING.fprs,
         source: str = "held-out normal episodes",
+        covariance: str = SCORING.error_covariance,
     ) -> Calibration:
         """Estimate precisions on one set of normal episodes and thresholds on another."""
-        calibration = Calibration(
-            mode, cue_steps, error_spread(self.errors(precision_sequences, mode, cue_steps)), source
-        )
+        if covariance not in ("full", "diagonal"):
+            raise ValueError(f"covariance must be 'full' or 'diagonal', got {covariance!r}")
+        errors = self.errors(precision_sequences, mode, cue_steps)
+        spread = error_spread(errors)
+        precision = error_precision(errors, spread) if covariance == "full" else None
+        calibration = Calibration(mode, cue_steps, spread, source, precision)
         set_thresholds(calibration, self.errors(threshold_sequences, mode, cue_steps), fprs)
         self.calibrations[calibration.key] = calibration
         return calibration
@@ -179,7 +186,7 @@ class SkillStream:
 
     def __init__(self, model: NeuralASM, mode: str, cue_steps: int, weighted: bool) -> None:
         self.model = model
-        self.error_std = model.error_std(mode, cue_steps, weighted)
+        self.calibration = model.weighting(mode, cue_steps, weighted)
         self.recaller = recall_.Recaller(model.net, 1, mode, cue_steps, model._rng())  # type: ignore[arg-type]
 
     @property
@@ -224,12 +231,7 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     x = model.normaliser.normalise(observations)
     expected = batch.step(x)
     errors = x - expected
-    spread = np.stack([
-        np.ones(model.obs_size) if s.error_std is None else s.error_std[min(t, len(s.error_std) - 1)]
-        for s, t in zip(streams, steps)
-    ])
-    weighted = errors / spread
-    energies = energy(weighted[:, None])[:, 0]
+    weighted, energies = weigh_step(errors, [s.calibration for s in streams], steps)
     expected_raw = model.normaliser.denormalise(expected)
     prediction = model.normaliser.denormalise(batch.forecast())
     finite = np.isfinite(energies) & np.isfinite(prediction).all(1) & np.isfinite(expected_raw).all(1)
@@ -241,3 +243,19 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
         r.zhat, r.t = batch.zhat[i : i + 1].copy(), r.t + 1
         scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i]))
     return scores
+
+
+def weigh_step(
+    errors: np.ndarray, calibrations: Sequence[Calibration | None], steps: Sequence[int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Errors (B, D) of one step of each stream divided by their spreads, and their energies."""
+    ones, eye = np.ones(errors.shape[1]), np.eye(errors.shape[1])
+    spread = np.stack([ones if c is None else step_row(c.error_std, t) for c, t in zip(calibrations, steps)])
+    weighted = errors / spread
+    if all(c is None or c.error_precision is None for c in calibrations):
+        return weighted, quadratic(weighted, None)
+    precision = np.stack([
+        eye if c is None or c.error_precision is None else step_row(c.error_precision, t)
+        for c, t in zip(calibrations, steps)
+    ])
+    return weighted, quadratic(weighted, precision)

@@ -1,8 +1,9 @@
 """Precisions and fault thresholds from normal episodes.
 
 A calibration belongs to one recall setting (mode, cue length). It holds the expected
-spread of each channel's normalised prediction error at each step (the precisions of
-the observation layer) and energy thresholds at chosen false-positive rates: one for
+spread of each channel's normalised prediction error at each step and, optionally, the
+precision matrix of the errors divided by those spreads at each step (together, the
+precisions of the observation layer), and energy thresholds at chosen false-positive rates: one for
 all steps, one per step, and one for an episode's peak energy. Spreads and thresholds
 should come from different normal episodes; estimating both on the same ones makes
 the measured false-positive rate optimistic.
@@ -13,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from sklearn.covariance import LedoitWolf
 
 from models.config import SCORING
 from models.scoring import energy
@@ -24,6 +26,8 @@ class Calibration:
     cue_steps: int
     error_std: np.ndarray  # (T, D), normalised units
     source: str  # where the spreads and thresholds came from, for provenance
+    # (T, D, D) precision matrices of error / error_std; None: channels independent
+    error_precision: np.ndarray | None = None
     thresholds: dict[float, float] = field(default_factory=dict)
     step_thresholds: dict[float, np.ndarray] = field(default_factory=dict)
     episode_thresholds: dict[float, float] = field(default_factory=dict)
@@ -43,6 +47,15 @@ def error_spread(errors: np.ndarray, floor: float = SCORING.error_std_floor) -> 
     return np.maximum(rms, floor)
 
 
+def error_precision(errors: np.ndarray, error_std: np.ndarray) -> np.ndarray:
+    """Per-step precision matrices (T, D, D) of normalised errors (N, T, D) divided by
+    their spreads: the inverse of their second moment about zero (as the spreads are),
+    shrunk towards the identity by Ledoit-Wolf, since a few hundred episodes do not pin
+    down a D x D matrix and channels that never vary would make it singular."""
+    w = errors.astype(np.float64) / error_std[None, : errors.shape[1]]
+    return np.stack([LedoitWolf(assume_centered=True).fit(w[:, t]).precision_ for t in range(w.shape[1])])
+
+
 def quantile_threshold(energies: np.ndarray, fpr: float) -> float:
     """Energy above which a fraction ``fpr`` of the given normal energies lie."""
     if not 0 < fpr < 1:
@@ -56,7 +69,7 @@ def set_thresholds(
     fprs: tuple[float, ...] = SCORING.fprs,
 ) -> None:
     """Thresholds from normalised errors (N, T, D) of normal episodes, weighted energy."""
-    e = energy(errors, calibration.error_std)
+    e = energy(errors, calibration.error_std, calibration.error_precision)
     for fpr in fprs:
         calibration.thresholds[fpr] = quantile_threshold(e, fpr)
         calibration.step_thresholds[fpr] = np.array(

@@ -1,8 +1,9 @@
 """Checkpoints: one safetensors file holding the weights and a JSON metadata header.
 
 Tensors: ``W_H``, ``W_F``, ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
-calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std`` and
-``calibration.<key>.step_thresholds``. The header entry ``neural_asm`` is a JSON
+calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
+``calibration.<key>.step_thresholds`` and, when errors are whitened,
+``calibration.<key>.error_precision`` (absent: channels weighed independently). The header entry ``neural_asm`` is a JSON
 document with the format version, the TPCConfig, the channel names, each
 calibration's thresholds and source, the data provenance and the training energy
 curve. No pickle is involved; writes go to a temporary file that replaces the target
@@ -65,6 +66,8 @@ def to_bytes(model: NeuralASM) -> bytes:
     for key, cal in model.calibrations.items():
         fprs = sorted(cal.step_thresholds)
         tensors[f"calibration.{key}.error_std"] = _f64(cal.error_std)
+        if cal.error_precision is not None:
+            tensors[f"calibration.{key}.error_precision"] = _f64(cal.error_precision)
         if fprs:
             tensors[f"calibration.{key}.step_thresholds"] = _f64(
                 np.stack([cal.step_thresholds[f] for f in fprs])
@@ -142,11 +145,13 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
         for c in meta["calibrations"]:
             fprs = [float(f) for f in c["fprs"]]
             steps = tensors.get(f"calibration.{c['key']}.step_thresholds")
+            precision = tensors.get(f"calibration.{c['key']}.error_precision")
             calibrations[c["key"]] = Calibration(
                 mode=c["mode"],
                 cue_steps=int(c["cue_steps"]),
                 error_std=tensors[f"calibration.{c['key']}.error_std"].numpy(),
                 source=c["source"],
+                error_precision=None if precision is None else precision.numpy(),
                 thresholds=dict(zip(fprs, c["thresholds"])),
                 step_thresholds={f: steps[i].numpy() for i, f in enumerate(fprs)},
                 episode_thresholds=dict(zip(fprs, c["episode_thresholds"])),
@@ -158,6 +163,10 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
     for cal in calibrations.values():
         if cal.error_std.ndim != 2 or cal.error_std.shape[1] != len(names):
             raise CheckpointError(f"{where}: calibration {cal.key} has shape {cal.error_std.shape}")
+        if cal.error_precision is not None and cal.error_precision.shape != (len(cal.error_std), len(names), len(names)):
+            raise CheckpointError(
+                f"{where}: calibration {cal.key} has precision matrices of shape {cal.error_precision.shape}"
+            )
     if not all(torch.isfinite(t).all() for t in tensors.values()):
         raise CheckpointError(f"{where} holds NaN or inf values")
     return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"))

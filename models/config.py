@@ -111,6 +111,12 @@ class ScoringConfig:
     # from ~20 episodes can be near zero for a channel that barely varies (a toggle),
     # which would give it an unbounded precision.
     error_std_floor: float = 0.05
+    # Correlations between the channels' errors. "full": each step's errors, divided by
+    # their spreads, are whitened by a precision matrix (the inverse of their
+    # Ledoit-Wolf-shrunk second moment on normal episodes), so that errors moving together
+    # as they normally do (joint angles and the end effector they place) are not counted
+    # twice. "diagonal": every channel weighed alone, as if errors were independent.
+    error_covariance: Literal["full", "diagonal"] = "full"
     # False-positive rates (per step) at which thresholds are calibrated.
     fprs: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
 

@@ -20,6 +20,7 @@ def test_round_trip_gives_identical_predictions(trained, skills, tmp_path):
     cal_a, cal_b = trained.calibration("online", 1), loaded.calibration("online", 1)
     assert cal_a.thresholds == cal_b.thresholds and cal_b.source == "test"
     assert np.array_equal(cal_a.step_thresholds[0.01], cal_b.step_thresholds[0.01])
+    assert cal_a.error_precision is not None and np.array_equal(cal_a.error_precision, cal_b.error_precision)
     assert list(tmp_path.iterdir()) == [path]  # no temporary file left behind
 
 

@@ -10,12 +10,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, weigh  # noqa: E402
+from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, weigh  # noqa: E402
 from experiments.fault_sweep.run import SweepResult  # noqa: E402
 from models.calibration import quantile_threshold  # noqa: E402
 from models.fault import joint_channels  # noqa: E402
 
-BEST = ("nasm_offline", "precision")  # the paper's setting, precision-weighted
+BEST = ("nasm_offline", "whitened")  # the paper's setting, errors weighted by a full precision
 EXAMPLES = ((5, 3.0, 10.0), (2, 3.0, 10.0))  # (joint, time s, overshoot deg), the paper's two
 
 
@@ -26,8 +26,8 @@ def _save(fig: plt.Figure, path: Path) -> None:
 
 
 def detection_vs_fpr(result: SweepResult, out: Path) -> None:
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
-    for ax, weighting in zip(axes, ("raw", "precision")):
+    fig, axes = plt.subplots(1, len(WEIGHTINGS), figsize=(6 * len(WEIGHTINGS), 4.5), sharey=True)
+    for ax, weighting in zip(axes, WEIGHTINGS):
         for name, by_w in result.summary.items():
             m = by_w[weighting]
             ax.plot([100 * f for f in FPRS], [100 * m["detection_rate"][f"{f:.2f}"] for f in FPRS], marker="o",
@@ -35,7 +35,7 @@ def detection_vs_fpr(result: SweepResult, out: Path) -> None:
         ax.axhline(100 * result.ceilings["oracle_detection_rate"], color="k", lw=0.8, label="oracle (twin)")
         ax.set(title=f"{weighting} errors", xlabel="per-step false-positive rate (%)", ylabel="faults detected (%)")
         ax.grid(alpha=0.3)
-    axes[1].legend(fontsize=7, loc="lower right")
+    axes[-1].legend(fontsize=7, loc="lower right")
     _save(fig, out / "detection_vs_fpr.png")
 
 
@@ -73,8 +73,8 @@ def confusion(result: SweepResult, out: Path) -> None:
 def breakdown(result: SweepResult, out: Path) -> None:
     b = result.bench
     factors = (("locked joint", b.fault_joint), ("fault time (s)", b.fault_time), ("overshoot (deg)", b.overshoot))
-    shown = [BEST, ("nasm_online", "precision"), ("nasm_paper_offline", "raw"), ("zscore_pooled", "demo_std"),
-             ("zscore_per_skill", "demo_std"), ("linear_one_step", "precision")]
+    shown = [BEST, ("nasm_online", "whitened"), ("nasm_paper_offline", "raw"), ("zscore_pooled", "demo_std"),
+             ("zscore_per_skill", "demo_std"), ("zscore_per_skill", "whitened"), ("linear_one_step", "whitened")]
     fig, axes = plt.subplots(1, 3, figsize=(15, 4), sharey=True)
     for ax, (label, values) in zip(axes, factors):
         levels = np.unique(values)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from models.calibration import error_spread, quantile_threshold
+from models.calibration import error_precision, error_spread, quantile_threshold
 from models.fault import joint_channels
 from models.scoring import energy
 
@@ -42,17 +42,27 @@ class Weighted:
     fault_errors: np.ndarray
 
 
+WEIGHTINGS = ("raw", "precision", "whitened")  # every method; z-score methods add "demo_std"
+
+
 def weigh(errors: Errors, weighting: str, demo_spread: dict[str, np.ndarray] | None = None) -> Weighted:
     """raw: plain squared errors; precision: divided by each step's error spread on the
-    precision split; demo_std: divided by the demonstrations' std (z-score baselines)."""
+    precision split; whitened: as precision, then whitened by each step's precision matrix
+    from the same split (isolation still reads the spread-divided errors); demo_std:
+    divided by the demonstrations' std (z-score baselines)."""
+    sets = ("calibration", "normal_test", "faults")
     if weighting == "raw":
-        std = {k: 1.0 for k in ("calibration", "normal_test", "faults")}
-    elif weighting == "precision":
+        std = {k: 1.0 for k in sets}
+    elif weighting in ("precision", "whitened"):
         spread = error_spread(errors.precision)
-        std = {k: spread[None, : getattr(errors, k).shape[1]] for k in ("calibration", "normal_test", "faults")}
+        std = {k: spread[None, : getattr(errors, k).shape[1]] for k in sets}
+        if weighting == "whitened":
+            precision = error_precision(errors.precision, spread)
+            e = {k: energy(getattr(errors, k), spread, precision) for k in sets}
+            return Weighted(e["calibration"], e["normal_test"], e["faults"], errors.faults / std["faults"])
     elif weighting == "demo_std":
         assert demo_spread is not None
-        std = {k: np.maximum(demo_spread[k], 0.05) for k in ("calibration", "normal_test", "faults")}
+        std = {k: np.maximum(demo_spread[k], 0.05) for k in sets}
     else:
         raise ValueError(f"unknown weighting {weighting!r}")
     w = {k: getattr(errors, k) / std[k] for k in std}

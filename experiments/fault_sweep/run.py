@@ -17,7 +17,7 @@ from tqdm.auto import tqdm
 
 from experiments.fault_sweep.data import Benchmark, load_benchmark
 from experiments.fault_sweep.methods import Method, baseline_methods, neural_asm_methods
-from experiments.fault_sweep.metrics import Errors, ceilings, evaluate, weigh
+from experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
 from experiments.panda_model import provenance_of, train_calibrated
 from models import checkpoint
 from models.asm import NeuralASM
@@ -62,7 +62,7 @@ def score_methods(bench: Benchmark, methods: list[Method], norm: Normaliser) -> 
         errors, spread = method_errors(method, bench, norm)
         all_errors[method.name] = errors
         summary[method.name] = {}
-        for weighting in ["raw", "precision"] + (["demo_std"] if spread is not None else []):
+        for weighting in WEIGHTINGS + (("demo_std",) if spread is not None else ()):
             metrics, outcome = evaluate(weigh(errors, weighting, spread), names, bench.fault_step, bench.fault_joint)
             summary[method.name][weighting] = {"family": method.family, **metrics}
             outcomes[(method.name, weighting)] = outcome

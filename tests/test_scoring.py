@@ -1,0 +1,33 @@
+"""Precision weighting of prediction errors: spreads and whitening by a precision matrix."""
+
+import numpy as np
+import pytest
+
+from models.calibration import error_precision, error_spread
+from models.scoring import energy
+
+
+@pytest.fixture
+def correlated(rng):
+    """Normal errors (N, T, D) in which channel 1 follows channel 0 closely and channel 2 is alone."""
+    a = rng.standard_normal((400, 3))
+    errors = np.stack([a[:, 0], a[:, 0] + 0.1 * a[:, 1], a[:, 2]], axis=-1)
+    return errors[:, None, :].repeat(2, axis=1)  # two identical steps
+
+
+def test_whitening_scores_a_broken_correlation_above_a_usual_one(correlated):
+    spread = error_spread(correlated)
+    precision = error_precision(correlated, spread)
+    usual = np.array([[[2.0, 2.0, 0.0]]])  # both channels off together, as they normally are
+    broken = np.array([[[2.0, -2.0, 0.0]]])  # the same sizes, against their correlation
+    diagonal = energy(usual, spread), energy(broken, spread)
+    whitened = energy(usual, spread, precision), energy(broken, spread, precision)
+    assert diagonal[0] == pytest.approx(diagonal[1])
+    assert whitened[1] > 20 * whitened[0]
+
+
+def test_identity_precision_is_the_diagonal_energy(rng):
+    errors = rng.standard_normal((5, 4, 6))
+    spread = np.abs(rng.standard_normal((4, 6))) + 0.5
+    eye = np.broadcast_to(np.eye(6), (4, 6, 6))
+    np.testing.assert_allclose(energy(errors, spread, eye), energy(errors, spread))
