@@ -39,6 +39,7 @@ class CalibrationInfo(BaseModel):
     mode: RecallMode
     cue_steps: int
     fprs: list[float] = Field(description="per-step false-positive rates with a threshold")
+    whitened: bool = Field(description="energy whitened by per-step precision matrices (else channels weighed alone)")
     source: str
 
 

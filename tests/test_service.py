@@ -84,6 +84,7 @@ def test_health_and_models(client):
     assert model["name"] == "panda" and model["channel_names"] == list(CHANNEL_NAMES)
     assert {(c["mode"], c["cue_steps"]) for c in model["calibrations"]} == {("offline", 1), ("online", 1)}
     assert 0.01 in model["calibrations"][0]["fprs"]
+    assert all(c["whitened"] for c in model["calibrations"])  # the default scoring
 
 
 def test_session_lifecycle(client):

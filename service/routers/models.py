@@ -12,7 +12,8 @@ router = APIRouter(tags=["models"], dependencies=[Depends(require_api_key)], res
 
 def model_info(name: str, model: NeuralASM) -> ModelInfo:
     calibrations = [
-        CalibrationInfo(mode=c.mode, cue_steps=c.cue_steps, fprs=sorted(c.thresholds), source=c.source)  # type: ignore[arg-type]
+        CalibrationInfo(mode=c.mode, cue_steps=c.cue_steps, fprs=sorted(c.thresholds),  # type: ignore[arg-type]
+                        whitened=c.error_precision is not None, source=c.source)
         for c in model.calibrations.values()
     ]
     return ModelInfo(name=name, channel_names=list(model.channel_names), hidden_size=model.config.hidden_size,
