@@ -104,19 +104,21 @@ class TemporalPC:
         """
         steps = self.config.inference_steps if steps is None else steps
         gamma = np.float32(self.config.inference_rate)
-        w_f, w_ft = self.w_f * self.pi[:, None], self.w_f.T  # Pi folded into W_F once
+        keep = np.float32(1.0) - gamma
+        # Pi and gamma folded into W_F once; W_F^T made contiguous for the first product.
+        w_f_step, w_ft = (gamma * self.pi[:, None]) * self.w_f, np.ascontiguousarray(self.w_f.T)
         z = prior.copy()
         gamma_prior = gamma * prior
         for _ in range(steps):
             fz = np.tanh(z)
-            eps_x = x - fz @ w_ft
-            drive = eps_x @ w_f
-            drive *= 1.0 - fz * fz
-            # z - gamma * (z - prior) + gamma * drive, in place.
-            z *= 1.0 - gamma
+            drive = (x - fz @ w_ft) @ w_f_step  # gamma (Pi eps_x) W_F
+            fz *= fz
+            fz -= 1.0  # -f'(z)
+            drive *= fz
+            # z - gamma * (z - prior) + gamma * f'(z) * ((Pi eps_x) @ W_F), in place.
+            z *= keep
             z += gamma_prior
-            drive *= gamma
-            z += drive
+            z -= drive
         return z
 
     def hebbian_gradients(
@@ -138,6 +140,7 @@ class TemporalPC:
         cap = self.wf_max_norm
         if float(np.linalg.norm(self.w_f)) <= cap:  # Frobenius >= spectral: nothing to do
             return
-        norm = float(np.linalg.norm(self.w_f, 2))
+        # ||W_F||_2^2 is the largest eigenvalue of the small (D x D) W_F W_F^T: cheaper than an SVD.
+        norm = math.sqrt(float(np.linalg.eigvalsh(self.w_f @ self.w_f.T)[-1]))
         if norm > cap:
             self.W_F.mul_(cap / norm)

@@ -42,17 +42,22 @@ def sweep():
     return score_methods(bench, methods, norm), model
 
 
-def test_large_faults_are_detected_at_or_after_their_step(sweep):
+SCORED = [("nasm_online", "precision"), ("nasm_offline", "whitened")]
+
+
+@pytest.mark.parametrize("method, weighting", SCORED)
+def test_large_faults_are_detected_at_or_after_their_step(sweep, method, weighting):
     result, _ = sweep
-    outcome = result.outcomes[("nasm_online", "precision")]
+    outcome = result.outcomes[(method, weighting)]
     first = outcome["first_detection_step"]
     assert (first >= result.bench.fault_step).all()
-    assert result.summary["nasm_online"]["precision"]["detection_rate"]["0.01"] == 1.0
+    assert result.summary[method][weighting]["detection_rate"]["0.01"] == 1.0
 
 
-def test_clear_case_is_isolated_to_the_locked_joint(sweep):
+@pytest.mark.parametrize("method, weighting", SCORED)
+def test_clear_case_is_isolated_to_the_locked_joint(sweep, method, weighting):
     result, _ = sweep
-    outcome = result.outcomes[("nasm_online", "precision")]
+    outcome = result.outcomes[(method, weighting)]
     # joint 4 at -15 deg: visible and isolable at its own step
     assert outcome["isolated_at_fault_step"][1] == 4
     assert outcome["isolated_at_detection"][1] == 4

@@ -115,6 +115,8 @@ def evaluate(w: Weighted, channel_names: tuple[str, ...], fault_step: np.ndarray
     scores = np.concatenate([w.faults.max(axis=1), w.normal_test.max(axis=1)])
     labels = np.concatenate([np.ones(len(w.faults)), np.zeros(len(w.normal_test))])
     summary["auroc"] = float(roc_auc_score(labels, scores))
+    # Immediate detection: at the fault step itself (ceiling: faults visible there).
+    summary["detection_rate_at_fault_step"] = float((first == fault_step).mean())
     delay = (first - fault_step)[detected]
     summary["median_detection_delay_steps"] = float(np.median(delay)) if detected.any() else None
     outcome.update(isolated_at_fault_step=at_fault, isolated_at_detection=np.where(detected, at_detection, 0),
