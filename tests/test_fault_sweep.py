@@ -1,11 +1,16 @@
 """A small fault sweep end to end: real simulation, training, calibration, scoring."""
 
+import csv
+import json
+
 import numpy as np
 import pytest
 
 from experiments.fault_sweep.data import make_benchmark
 from experiments.fault_sweep.methods import baseline_methods, neural_asm_methods
+from experiments.fault_sweep.figures import write_figures
 from experiments.fault_sweep.metrics import FPRS
+from experiments.fault_sweep.report import write_csv, write_json, write_markdown
 from experiments.fault_sweep.run import score_methods, train_models
 from models.calibration import quantile_threshold
 from models.config import FAST
@@ -82,3 +87,36 @@ def test_ceilings_see_every_large_fault(sweep):
     result, _ = sweep
     assert result.ceilings["visible"].all()
     assert np.isfinite(result.summary["zscore_pooled"]["demo_std"]["auroc"])
+
+
+def test_intervals_bracket_their_estimates(sweep):
+    result, _ = sweep
+    for by_weighting in result.summary.values():
+        for m in by_weighting.values():
+            for name, (low, high) in m["interval95"].items():
+                value = m[name]["0.01"]
+                assert 0.0 <= low <= value <= high <= 1.0, (name, low, value, high)
+
+
+def test_outputs_hold_every_method_and_fault(sweep, tmp_path):
+    result, _ = sweep
+    write_json(result, tmp_path / "fault_sweep.json")
+    write_markdown(result, tmp_path / "fault_sweep.md")
+    write_csv(result, tmp_path / "episodes.csv")
+    write_figures(result, tmp_path)
+    doc = json.loads((tmp_path / "fault_sweep.json").read_text())
+    assert set(doc["methods"]) == set(result.summary)
+    for by_weighting in doc["methods"].values():
+        for m in by_weighting.values():
+            assert set(m["detection_rate"]) == {f"{f:.2f}" for f in FPRS}
+            for field in ("measured_fpr", "episode_false_alarm_rate", "isolation_accuracy_at_fault_step",
+                          "isolation_accuracy_at_detection", "auroc", "median_detection_delay_steps"):
+                assert field in m
+    rows = sum(len(w) for w in result.summary.values())
+    table = [line for line in (tmp_path / "fault_sweep.md").read_text().splitlines() if line.startswith("| nasm")
+             or line.startswith("| zscore") or line.startswith("| classic") or line.startswith("| linear")]
+    assert len(table) == rows
+    with (tmp_path / "episodes.csv").open() as f:
+        assert len(list(csv.reader(f))) == 1 + len(FAULTS)
+    for png in ("detection_vs_fpr", "energy_distribution", "isolation_confusion", "breakdown"):
+        assert (tmp_path / f"{png}.png").stat().st_size > 10_000

@@ -75,6 +75,7 @@ def breakdown(result: SweepResult, out: Path) -> None:
     factors = (("locked joint", b.fault_joint), ("fault time (s)", b.fault_time), ("overshoot (deg)", b.overshoot))
     shown = [BEST, ("nasm_online", "whitened"), ("nasm_paper_offline", "raw"), ("zscore_pooled", "demo_std"),
              ("zscore_per_skill", "demo_std"), ("zscore_per_skill", "whitened"), ("linear_one_step", "whitened")]
+    shown = [key for key in shown if key in result.outcomes]
     fig, axes = plt.subplots(1, 3, figsize=(15, 4), sharey=True)
     for ax, (label, values) in zip(axes, factors):
         levels = np.unique(values)

@@ -20,6 +20,15 @@ from models.scoring import energy
 
 FPRS = (0.01, 0.02, 0.03, 0.04, 0.05)
 MAIN_FPR = 0.01
+BOOTSTRAP = 2000  # resamples for the 95 % intervals
+
+
+def interval95(per_item: np.ndarray, seed: int = 0) -> list[float]:
+    """Percentile bootstrap interval of the mean of per-episode values (thresholds held fixed:
+    the spread of the test episodes, not of the calibration)."""
+    rng = np.random.default_rng(seed)
+    means = per_item[rng.integers(0, len(per_item), (BOOTSTRAP, len(per_item)))].mean(axis=1)
+    return [float(v) for v in np.quantile(means, [0.025, 0.975])]
 
 
 @dataclass(frozen=True)
@@ -103,6 +112,11 @@ def evaluate(w: Weighted, channel_names: tuple[str, ...], fault_step: np.ndarray
         if fpr == MAIN_FPR:
             outcome["first_detection_step"] = first
             outcome["threshold"] = single
+            summary["interval95"] = {
+                "detection_rate": interval95((first >= 0).astype(float)),
+                "measured_fpr": interval95((w.normal_test > single).mean(axis=1)),
+                "episode_false_alarm_rate": interval95((w.normal_test > single).any(axis=1).astype(float)),
+            }
     joint_err = np.abs(w.fault_errors[:, :, joints])  # (F, T, 7)
     at_fault = joints_isolated(joint_err, rows, fault_step)
     first = outcome["first_detection_step"]
