@@ -14,7 +14,7 @@ import numpy as np
 
 from models import recall as recall_
 from models.calibration import Calibration, calibration_key, error_precision, error_spread, set_thresholds
-from models.config import FAST, SCORING, TPCConfig
+from models.config import FAST, SCORING, Covariance, TPCConfig
 from models.normaliser import Normaliser
 from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
 from models.tpc import TemporalPC
@@ -164,7 +164,7 @@ class NeuralASM:
         cue_steps: int = 1,
         fprs: tuple[float, ...] = SCORING.fprs,
         source: str = "held-out normal episodes",
-        covariance: str = SCORING.error_covariance,
+        covariance: Covariance = SCORING.error_covariance,
     ) -> Calibration:
         """Estimate precisions on one set of normal episodes and thresholds on another."""
         if covariance not in ("full", "diagonal"):

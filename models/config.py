@@ -14,6 +14,7 @@ from typing import Any, Literal
 
 Optimizer = Literal["adam", "sgd"]
 InitialState = Literal["zeros", "random"]
+Covariance = Literal["full", "diagonal"]
 
 
 @dataclass(frozen=True)
@@ -116,7 +117,7 @@ class ScoringConfig:
     # Ledoit-Wolf-shrunk second moment on normal episodes), so that errors moving together
     # as they normally do (joint angles and the end effector they place) are not counted
     # twice. "diagonal": every channel weighed alone, as if errors were independent.
-    error_covariance: Literal["full", "diagonal"] = "full"
+    error_covariance: Covariance = "full"
     # False-positive rates (per step) at which thresholds are calibrated.
     fprs: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
 

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from models import checkpoint
 from models.calibration import error_precision, error_spread
 from models.scoring import energy
 
@@ -31,3 +32,17 @@ def test_identity_precision_is_the_diagonal_energy(rng):
     spread = np.abs(rng.standard_normal((4, 6))) + 0.5
     eye = np.broadcast_to(np.eye(6), (4, 6, 6))
     np.testing.assert_allclose(energy(errors, spread, eye), energy(errors, spread))
+
+
+def test_calibration_whitens_by_default_and_diagonal_on_request(trained, skills):
+    model = checkpoint.from_bytes(checkpoint.to_bytes(trained))  # a copy: `trained` is shared
+    train, test = skills
+    full = model.calibrate(train.sequences, test.sequences, "offline", 1)
+    steps, channels = full.error_std.shape
+    assert full.error_precision is not None and full.error_precision.shape == (steps, channels, channels)
+    diagonal = model.calibrate(train.sequences, test.sequences, "offline", 1, covariance="diagonal")
+    assert diagonal.error_precision is None
+    errors = model.errors(test.sequences, "offline", 1)
+    np.testing.assert_allclose(model.score(test.sequences, "offline").energy, energy(errors, diagonal.error_std))
+    with pytest.raises(ValueError, match="covariance"):
+        model.calibrate(train.sequences, test.sequences, "offline", 1, covariance="sparse")  # type: ignore[arg-type]
