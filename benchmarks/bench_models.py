@@ -74,7 +74,8 @@ def mse(a: np.ndarray, b: np.ndarray) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--faithful-epochs", type=int, default=FAITHFUL.epochs)
-    parser.add_argument("--seeds", type=int, default=3, help="training seeds of the default model for quality")
+    parser.add_argument("--seeds", type=int, default=3, choices=range(1, 11), metavar="1..10",
+                        help="training seeds of the default model for quality")
     args = parser.parse_args()
 
     demos, _ = run_jobs(demonstrations(10), workers=2, desc="demonstrations")
@@ -106,8 +107,8 @@ def main() -> None:
 
     print(f"training the default configuration with {args.seeds - 1} more seed(s) ...", flush=True)
     fast_models = [fast] + [
-        NeuralASM.fit(train.x, names, FAST.with_(seed=seed), labels=train.skills, validation=validation.x)
-        for seed in range(1, args.seeds)
+        NeuralASM.fit(train.x, names, FAST.with_(seed=FAST.seed + k), labels=train.skills, validation=validation.x)
+        for k in range(1, args.seeds)
     ]
 
     print(f"training the faithful configuration ({args.faithful_epochs} epochs, batch 1) ...", flush=True)

@@ -13,7 +13,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from models import recall as recall_
-from models.calibration import Calibration, calibration_key, error_precision, error_spread, set_thresholds
+from models.calibration import Calibration, calibration_key, estimate, set_thresholds
 from models.config import FAST, SCORING, Covariance, TPCConfig
 from models.normaliser import Normaliser
 from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
@@ -97,10 +97,10 @@ class NeuralASM:
         provenance = {**(provenance or {}), "kept_epoch": kept + 1}
         model = cls(net, normaliser, channel_names, provenance=provenance, history=history)
         for mode in recall_.RECALL_MODES:
-            errors = model.errors(data, mode, 1)
-            model.calibrations[calibration_key(mode, 1)] = Calibration(
-                mode, 1, error_spread(errors), source="training sequences"
-            )
+            # provisional until calibrate(); one sequence cannot give a precision matrix
+            covariance = SCORING.error_covariance if len(data) > 1 else "diagonal"
+            calibration = estimate(mode, 1, model.errors(data, mode, 1), "training sequences", covariance)
+            model.calibrations[calibration.key] = calibration
         return model
 
     @property
@@ -167,12 +167,7 @@ class NeuralASM:
         covariance: Covariance = SCORING.error_covariance,
     ) -> Calibration:
         """Estimate precisions on one set of normal episodes and thresholds on another."""
-        if covariance not in ("full", "diagonal"):
-            raise ValueError(f"covariance must be 'full' or 'diagonal', got {covariance!r}")
-        errors = self.errors(precision_sequences, mode, cue_steps)
-        spread = error_spread(errors)
-        precision = error_precision(errors, spread) if covariance == "full" else None
-        calibration = Calibration(mode, cue_steps, spread, source, precision)
+        calibration = estimate(mode, cue_steps, self.errors(precision_sequences, mode, cue_steps), source, covariance)
         set_thresholds(calibration, self.errors(threshold_sequences, mode, cue_steps), fprs)
         self.calibrations[calibration.key] = calibration
         return calibration

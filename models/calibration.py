@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.covariance import LedoitWolf
 
-from models.config import SCORING
+from models.config import SCORING, Covariance
 from models.scoring import energy
 
 
@@ -50,10 +50,23 @@ def error_spread(errors: np.ndarray, floor: float = SCORING.error_std_floor) -> 
 def error_precision(errors: np.ndarray, error_std: np.ndarray) -> np.ndarray:
     """Per-step precision matrices (T, D, D) of normalised errors (N, T, D) divided by
     their spreads: the inverse of their second moment about zero (as the spreads are),
-    shrunk towards the identity by Ledoit-Wolf, since a few hundred episodes do not pin
-    down a D x D matrix and channels that never vary would make it singular."""
+    shrunk by Ledoit-Wolf towards a multiple of the identity, since a few hundred episodes
+    do not pin down a D x D matrix and channels that never vary would make it singular."""
+    if len(errors) < 2:
+        raise ValueError(f"precision matrices need errors of at least 2 episodes, got {len(errors)}")
     w = errors.astype(np.float64) / error_std[None, : errors.shape[1]]
     return np.stack([LedoitWolf(assume_centered=True).fit(w[:, t]).precision_ for t in range(w.shape[1])])
+
+
+def estimate(
+    mode: str, cue_steps: int, errors: np.ndarray, source: str, covariance: Covariance = SCORING.error_covariance
+) -> Calibration:
+    """Precisions (no thresholds yet) from normalised errors (N, T, D) of normal episodes."""
+    if covariance not in ("full", "diagonal"):
+        raise ValueError(f"covariance must be 'full' or 'diagonal', got {covariance!r}")
+    spread = error_spread(errors)
+    precision = error_precision(errors, spread) if covariance == "full" else None
+    return Calibration(mode, cue_steps, spread, source, precision)
 
 
 def quantile_threshold(energies: np.ndarray, fpr: float) -> float:

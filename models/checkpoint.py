@@ -31,7 +31,8 @@ from models.config import TPCConfig
 from models.normaliser import Normaliser
 from models.tpc import TemporalPC
 
-FORMAT_VERSION = 2  # 2: observation precisions
+FORMAT_VERSION = 3  # 2: observation precisions; 3: optional whitening precision matrices
+READABLE_VERSIONS = (2, 3)  # a version-2 file simply has no precision matrices
 HEADER_KEY = "neural_asm"
 
 
@@ -121,10 +122,10 @@ def read_header(data: bytes, where: str) -> dict[str, Any]:
         meta = json.loads(header["__metadata__"][HEADER_KEY])
     except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
         raise CheckpointError(f"{where} is not a Neural ASM checkpoint (no readable metadata)") from exc
-    if meta.get("format_version") != FORMAT_VERSION:
+    if meta.get("format_version") not in READABLE_VERSIONS:
         raise CheckpointError(
             f"{where} has format version {meta.get('format_version')!r}; "
-            f"this software reads version {FORMAT_VERSION}"
+            f"this software reads versions {', '.join(map(str, READABLE_VERSIONS))}"
         )
     return meta
 

@@ -55,6 +55,6 @@ class StepScore:
     step: int
     expected: np.ndarray  # (D,) what the model expected of this step, original units
     errors: np.ndarray  # (D,) normalised prediction errors
-    weighted_errors: np.ndarray  # (D,) errors divided by their expected spread; energy = sum of squares
+    weighted_errors: np.ndarray  # (D,) errors divided by their expected spread (what isolation ranks)
     energy: float
     prediction: np.ndarray  # (D,) forecast of the next step, original units

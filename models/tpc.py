@@ -140,7 +140,9 @@ class TemporalPC:
         cap = self.wf_max_norm
         if float(np.linalg.norm(self.w_f)) <= cap:  # Frobenius >= spectral: nothing to do
             return
-        # ||W_F||_2^2 is the largest eigenvalue of the small (D x D) W_F W_F^T: cheaper than an SVD.
-        norm = math.sqrt(float(np.linalg.eigvalsh(self.w_f @ self.w_f.T)[-1]))
+        # ||W_F||_2^2 is the largest eigenvalue of the smaller Gram matrix: cheaper than an SVD.
+        w = self.w_f
+        gram = w @ w.T if w.shape[0] <= w.shape[1] else w.T @ w
+        norm = math.sqrt(float(np.linalg.eigvalsh(gram)[-1]))
         if norm > cap:
             self.W_F.mul_(cap / norm)

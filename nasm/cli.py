@@ -122,8 +122,7 @@ def info(model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"
         "config": model.config.to_dict(),
         "channels": list(model.channel_names),
         "calibrations": {
-            k: {"source": c.source, "errors": "whitened" if c.error_precision is not None else "precision (diagonal)",
-                "thresholds": c.thresholds}
+            k: {"source": c.source, "whitened": c.error_precision is not None, "thresholds": c.thresholds}
             for k, c in model.calibrations.items()
         },
         "provenance": model.provenance,

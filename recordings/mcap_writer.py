@@ -23,7 +23,7 @@ _VECTOR_TOPICS = {
     "/observation": "the observation, original units",
     "/expected": "what the model expected of this step, original units",
     "/prediction": "the model's forecast of the next step, original units",
-    "/errors": "precision-weighted prediction errors (energy = sum of squares)",
+    "/errors": "prediction errors divided by their expected spread (the channels isolation ranks)",
 }
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 

@@ -117,7 +117,10 @@ class Timed(BaseModel):
 class PredictResponse(Timed):
     prediction: dict[str, float] = Field(description="forecast of the next observation, original units")
     expected: dict[str, float] = Field(description="what the model expected of this observation")
-    errors: dict[str, float] = Field(description="weighted prediction errors; energy = sum of squares")
+    errors: dict[str, float] = Field(
+        description="prediction errors divided by their expected spread; energy = their sum of squares, or "
+        "their quadratic form with the step's precision matrix when the calibration whitens"
+    )
 
 
 class RankedChannel(BaseModel):

@@ -3,7 +3,8 @@
 Simulated episodes and experiment runs are independent, CPU-bound and seeded, so the
 results do not depend on where they run. Local spawned processes are the default; Ray
 (`pip install 'neural-asm[ray]'`) lets a sweep outgrow one machine: it joins the cluster
-named by ``RAY_ADDRESS`` when set, and otherwise starts a local instance with `workers` CPUs.
+named by ``RAY_ADDRESS`` when set (every node needs this project installed, as workers import
+it), and otherwise starts a local instance with `workers` CPUs.
 """
 
 from __future__ import annotations
@@ -12,12 +13,13 @@ import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
-from typing import Any, Literal
+from itertools import repeat
+from typing import Any, Literal, get_args
 
 from tqdm.auto import tqdm
 
 Backend = Literal["processes", "ray"]
-BACKENDS: tuple[str, ...] = ("processes", "ray")
+BACKENDS: tuple[str, ...] = get_args(Backend)
 
 
 def parallel_map(
@@ -34,7 +36,8 @@ def parallel_map(
     """``[fn(*a) for a in args]``, in order, run on `workers` processes or on Ray.
 
     `fn` and `initializer` must be importable module-level functions (they are sent to
-    other processes); `initializer` runs once per process before its first job. Local
+    other processes); `initializer` runs once per process before its first job (on Ray,
+    before every job: Ray reuses worker processes without telling). Local
     processes take `chunksize` jobs at a time: more amortises many short jobs, 1 balances
     long uneven ones.
     """
@@ -64,10 +67,14 @@ def parallel_map(
 def _process_map(fn, args, workers, initializer, chunksize, bar) -> list[Any]:
     results = []
     with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=initializer) as pool:
-        for result in pool.map(fn, *zip(*args), chunksize=chunksize):
+        for result in pool.map(_apply, repeat(fn), args, chunksize=chunksize):
             results.append(result)
             bar.update()
     return results
+
+
+def _apply(fn, args):
+    return fn(*args)
 
 
 def _run_initialised(initializer, fn, *args):
@@ -83,19 +90,25 @@ def _ray_map(fn, args, workers, initializer, bar) -> list[Any]:
         raise RuntimeError("the ray backend needs Ray: pip install 'neural-asm[ray]'") from err
     started_here = not ray.is_initialized()
     if started_here:
-        # RAY_ADDRESS, when set, names an existing cluster and ray.init joins it.
-        ray.init(num_cpus=None if _joins_cluster() else workers, include_dashboard=False,
-                 log_to_driver=False, configure_logging=False)
+        if _joins_cluster():  # ray.init reads RAY_ADDRESS itself
+            ray.init(log_to_driver=False, configure_logging=False)
+        else:  # a fresh local instance, never one that happens to be running already
+            ray.init(address="local", num_cpus=workers, include_dashboard=False,
+                     log_to_driver=False, configure_logging=False)
     try:
         task = ray.remote(_run_initialised)
         refs = [task.remote(initializer, fn, *a) for a in args]
         index = {ref: i for i, ref in enumerate(refs)}
         results: list[Any] = [None] * len(args)
         pending = list(refs)
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            results[index[done[0]]] = ray.get(done[0])
-            bar.update()
+        try:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                results[index[done[0]]] = ray.get(done[0])
+                bar.update()
+        finally:
+            for ref in pending:  # a failed job: do not leave the others running on a shared cluster
+                ray.cancel(ref)
         return results
     finally:
         if started_here:

@@ -61,7 +61,7 @@ def confusion(result: SweepResult, out: Path) -> None:
     for true, got in zip(result.bench.fault_joint, o["isolated_at_fault_step"]):
         m[true - 1, got - 1] += 1
     fig, ax = plt.subplots(figsize=(5, 4.5))
-    ax.imshow(m / m.sum(axis=1, keepdims=True), cmap="viridis", vmin=0, vmax=1)
+    ax.imshow(m / np.maximum(m.sum(axis=1, keepdims=True), 1), cmap="viridis", vmin=0, vmax=1)  # rows may be empty
     for i in range(7):
         for j in range(7):
             ax.text(j, i, int(m[i, j]), ha="center", va="center", color="w" if m[i, j] < 70 else "k", fontsize=7)

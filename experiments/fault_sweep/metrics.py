@@ -25,7 +25,10 @@ BOOTSTRAP = 2000  # resamples for the 95 % intervals
 
 def interval95(per_item: np.ndarray, seed: int = 0) -> list[float]:
     """Percentile bootstrap interval of the mean of per-episode values (thresholds held fixed:
-    the spread of the test episodes, not of the calibration)."""
+    the spread of the test episodes, not of the calibration). For detection it resamples the
+    designed fault grid, so read it as the spread over faults like these, not over a population."""
+    if len(per_item) == 0:
+        raise ValueError("no episodes to resample")
     rng = np.random.default_rng(seed)
     means = per_item[rng.integers(0, len(per_item), (BOOTSTRAP, len(per_item)))].mean(axis=1)
     return [float(v) for v in np.quantile(means, [0.025, 0.975])]

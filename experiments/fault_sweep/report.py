@@ -46,9 +46,10 @@ def write_markdown(result: SweepResult, path: Path) -> None:
     lines = [
         f"| method | errors | detection @1/3/5 % FPR | measured FPR @1 % [95 % interval] "
         f"| episodes falsely flagged @1 % [95 % interval] "
-        f"| detection, episode-calibrated @1 % | detected at the fault step @1 % | isolation at fault step "
+        f"| detection, episode-calibrated @1 % | episodes falsely flagged, episode-calibrated @1 % "
+        f"| detected at the fault step @1 % | isolation at fault step "
         f"| isolation at detection | AUROC | median delay (steps) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, by_weighting in result.summary.items():
         for weighting, m in by_weighting.items():
@@ -57,6 +58,7 @@ def write_markdown(result: SweepResult, path: Path) -> None:
                 f"| {name} | {weighting} | {det} | {with_interval(m['measured_fpr'][key], m['interval95']['measured_fpr'])} "
                 f"| {with_interval(m['episode_false_alarm_rate'][key], m['interval95']['episode_false_alarm_rate'])} "
                 f"| {pct(m['detection_rate_episode_calibrated'][key])} "
+                f"| {pct(m['episode_false_alarm_rate_episode_calibrated'][key])} "
                 f"| {pct(m['detection_rate_at_fault_step'])} "
                 f"| {pct(m['isolation_accuracy_at_fault_step'])} | {pct(m['isolation_accuracy_at_detection'])} "
                 f"| {m['auroc']:.3f} | {m['median_detection_delay_steps']} |"
