@@ -3,8 +3,8 @@
 A calibration belongs to one recall setting (mode, cue length). It holds the expected
 spread of each channel's normalised prediction error at each step and, optionally, the
 precision matrix of the errors divided by those spreads at each step (together, the
-precisions of the observation layer), and energy thresholds at chosen false-positive rates: one for
-all steps, one per step, and one for an episode's peak energy. Spreads and thresholds
+precisions of the observation layer), and energy thresholds at chosen false-positive
+rates: one for all steps, one per step, and one for an episode's peak energy. Spreads and thresholds
 should come from different normal episodes; estimating both on the same ones makes
 the measured false-positive rate optimistic.
 """

@@ -42,18 +42,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # before torch is imported (embed
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 import contextlib  # noqa: E402
-import ipaddress  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
 from dataclasses import asdict, dataclass, field  # noqa: E402
-from typing import Any, Callable, Iterator, Protocol  # noqa: E402
-from urllib.parse import urlparse  # noqa: E402
+from typing import Any, Callable, Iterator  # noqa: E402
 
-import httpx  # noqa: E402
 import numpy as np  # noqa: E402
 import typer  # noqa: E402
-from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus  # noqa: E402
-from websockets.sync.client import connect as ws_connect  # noqa: E402
 
 from recordings import DEFAULT_DIR, EpisodeRecorder, new_run_id  # noqa: E402
 from recordings.records import StepRecord, WorldRecord  # noqa: E402
@@ -64,150 +59,10 @@ from sim.faults import FaultSpec  # noqa: E402
 from sim.panda import dh_frames  # noqa: E402
 from sim.runner import run_episode  # noqa: E402
 from sim.skills import SKILLS  # noqa: E402
+from sim.transport import TRANSPORTS, ServiceError, ServiceLost, Transport  # noqa: E402
 
-API_KEY_HEADER = "X-API-Key"
 RECONNECT_ATTEMPTS = 5
 RECONNECT_BACKOFF_S = (0.5, 1.0, 2.0, 4.0, 8.0)
-TIMEOUT_S = 30.0
-
-
-class ServiceLost(RuntimeError):
-    """The service closed the connection or stopped answering."""
-
-
-class ServiceError(RuntimeError):
-    """The service answered with an error (a 4xx/5xx or a websocket error message)."""
-
-
-# --------------------------------------------------------------------------- transports
-
-
-class Transport(Protocol):
-    def start(self, params: dict[str, Any]) -> dict[str, Any]: ...
-    def step(self, observation: list[float]) -> dict[str, Any]: ...
-    def end(self) -> dict[str, Any] | None: ...
-    def close(self) -> None: ...
-
-
-def _loopback(url: str) -> bool:
-    host = urlparse(url).hostname or ""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def _headers(api_key: str | None) -> dict[str, str]:
-    return {API_KEY_HEADER: api_key} if api_key else {}
-
-
-class WebSocketTransport:
-    """One websocket connection to ``/stream``: start, steps, end (see service/routers/stream.py)."""
-
-    def __init__(self, url: str, api_key: str | None, timeout_s: float = TIMEOUT_S) -> None:
-        parsed = urlparse(url)
-        scheme = "wss" if parsed.scheme == "https" else "ws"
-        self.uri = parsed._replace(scheme=scheme, path=parsed.path.rstrip("/") + "/stream").geturl()
-        self.timeout_s = timeout_s
-        try:
-            self.ws = ws_connect(self.uri, additional_headers=_headers(api_key), open_timeout=timeout_s,
-                                 proxy=None if _loopback(url) else True, max_size=2**22).__enter__()
-        except InvalidStatus as exc:
-            code = exc.response.status_code
-            if code in (401, 403):
-                raise ServiceError(f"{self.uri} refused the connection ({code}): missing or wrong API key "
-                                   f"(--api-key, header {API_KEY_HEADER})") from exc
-            raise ServiceLost(f"{self.uri} refused the websocket handshake ({code})") from exc
-        except (OSError, TimeoutError, InvalidHandshake) as exc:
-            raise ServiceLost(f"cannot connect to {self.uri}: {exc}") from exc
-        hello = self._receive()
-        if hello.get("type") != "metadata":
-            raise ServiceError(f"unexpected first message from {self.uri}: {hello}")
-        self.metadata = hello
-
-    def _receive(self) -> dict[str, Any]:
-        try:
-            text = self.ws.recv(timeout=self.timeout_s)
-        except ConnectionClosed as exc:
-            rcvd = exc.rcvd
-            if rcvd is not None and rcvd.code == 1008:
-                raise ServiceError(f"the service closed the connection: {rcvd.reason}") from exc
-            why = f"code {rcvd.code} {rcvd.reason!r}".strip() if rcvd is not None else "no close frame"
-            raise ServiceLost(f"the service closed the connection ({why})") from exc
-        except (OSError, TimeoutError) as exc:
-            raise ServiceLost(f"no answer from the service: {exc!r}") from exc
-        return json.loads(text)
-
-    def _call(self, message: dict[str, Any], expect: str) -> dict[str, Any]:
-        try:
-            self.ws.send(json.dumps(message))
-        except (ConnectionClosed, OSError) as exc:
-            raise ServiceLost(f"the service closed the connection: {exc}") from exc
-        answer = self._receive()
-        if answer.get("type") == "error":
-            raise ServiceError(f"service error {answer.get('status')}: {answer.get('detail')}")
-        if answer.get("type") != expect:
-            raise ServiceError(f"expected a {expect!r} message, got {answer}")
-        return answer
-
-    def start(self, params: dict[str, Any]) -> dict[str, Any]:
-        return self._call({"type": "start", **params}, "started")
-
-    def step(self, observation: list[float]) -> dict[str, Any]:
-        return self._call({"type": "step", "observation": observation}, "step")
-
-    def end(self) -> dict[str, Any] | None:
-        return self._call({"type": "end"}, "ended")
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.ws.close()
-
-
-class HttpTransport:
-    """``POST /sessions``, one ``POST /fault`` per step, ``DELETE /sessions/{id}``."""
-
-    def __init__(self, url: str, api_key: str | None, timeout_s: float = TIMEOUT_S) -> None:
-        self.client = httpx.Client(base_url=url.rstrip("/"), headers=_headers(api_key), timeout=timeout_s,
-                                   trust_env=not _loopback(url))
-        self.session_id: str | None = None
-
-    def _request(self, method: str, path: str, body: dict[str, Any] | None = None) -> dict[str, Any]:
-        try:
-            response = self.client.request(method, path, json=body)
-        except httpx.TransportError as exc:
-            raise ServiceLost(f"{method} {path}: {exc!r}") from exc
-        if response.status_code >= 400:
-            try:
-                detail = response.json().get("detail", response.text)
-            except ValueError:
-                detail = response.text
-            if response.status_code >= 500 or response.status_code in (502, 503, 504):
-                raise ServiceLost(f"{method} {path}: {response.status_code} {detail}")
-            raise ServiceError(f"{method} {path}: {response.status_code} {detail}")
-        return response.json()
-
-    def start(self, params: dict[str, Any]) -> dict[str, Any]:
-        info = self._request("POST", "/sessions", params)
-        self.session_id = info["session_id"]
-        return info
-
-    def step(self, observation: list[float]) -> dict[str, Any]:
-        return self._request("POST", "/fault", {"session_id": self.session_id, "observation": observation})
-
-    def end(self) -> dict[str, Any] | None:
-        if self.session_id is None:
-            return None
-        session_id, self.session_id = self.session_id, None
-        return self._request("DELETE", f"/sessions/{session_id}")
-
-    def close(self) -> None:
-        self.client.close()
-
-
-TRANSPORTS: dict[str, Callable[[str, str | None], Transport]] = {"ws": WebSocketTransport, "http": HttpTransport}
 
 
 # --------------------------------------------------------------------------- episode results

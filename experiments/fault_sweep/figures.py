@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, weigh  # noqa: E402
+from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, Weighted, weigh  # noqa: E402
 from experiments.fault_sweep.run import SweepResult  # noqa: E402
 from models.calibration import quantile_threshold  # noqa: E402
 from models.fault import joint_channels  # noqa: E402
@@ -39,9 +39,8 @@ def detection_vs_fpr(result: SweepResult, out: Path) -> None:
     _save(fig, out / "detection_vs_fpr.png")
 
 
-def energy_distribution(result: SweepResult, out: Path) -> None:
+def energy_distribution(result: SweepResult, w: Weighted, out: Path) -> None:
     name, weighting = BEST
-    w = weigh(result.errors[name], weighting)
     fig, ax = plt.subplots(figsize=(7, 4))
     bins = np.logspace(np.log10(max(w.calibration.min(), 1e-2)), np.log10(w.faults.max()), 60)
     ax.hist(w.calibration.ravel(), bins=bins, alpha=0.6, density=True, label="normal steps (calibration split)")
@@ -90,12 +89,10 @@ def breakdown(result: SweepResult, out: Path) -> None:
     _save(fig, out / "breakdown.png")
 
 
-def worked_examples(result: SweepResult, out: Path) -> None:
+def worked_examples(result: SweepResult, w: Weighted, out: Path) -> None:
     b = result.bench
     names = b.normal.channel_names
     joints = joint_channels(names)
-    name, weighting = BEST
-    w = weigh(result.errors[name], weighting)
     skill = b.faults.skills[0]
     for joint, time_s, overshoot in EXAMPLES:
         pick = np.flatnonzero((b.fault_joint == joint) & (b.fault_time == time_s) & (b.overshoot == overshoot)
@@ -128,5 +125,9 @@ def worked_examples(result: SweepResult, out: Path) -> None:
 
 
 def write_figures(result: SweepResult, out: Path) -> None:
-    for draw in (detection_vs_fpr, energy_distribution, confusion, breakdown, worked_examples):
-        draw(result, out)
+    best = weigh(result.errors[BEST[0]], BEST[1])  # whitening fits a matrix per step: once
+    detection_vs_fpr(result, out)
+    energy_distribution(result, best, out)
+    confusion(result, out)
+    breakdown(result, out)
+    worked_examples(result, best, out)

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from models.calibration import error_precision, error_spread, quantile_threshold
+from models.calibration import estimate, quantile_threshold
 from models.fault import joint_channels
-from models.scoring import energy
+from models.scoring import energy, step_rows
 
 FPRS = (0.01, 0.02, 0.03, 0.04, 0.05)
 MAIN_FPR = 0.01
@@ -65,13 +65,12 @@ def weigh(errors: Errors, weighting: str, demo_spread: dict[str, np.ndarray] | N
     sets = ("calibration", "normal_test", "faults")
     if weighting == "raw":
         std = {k: 1.0 for k in sets}
-    elif weighting in ("precision", "whitened"):
-        spread = error_spread(errors.precision)
-        std = {k: spread[None, : getattr(errors, k).shape[1]] for k in sets}
-        if weighting == "whitened":
-            precision = error_precision(errors.precision, spread)
-            e = {k: energy(getattr(errors, k), spread, precision) for k in sets}
-            return Weighted(e["calibration"], e["normal_test"], e["faults"], errors.faults / std["faults"])
+    elif weighting in ("precision", "whitened"):  # as the model's own calibration does it
+        cal = estimate("sweep", 1, errors.precision, "precision split",
+                       "full" if weighting == "whitened" else "diagonal")
+        e = {k: energy(getattr(errors, k), cal.error_std, cal.error_precision) for k in sets}
+        spread = step_rows(cal.error_std, errors.faults.shape[1])
+        return Weighted(e["calibration"], e["normal_test"], e["faults"], errors.faults / spread)
     elif weighting == "demo_std":
         assert demo_spread is not None
         std = {k: np.maximum(demo_spread[k], 0.05) for k in sets}

@@ -44,11 +44,11 @@ def with_interval(value: float, interval: list[float]) -> str:
 def write_markdown(result: SweepResult, path: Path) -> None:
     key = f"{MAIN_FPR:.2f}"
     lines = [
-        f"| method | errors | detection @1/3/5 % FPR | measured FPR @1 % [95 % interval] "
-        f"| episodes falsely flagged @1 % [95 % interval] "
-        f"| detection, episode-calibrated @1 % | episodes falsely flagged, episode-calibrated @1 % "
-        f"| detected at the fault step @1 % | isolation at fault step "
-        f"| isolation at detection | AUROC | median delay (steps) |",
+        "| method | errors | detection @1/3/5 % FPR | measured FPR @1 % [95 % interval] "
+        "| episodes falsely flagged @1 % [95 % interval] "
+        "| detection, episode-calibrated @1 % | episodes falsely flagged, episode-calibrated @1 % "
+        "| detected at the fault step @1 % | isolation at fault step "
+        "| isolation at detection | AUROC | median delay (steps) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, by_weighting in result.summary.items():
