@@ -1,0 +1,105 @@
+"""What every baseline detector shares: its interface, input checks and cross-validation folds.
+
+A detector sees normalised sequences x (N, T, D) and the true skill of each (baselines may
+use it: generous to them). Some channels are context (e.g. a perceived cube pose or a place
+target); an episode's context is what they read at its first step, c = x[:, 0, context].
+``expected(x, skills)`` is causal: expected[:, t] depends on x[:, :t] and c only (a
+predictor's expected[:, 0] is x[:, 0] itself), so every method can run online.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from sklearn.model_selection import StratifiedKFold
+
+
+@runtime_checkable
+class Detector(Protocol):
+    name: str  # machine name, e.g. "conditional_template"
+    label: str  # human name for tables
+
+    def fit(
+        self, demos: np.ndarray, skills: np.ndarray, context_channels: Sequence[int], seed: int = 0
+    ) -> "Detector": ...
+
+    def expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray: ...
+
+
+def check_sequences(x: np.ndarray, name: str) -> np.ndarray:
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.ndim != 3 or 0 in arr.shape:
+        raise ValueError(f"{name} must be a non-empty (N, T, D) array, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return arr
+
+
+def check_skills(skills: np.ndarray, n: int) -> np.ndarray:
+    arr = np.asarray(skills)
+    if arr.shape != (n,):
+        raise ValueError(f"skills must have shape ({n},), one per sequence, got {arr.shape}")
+    return arr.astype(str)
+
+
+class DetectorBase:
+    """Checks shared by every detector; subclasses implement ``_fit`` and ``_expected``."""
+
+    name = ""
+    label = ""
+
+    def __init__(self) -> None:
+        self.skill_names: list[str] = []
+        self.context_channels: np.ndarray = np.zeros(0, dtype=int)
+        self.steps = 0
+        self.dims = 0
+
+    def fit(
+        self, demos: np.ndarray, skills: np.ndarray, context_channels: Sequence[int], seed: int = 0
+    ) -> "DetectorBase":
+        x = check_sequences(demos, "demos")
+        labels = check_skills(skills, len(x))
+        ctx = np.asarray(list(context_channels), dtype=int)
+        if ctx.size and (ctx.min() < 0 or ctx.max() >= x.shape[2] or len(set(ctx.tolist())) != ctx.size):
+            raise ValueError(f"context_channels must be distinct indices in [0, {x.shape[2]}), got {ctx.tolist()}")
+        names, counts = np.unique(labels, return_counts=True)
+        if counts.min() < 2:
+            raise ValueError(f"every skill needs >= 2 demonstrations; {names[counts.argmin()]!r} has {counts.min()}")
+        self.skill_names, self.context_channels = names.tolist(), ctx
+        self.steps, self.dims = x.shape[1], x.shape[2]
+        self._fit(x, labels, seed)
+        return self
+
+    def expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        """(N, T, D) expectation of every step; T may be shorter than the demonstrations'."""
+        if not self.skill_names:
+            raise RuntimeError(f"{type(self).__name__} is not fitted: call fit() first")
+        arr = check_sequences(x, "x")
+        labels = check_skills(skills, len(arr))
+        if arr.shape[2] != self.dims:
+            raise ValueError(f"x has {arr.shape[2]} channels, the detector was fitted on {self.dims}")
+        if arr.shape[1] > self.steps:
+            raise ValueError(f"x has {arr.shape[1]} steps, the demonstrations only {self.steps}")
+        unknown = sorted(set(labels.tolist()) - set(self.skill_names))
+        if unknown:
+            raise ValueError(f"unknown skills {unknown}; fitted on {self.skill_names}")
+        return self._expected(arr, labels)
+
+    def context(self, x: np.ndarray) -> np.ndarray:
+        """(N, C) context of each episode: its context channels at the first step."""
+        return x[:, 0, self.context_channels]
+
+    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
+        raise NotImplementedError
+
+    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+
+def episode_folds(skills: np.ndarray, seed: int, n_folds: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Train/test indices of whole episodes, every skill in every fold."""
+    smallest = np.unique(skills, return_counts=True)[1].min()
+    folds = StratifiedKFold(min(n_folds, smallest), shuffle=True, random_state=seed)
+    return list(folds.split(np.zeros(len(skills)), skills))

@@ -1,0 +1,40 @@
+"""Baseline fault detectors, every one scored exactly as the Neural ASM: by what it expects.
+
+Each detector is fitted on normalised demonstrations with their true skills and the indices
+of the context channels, and returns ``expected(x, skills)`` (N, T, D), causal in time (see
+``models.detector_base``). Errors x - expected, energies and thresholds are computed by the
+caller, the same way for every method.
+"""
+
+from __future__ import annotations
+
+from models.detector_base import Detector
+from models.one_step import LinearOneStep, TemplateResidualOneStep
+from models.sequence_detectors import LSTMVAE, GRUOneStep, RecurrentConfig
+from models.templates import ConditionalTemplate, NearestDemos, PerSkillZScore
+
+__all__ = [
+    "Detector",
+    "PerSkillZScore",
+    "ConditionalTemplate",
+    "TemplateResidualOneStep",
+    "NearestDemos",
+    "LinearOneStep",
+    "GRUOneStep",
+    "LSTMVAE",
+    "RecurrentConfig",
+    "all_detectors",
+]
+
+
+def all_detectors() -> list[Detector]:
+    """One unfitted instance of every baseline, default hyper-parameters."""
+    return [
+        PerSkillZScore(),
+        ConditionalTemplate(),
+        TemplateResidualOneStep(),
+        NearestDemos(),
+        LinearOneStep(),
+        GRUOneStep(),
+        LSTMVAE(),
+    ]

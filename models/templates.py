@@ -1,0 +1,142 @@
+"""Template detectors: each skill's expected trajectory, fixed from the episode's first step.
+
+- ``PerSkillZScore``: the per-skill per-step mean of the demonstrations (classic ASM).
+- ``ConditionalTemplate``: per skill, every step's observation ridge-regressed on the
+  context c (linear or quadratic features, chosen by leave-one-out error; a ridge strength
+  per step and channel, chosen likewise on the demonstrations only).
+- ``NearestDemos``: per skill, the mean of the k demonstrations whose standardised context is
+  nearest (k by leave-one-out error).
+
+Without context channels the last two reduce to the per-skill mean.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sklearn.linear_model import RidgeCV
+from sklearn.pipeline import Pipeline, make_pipeline
+from sklearn.preprocessing import PolynomialFeatures, StandardScaler
+
+from models.detector_base import DetectorBase, episode_folds
+
+RIDGE_ALPHAS = np.logspace(-3, 4, 15)
+NEIGHBOUR_COUNTS = (1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30, 40)
+
+
+class PerSkillZScore(DetectorBase):
+    name = "per_skill_zscore"
+    label = "per-skill z-score (classic ASM)"
+
+    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
+        self.means = {s: x[skills == s].mean(axis=0) for s in self.skill_names}
+
+    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        return np.stack([self.means[s][: x.shape[1]] for s in skills])
+
+
+class _SkillRegression:
+    """One skill's template: all T*D step values as a ridge regression on context features."""
+
+    def __init__(self, x: np.ndarray, c: np.ndarray) -> None:
+        self.shape = x.shape[1:]
+        self.mean = x.mean(axis=0)
+        self.model: Pipeline | None = None
+        self.degree = 0
+        if c.shape[1] == 0:
+            return
+        y = x.reshape(len(x), -1)
+        best = np.inf
+        for degree in (1, 2):
+            model = make_pipeline(
+                StandardScaler(),
+                PolynomialFeatures(degree, include_bias=False),
+                StandardScaler(),
+                RidgeCV(alphas=RIDGE_ALPHAS, alpha_per_target=True, store_cv_results=True),
+            ).fit(c, y)
+            # Leave-one-out squared errors (n, targets, alphas); each target at its best alpha.
+            loo = model[-1].cv_results_.mean(axis=0).min(axis=-1).sum()
+            if loo < best:
+                best, self.model, self.degree = loo, model, degree
+
+    def predict(self, c: np.ndarray) -> np.ndarray:
+        if self.model is None:
+            return np.broadcast_to(self.mean, (len(c),) + self.shape).copy()
+        return self.model.predict(c).reshape((len(c),) + self.shape)
+
+
+class ConditionalTemplate(DetectorBase):
+    name = "conditional_template"
+    label = "conditional template (ridge on context)"
+
+    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
+        c = self.context(x)
+        self.templates = {s: _SkillRegression(x[skills == s], c[skills == s]) for s in self.skill_names}
+
+    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        out = np.empty_like(x)
+        c = self.context(x)
+        for s in np.unique(skills):
+            rows = skills == s
+            out[rows] = self.templates[s].predict(c[rows])[:, : x.shape[1]]
+        return out
+
+    def cross_fitted_residuals(self, x: np.ndarray, skills: np.ndarray, seed: int) -> np.ndarray:
+        """x minus the template of a fit that did not see the episode (K folds by episode).
+
+        In-sample residuals of a regression are smaller than a new episode's; a model of
+        the residual trained on them would expect too little.
+        """
+        c = self.context(x)
+        residuals = np.empty_like(x)
+        for train, test in episode_folds(skills, seed):
+            for s in np.unique(skills[test]):
+                fit_rows = train[skills[train] == s]
+                rows = test[skills[test] == s]
+                residuals[rows] = x[rows] - _SkillRegression(x[fit_rows], c[fit_rows]).predict(c[rows])
+        return residuals
+
+
+class NearestDemos(DetectorBase):
+    name = "nearest_demos"
+    label = "k-nearest-demonstration template"
+
+    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
+        c = self.context(x)
+        self.demos: dict[str, np.ndarray] = {}
+        self.contexts: dict[str, np.ndarray] = {}
+        self.scalers: dict[str, StandardScaler] = {}
+        self.k: dict[str, int] = {}
+        for s in self.skill_names:
+            xs, cs = x[skills == s], c[skills == s]
+            self.scalers[s] = StandardScaler().fit(cs) if cs.shape[1] else None
+            self.demos[s] = xs
+            self.contexts[s] = self.scalers[s].transform(cs) if cs.shape[1] else cs
+            self.k[s] = self._choose_k(xs, self.contexts[s])
+
+    @staticmethod
+    def _choose_k(xs: np.ndarray, cs: np.ndarray) -> int:
+        """Leave-one-out: each demonstration predicted by its k nearest others."""
+        n = len(xs)
+        if cs.shape[1] == 0:
+            return n
+        dist = ((cs[:, None] - cs[None]) ** 2).sum(-1)
+        np.fill_diagonal(dist, np.inf)
+        order = np.argsort(dist, axis=1, kind="stable")[:, : n - 1]
+        candidates = [k for k in NEIGHBOUR_COUNTS if k <= n - 1] + [n - 1]
+        errors = [((xs - xs[order[:, :k]].mean(axis=1)) ** 2).mean() for k in candidates]
+        return candidates[int(np.argmin(errors))]
+
+    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        out = np.empty_like(x)
+        c = self.context(x)
+        for s in np.unique(skills):
+            rows = skills == s
+            demos, k = self.demos[s], self.k[s]
+            if self.scalers[s] is None:
+                out[rows] = demos.mean(axis=0)[: x.shape[1]]
+                continue
+            query = self.scalers[s].transform(c[rows])
+            dist = ((query[:, None] - self.contexts[s][None]) ** 2).sum(-1)
+            nearest = np.argsort(dist, axis=1, kind="stable")[:, :k]
+            out[rows] = demos[nearest].mean(axis=1)[:, : x.shape[1]]
+        return out

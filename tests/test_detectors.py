@@ -1,0 +1,156 @@
+"""Baseline detectors on small synthetic tasks whose truth is known."""
+
+import numpy as np
+import pytest
+
+from models.detectors import (
+    LSTMVAE,
+    ConditionalTemplate,
+    Detector,
+    GRUOneStep,
+    LinearOneStep,
+    NearestDemos,
+    PerSkillZScore,
+    RecurrentConfig,
+    TemplateResidualOneStep,
+    all_detectors,
+)
+
+T, D, C = 10, 8, 2
+CONTEXT = list(range(C))
+SMALL_RNN = RecurrentConfig(hidden_size=32, latent_size=4, max_epochs=150, patience=15, kl_anneal_epochs=20)
+
+
+def varied_task(n_per_skill: int, seed: int, speed_spread: float = 0.0, noise: float = 0.05):
+    """Two skills whose trajectories depend on a 2-D context (linearly and quadratically),
+    optionally at a random speed per episode that the context does not give."""
+    rng = np.random.default_rng(seed)
+    shape = np.random.default_rng(123).standard_normal((2, 3, D - C))  # fixed task structure
+    t = np.linspace(0.0, 1.0, T)[:, None]
+    xs, skills = [], []
+    for k, skill in enumerate(("reach", "push")):
+        c = rng.uniform(-1.0, 1.0, (n_per_skill, C))
+        speed = 1.0 + speed_spread * rng.uniform(-1.0, 1.0, n_per_skill)
+        phase = speed[:, None, None] * t  # (n, T, 1)
+        motion = (
+            np.sin(2.5 * phase + shape[k, 0])
+            + c[:, None, :1] * phase * shape[k, 1]
+            + (c[:, None, 1:2] ** 2) * shape[k, 2]
+        )
+        x = np.empty((n_per_skill, T, D))
+        x[:, :, :C] = c[:, None]  # context channels read the context
+        x[:, :, C:] = motion
+        xs.append(x + noise * rng.standard_normal(x.shape))
+        skills += [skill] * n_per_skill
+    return np.concatenate(xs), np.array(skills)
+
+
+def fitted(detector, demos, skills):
+    return detector.fit(demos, skills, CONTEXT, seed=0)
+
+
+def small_detectors():
+    """Every detector class, the recurrent ones at a size that trains in seconds."""
+    return [d for d in all_detectors() if not hasattr(d, "config")] + [GRUOneStep(SMALL_RNN), LSTMVAE(SMALL_RNN)]
+
+
+@pytest.fixture(scope="module")
+def task():
+    return varied_task(30, seed=0, speed_spread=0.1), varied_task(40, seed=1, speed_spread=0.1)
+
+
+@pytest.fixture(scope="module")
+def detectors(task):
+    (demos, skills), _ = task
+    return [fitted(d, demos, skills) for d in small_detectors()]
+
+
+def mse(x, expected):
+    return float(((x - expected)[:, 1:] ** 2).mean())
+
+
+def test_all_detectors_are_distinct_and_follow_the_protocol():
+    found = all_detectors()
+    assert len({d.name for d in found}) == len(found) == 7
+    assert all(isinstance(d, Detector) and d.label for d in found)
+
+
+def test_shapes_and_causality(detectors, task):
+    _, (x, skills) = task
+    rng = np.random.default_rng(5)
+    for det in detectors:
+        expected = det.expected(x, skills)
+        assert expected.shape == x.shape and np.all(np.isfinite(expected)), det.name
+        for t in (0, 4, T - 2):
+            changed = x.copy()
+            changed[:, t + 1 :] += rng.standard_normal(changed[:, t + 1 :].shape)
+            np.testing.assert_allclose(
+                det.expected(changed, skills)[:, : t + 1], expected[:, : t + 1], atol=1e-9, err_msg=det.name
+            )
+        # A running episode: its first steps only, the same expectation.
+        np.testing.assert_allclose(det.expected(x[:, :5], skills), expected[:, :5], atol=1e-9, err_msg=det.name)
+
+
+def test_conditional_template_far_below_the_per_skill_mean():
+    demos, skills = varied_task(40, seed=0)
+    x, test_skills = varied_task(60, seed=1)
+    mean = mse(x, fitted(PerSkillZScore(), demos, skills).expected(x, test_skills))
+    template = fitted(ConditionalTemplate(), demos, skills)
+    assert mse(x, template.expected(x, test_skills)) < 0.1 * mean
+    assert {t.degree for t in template.templates.values()} == {2}  # the task is quadratic in c
+    assert mse(x, fitted(NearestDemos(), demos, skills).expected(x, test_skills)) < 0.5 * mean
+
+
+def test_without_context_the_templates_are_the_per_skill_mean(task):
+    (demos, skills), (x, test_skills) = task
+    mean = PerSkillZScore().fit(demos, skills, []).expected(x, test_skills)
+    for det in (ConditionalTemplate(), NearestDemos()):
+        np.testing.assert_allclose(det.fit(demos, skills, []).expected(x, test_skills), mean, atol=1e-9)
+
+
+def test_one_step_predictors_track_a_random_speed():
+    demos, skills = varied_task(40, seed=0, speed_spread=0.4)
+    x, test_skills = varied_task(60, seed=1, speed_spread=0.4)
+    template = mse(x, fitted(ConditionalTemplate(), demos, skills).expected(x, test_skills))
+    for det in (TemplateResidualOneStep(), LinearOneStep(), GRUOneStep(SMALL_RNN)):
+        assert mse(x, fitted(det, demos, skills).expected(x, test_skills)) < 0.5 * template, det.name
+
+
+def test_every_detector_errs_more_on_a_perturbed_episode(detectors, task):
+    _, (x, skills) = task
+    faulty = x.copy()
+    faulty[:, 5:, C : C + 3] += 1.5  # three channels jump mid-episode, in normalised units
+    for det in detectors:
+        normal = ((x - det.expected(x, skills))[:, 5:] ** 2).sum(axis=(1, 2))
+        perturbed = ((faulty - det.expected(faulty, skills))[:, 5:] ** 2).sum(axis=(1, 2))
+        assert np.mean(perturbed > normal) > 0.95 and np.median(perturbed) > 3 * np.median(normal), det.name
+
+
+def test_recurrent_detectors_are_deterministic_given_the_seed(task):
+    (demos, skills), (x, test_skills) = task
+    config = RecurrentConfig(hidden_size=16, latent_size=2, max_epochs=30, kl_anneal_epochs=10)
+    for cls in (GRUOneStep, LSTMVAE):
+        a, b = (cls(config).fit(demos, skills, CONTEXT, seed=3).expected(x, test_skills) for _ in range(2))
+        np.testing.assert_array_equal(a, b)
+
+
+def test_bad_input_is_named(task):
+    (demos, skills), (x, test_skills) = task
+    det = PerSkillZScore()
+    with pytest.raises(RuntimeError, match="not fitted"):
+        det.expected(x, test_skills)
+    with pytest.raises(ValueError, match="context_channels"):
+        det.fit(demos, skills, [D])
+    with pytest.raises(ValueError, match="NaN"):
+        det.fit(np.where(demos > 2, np.nan, demos), skills, CONTEXT)
+    with pytest.raises(ValueError, match="skills must have shape"):
+        det.fit(demos, skills[:-1], CONTEXT)
+    with pytest.raises(ValueError, match=">= 2 demonstrations"):
+        det.fit(demos[:31], skills[:31], CONTEXT)
+    det.fit(demos, skills, CONTEXT)
+    with pytest.raises(ValueError, match="unknown skills"):
+        det.expected(x, np.full(len(x), "stack"))
+    with pytest.raises(ValueError, match="channels"):
+        det.expected(x[:, :, :-1], test_skills)
+    with pytest.raises(ValueError, match="steps"):
+        det.expected(np.concatenate([x, x], axis=1), test_skills)
