@@ -22,10 +22,17 @@ class Which(str, Enum):
     all = "all"
 
 
+class Task(str, Enum):
+    paper = "paper"
+    varied = "varied"
+
+
 @app.command()
 def demos(
+    task: Task = typer.Option(Task.paper, help="paper: the paper's two fixed skills; varied: four skills whose "
+                              "context varies (all its sets: demos, normal, ood, faults, twins)"),
     sets: Which = typer.Option(Which.demos, "--sets", help="demos, normal (held-out), faults (980 + no-fault twins), or all."),
-    out: Path = typer.Option(Path("runs/data"), "--out", help="Output directory."),
+    out: Path | None = typer.Option(None, "--out", help="Output directory [default: runs/data, runs/data_varied]."),
     workers: int = typer.Option(2, "--workers", min=1, help="Worker processes (CPUs of a local Ray instance)."),
     backend: Backend = typer.Option("processes", "--backend", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)."),
     n_demos: int = typer.Option(10, "--n-demos", min=1, help="Demonstrations per skill."),
@@ -33,6 +40,17 @@ def demos(
 ) -> None:
     """Simulate episode sets and write <out>/<set>.mcap and <set>.npz."""
     from sim.dataset import generate, load_episodes
+
+    if task == Task.varied:
+        from sim import varied_sets
+
+        out = out or Path("runs/data_varied")
+        for kind in varied_sets.VARIED_KINDS:
+            path, failures = varied_sets.generate(kind, out, workers, backend)
+            typer.echo(f"varied {kind}: {len(load_episodes(path))} episodes -> {path} "
+                       f"({len(failures)} refused by the simulation: velocity limits or IK)")
+        return
+    out = out or Path("runs/data")
 
     kinds = {"demos": ["demos"], "normal": ["normal"], "faults": ["faults", "twins"],
              "all": ["demos", "normal", "faults", "twins"]}[sets.value]

@@ -83,11 +83,32 @@ class Seeds:
 
 
 @dataclass(frozen=True)
+class VariedTask:
+    """Ranges of the varied task (sim/varied.py): what changes between its episodes.
+
+    Offsets are uniform +- around each skill's nominal layout. Benign out-of-range episodes
+    draw every parameter from +- `ood_factor` times its range, at least one of them beyond it.
+    """
+
+    n_steps: int = 20  # observations per episode (10 s): room for a 20 % slower execution
+    cube_xy_m: float = 0.10
+    cube_yaw_deg: float = 45.0
+    target_xy_m: float = 0.08
+    speed: float = 0.20  # execution speed 1 +- this
+    post_offset_m: float = 0.04  # the obstacle's offset across the straight route
+    ood_factor: float = 1.3
+    perceived_xy_m: float = 0.003  # Gaussian noise of the perceived cube and obstacle positions
+    perceived_yaw_deg: float = 2.0
+    n_demos: int = 40  # demonstrations per skill
+
+
+@dataclass(frozen=True)
 class SimConfig:
     timing: Timing = field(default_factory=Timing)
     noise: Noise = field(default_factory=Noise)
     servo: Servo = field(default_factory=Servo)
     seeds: Seeds = field(default_factory=Seeds)
+    varied: VariedTask = field(default_factory=VariedTask)
     success_tolerance_m: float = 0.01
 
 

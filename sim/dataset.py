@@ -15,10 +15,10 @@ File format, one `<set>.mcap` per set (JSON-schema channels, zstd chunks):
   disturbance (or null), success, cube_error_m, channel_names, warnings, plan` (15 x 7 rad) and
   `hi_rate` (40 Hz `t, qpos, command, ee, cube, box` as float32 lists);
 - topic `/observation` (schema `nasm.Observation`), one message per 2 Hz step, log time =
-  the episode's start + k x 0.5 s: `episode, step, time_s, values` (25 floats, CHANNEL_NAMES
-  order).
+  the episode's start + k x 0.5 s: `episode, step, time_s, values` (one float per channel, in
+  the episode's `channel_names` order).
 
-`<set>.npz` holds the same data as arrays (observations (N, 15, 25), ...) plus the MCAP's size
+`<set>.npz` holds the same data as arrays (observations (N, T, D), ...) plus the MCAP's size
 and mtime; `load_episodes` uses it only while it matches the MCAP, else decodes the MCAP.
 """
 
@@ -40,6 +40,7 @@ from sim.episode import Episode
 from sim.faults import FaultSpec, fault_grid
 from sim.parallel import Backend, parallel_map
 from sim.skills import SKILLS
+from sim.varied_faults import VariedFault
 
 KINDS = ("demos", "normal", "faults", "twins")
 HI_RATE = ("t_hi", "qpos_hi", "command_hi", "ee_hi", "cube_hi", "box_hi")
@@ -49,12 +50,13 @@ EPISODE_SCHEMA = {
                    "fault": {"type": ["object", "null"]}, "disturbance": {"type": ["object", "null"]},
                    "success": {"type": "boolean"}, "cube_error_m": {"type": "number"},
                    "channel_names": {"type": "array", "items": {"type": "string"}},
-                   "warnings": {"type": "array"}, "plan": {"type": "array"}, "hi_rate": {"type": "object"}},
+                   "warnings": {"type": "array"}, "plan": {"type": "array"}, "hi_rate": {"type": "object"},
+                   "task": {"type": ["object", "null"]}},
 }
 OBSERVATION_SCHEMA = {
     "title": "nasm.Observation", "type": "object",
     "properties": {"episode": {"type": "integer"}, "step": {"type": "integer"}, "time_s": {"type": "number"},
-                   "values": {"type": "array", "items": {"type": "number"}, "minItems": 25, "maxItems": 25}},
+                   "values": {"type": "array", "items": {"type": "number"}, "minItems": 1}},
 }
 
 
@@ -116,7 +118,7 @@ def _meta(index: int, ep: Episode) -> dict:
             "fault": None if ep.fault is None else ep.fault.to_dict(),
             "disturbance": None if ep.disturbance is None else ep.disturbance.to_dict(),
             "success": bool(ep.success), "cube_error_m": ep.cube_error_m, "channel_names": list(ep.channel_names),
-            "warnings": ep.warnings}
+            "warnings": ep.warnings, "task": ep.task}
 
 
 def _episode_message(index: int, ep: Episode) -> dict:
@@ -151,12 +153,14 @@ def write_mcap(episodes: list[Episode], path: Path) -> None:
 
 def _episode_from(meta: dict, observations: np.ndarray) -> Episode:
     fault = meta["fault"]
+    if fault is not None:
+        fault = VariedFault.from_dict(fault) if "kind" in fault else FaultSpec(**fault)
     disturbance = meta["disturbance"]
     if disturbance is not None:
         disturbance = FallingObject(**{k: v for k, v in disturbance.items() if k != "kind"})
     hi = {name: np.asarray(meta["hi_rate"][name], dtype=np.float64) for name in HI_RATE}
     return Episode(observations=observations, skill=meta["skill"], seed=int(meta["seed"]),
-                   fault=None if fault is None else FaultSpec(**fault), disturbance=disturbance,
+                   fault=fault, disturbance=disturbance, task=meta.get("task"),
                    success=bool(meta["success"]), cube_error_m=float(meta["cube_error_m"]),
                    plan=np.asarray(meta["plan"], dtype=np.float64), channel_names=tuple(meta["channel_names"]),
                    warnings=list(meta["warnings"]), **hi)

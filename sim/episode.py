@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -10,15 +11,18 @@ from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS
 from sim.disturbances import FallingObject
 from sim.faults import FaultSpec
 
+if TYPE_CHECKING:
+    from sim.varied_faults import VariedFault
+
 
 @dataclass
 class Episode:
     """One run of a skill. `observations[k]` is taken at t = 0.5 k s (k = 0..14)."""
 
-    observations: np.ndarray  # (15, 25) float64, channels in CHANNEL_NAMES order
+    observations: np.ndarray  # (T, D) float64, channels in `channel_names` order (paper task: (15, 25))
     skill: str
     seed: int
-    fault: FaultSpec | None
+    fault: "FaultSpec | VariedFault | None"
     disturbance: FallingObject | None
     success: bool  # cube centre within 1 cm of its target at t = 7.5 s
     cube_error_m: float
@@ -31,6 +35,7 @@ class Episode:
     box_hi: np.ndarray  # (301, 3) falling box centre
     channel_names: tuple[str, ...] = CHANNEL_NAMES
     warnings: list[str] = field(default_factory=list)
+    task: dict | None = None  # the varied task's context of this episode (sim.varied.Context.to_dict)
 
     @property
     def joints(self) -> np.ndarray:

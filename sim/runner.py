@@ -125,9 +125,14 @@ def _observe(w: World, gripper: float, tare: np.ndarray, noise: np.ndarray) -> n
     return np.concatenate([w.qpos, data.site_xpos[w.tcp_site], fingers, [gripper], wrench])
 
 
-def _execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube_xy: np.ndarray,
+def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube_xy: np.ndarray,
              cube_yaw: float, noise: np.ndarray, effects: list[Effect], hook: CorrectionHook | None,
-             fault: FaultSpec | None, disturbance: FallingObject | None) -> Episode:
+             fault: FaultSpec | None, disturbance: FallingObject | None, cube_goal: np.ndarray | None = None) -> Episode:
+    """Execute a joint plan (T, 7) and gripper toggles (T,) given at the observation rate.
+
+    The low-level loop every task shares: T observation blocks of 20 control ticks each;
+    `cube_goal` (where the cube should end up) defaults to the paper's skill's target.
+    """
     timing, w = SIM.timing, world()
     physics, scene = w.physics, w.scene
     model, data = physics.model.ptr, physics.data.ptr
@@ -136,7 +141,7 @@ def _execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cub
         effect.initialize(physics, scene)
     warnings = physics.data.warning.number  # a live view of MuJoCo's warning counters
     kv_over_kp = np.asarray(SIM.servo.kv) / np.asarray(SIM.servo.kp)
-    block, n = timing.ticks_per_step, timing.n_steps
+    block, n = timing.ticks_per_step, len(joints)
     hi = {key: np.empty((n * block + 1, width)) for key, width in
           (("q", 7), ("cmd", 7), ("ee", 3), ("cube", 3), ("box", 3))}
 
@@ -173,7 +178,8 @@ def _execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cub
     observations = np.array(obs)
     if not np.isfinite(observations).all():
         raise SimulationError("non-finite observation")
-    cube_error = float(np.linalg.norm(hi["cube"][-1] - target_position(skill)))
+    cube_goal = target_position(skill) if cube_goal is None else cube_goal
+    cube_error = float(np.linalg.norm(hi["cube"][-1] - cube_goal))
     return Episode(observations=observations, skill=skill, seed=int(seed), fault=fault, disturbance=disturbance,
                    success=cube_error < SIM.success_tolerance_m, cube_error_m=cube_error, plan=joints.copy(),
                    t_hi=np.arange(n * block + 1) / timing.control_hz, qpos_hi=hi["q"],
@@ -192,7 +198,7 @@ def run_episode(skill: str, seed: int, fault: FaultSpec | None = None,
     variation = sample_variation(skill, rng)
     plan = make_plan(skill, variation)
     noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
-    return _execute(skill, seed, plan.joints, plan.gripper, variation.cube_xy, variation.cube_yaw, noise,
+    return execute(skill, seed, plan.joints, plan.gripper, variation.cube_xy, variation.cube_yaw, noise,
                     _effects(fault, disturbance), None, fault, disturbance)
 
 
@@ -218,5 +224,5 @@ def execute_plan(joint_plan: np.ndarray, gripper_plan: np.ndarray, seed: int,
     rng = _rng(skill, seed)
     variation = sample_variation(skill, rng)
     noise = rng.standard_normal((n, N_NOISY))
-    return _execute(skill, seed, joints, gripper, variation.cube_xy, variation.cube_yaw, noise,
+    return execute(skill, seed, joints, gripper, variation.cube_xy, variation.cube_yaw, noise,
                     _effects(fault, disturbance), correction_hook, fault, disturbance)

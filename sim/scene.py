@@ -1,4 +1,5 @@
-"""The workcell, composed with `dm_control.mjcf`: floor, table, cube and a parked falling box.
+"""The workcell, composed with `dm_control.mjcf`: floor, table, cube, a parked falling box and two
+parked posts (static mocap bodies the varied task stands on the table as obstacles).
 
 The Panda's base sits at the world origin on the table's surface (z = 0), as a bench-mounted
 arm does, so the table top is where a lowered hand first hits. The falling box hovers
@@ -18,6 +19,8 @@ CUBE_HALF = 0.025  # a 5 cm cube, comfortably inside the Franka Hand's 8 cm stro
 CUBE_MASS = 0.1
 BOX_HALF = (0.06, 0.06, 0.04)
 BOX_PARK = (-1.5, 1.5, 1.0)  # hovering (gravity-compensated) behind the robot: no contacts to solve
+POST_HALF = (0.025, 0.025, 0.125)  # a 25 cm post that a carried cube must go around, not over
+POST_PARK = ((-1.5, -1.5, 0.0), (-1.7, -1.5, 0.0))  # where the two posts wait, off the table
 TABLE_TOP, FLOOR_Z = 0.0, -0.75
 WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 1 | ARM_CONTYPE
 
@@ -33,6 +36,7 @@ class SceneHandles:
     box: mjcf.Element  # free joint of the falling box
     box_body: mjcf.Element
     table: mjcf.Element
+    posts: tuple[mjcf.Element, mjcf.Element]  # mocap bodies: the varied task's obstacle, a stray one
 
 
 def build_scene(timestep_s: float) -> SceneHandles:
@@ -59,6 +63,13 @@ def build_scene(timestep_s: float) -> SceneHandles:
     box_body.add("geom", name="falling_box_geom", type="box", size=BOX_HALF, mass=5.0,
                  rgba=(0.3, 0.3, 0.8, 1), **contact)
 
+    posts = []
+    for name, park in zip(("post", "stray_post"), POST_PARK):
+        post = root.worldbody.add("body", name=name, mocap=True, pos=park)
+        post.add("geom", name=f"{name}_geom", type="box", size=POST_HALF, pos=(0, 0, POST_HALF[2]),
+                 rgba=(0.2, 0.6, 0.3, 1), **contact)
+        posts.append(post)
+
     panda = build_panda()
     root.attach(panda.root)
-    return SceneHandles(root, panda, cube, cube_body, box, box_body, table)
+    return SceneHandles(root, panda, cube, cube_body, box, box_body, table, tuple(posts))

@@ -106,14 +106,14 @@ def waypoints(skill: str, cube_xy: np.ndarray) -> np.ndarray:
 
 
 @lru_cache(maxsize=None)
-def _ik() -> PandaIK:
+def shared_ik() -> PandaIK:
     return PandaIK()
 
 
 def _solve_sequence(tcp: np.ndarray, q_start: np.ndarray, postures: np.ndarray) -> np.ndarray:
     q = [q_start]
     for k in range(1, len(tcp)):
-        q.append(_ik().solve(tcp[k], DOWN, q[-1], postures[k]))
+        q.append(shared_ik().solve(tcp[k], DOWN, q[-1], postures[k]))
     return np.array(q)
 
 
@@ -123,7 +123,7 @@ def nominal_plan(skill: str) -> np.ndarray:
     spec = skill_spec(skill)
     home = np.asarray(spec.home)
     tcp = waypoints(skill, np.asarray(spec.cube_xy))
-    q0 = _ik().solve(np.asarray(spec.start_tcp), DOWN, home, home)
+    q0 = shared_ik().solve(np.asarray(spec.start_tcp), DOWN, home, home)
     plan = _solve_sequence(tcp, q0, np.tile(home, (len(tcp), 1)))
     plan.flags.writeable = False
     return plan

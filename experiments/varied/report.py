@@ -1,0 +1,103 @@
+"""Write the varied-task benchmark's results: JSON (with the headline), a markdown table, figures."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from experiments.varied.run import VariedResult  # noqa: E402
+
+
+def _facts(result: VariedResult) -> dict:
+    b = result.bench
+    return {"context": b.context, "channels": list(b.channel_names),
+            "episodes": {"demos": len(b.demos.x), "precision": len(b.precision.x), "calibration": len(b.calibration.x),
+                         "test": len(b.test.x), "ood": len(b.ood.x), "faults": len(b.faults.x),
+                         "visible_faults": int(b.visible.sum())},
+            "dropped_by_simulation": b.dropped}
+
+
+def write_json(result: VariedResult, path: Path, seconds: float) -> None:
+    data = {"headline": result.headline, "benchmark": _facts(result), "configs": result.configs,
+            "seconds": round(seconds, 1), "methods": result.summaries}
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=2))
+    os.replace(tmp, path)
+
+
+def _pct(v: float | None) -> str:
+    return "-" if v is None else f"{100 * v:.1f}"
+
+
+def write_markdown(result: VariedResult, path: Path) -> None:
+    h = result.headline
+    lines = [f"# Varied task, {result.bench.context} context", "",
+             f"Conformal episode threshold at {100 * h['episode_fa_target']:.0f} % (calibration split); detection of "
+             f"the {int(result.bench.visible.sum())} visible faults of {len(result.bench.faults.x)}; false alarms on "
+             f"{len(result.bench.test.x)} held-out normal and {len(result.bench.ood.x)} benign out-of-range episodes.", "",
+             "| method | detection (visible) | detection (all) | normal flagged | out-of-range flagged | AUROC | median delay | detection, time-varying threshold | normal flagged, time-varying |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    order = sorted(result.summaries, key=lambda n: -result.summaries[n]["episode"]["detection"])
+    for name in order:
+        s = result.summaries[name]
+        e, t = s["episode"], s["time_varying"]
+        label = f"**{s['label']}**" if name == h["featured"] else s["label"]
+        delay = "-" if e["median_delay_steps"] is None else f"{e['median_delay_steps']:.0f}"
+        lines.append(f"| {label} | {_pct(e['detection'])} | {_pct(e['detection_all_faults'])} | "
+                     f"{_pct(e['normal_episode_false_alarm'])} | {_pct(e['benign_ood_false_alarm'])} | {e['auroc']:.3f} | "
+                     f"{delay} | {_pct(t['detection'])} | {_pct(t['normal_episode_false_alarm'])} |")
+    p = h["paired"]
+    lines += ["", f"Paired against the best other method ({p['baseline']}): Neural ASM alone {p['nasm_only']}, "
+              f"baseline alone {p['baseline_only']}, exact McNemar p = {p['p_value']:.3g}.", "",
+              "Detection of visible faults per family (episode threshold):", "",
+              "| method | " + " | ".join(result.summaries[order[0]]["episode"]["per_family"]) + " |",
+              "|---|" + "---|" * len(result.summaries[order[0]]["episode"]["per_family"])]
+    for name in order:
+        fam = result.summaries[name]["episode"]["per_family"]
+        lines.append(f"| {result.summaries[name]['label']} | " + " | ".join(_pct(f["detection_visible"]) for f in fam.values()) + " |")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_figures(result: VariedResult, out: Path) -> list[Path]:
+    """Detection per fault family, and normal vs out-of-range false alarms, per method."""
+    names = sorted(result.summaries, key=lambda n: -result.summaries[n]["episode"]["detection"])
+    labels = [result.summaries[n]["label"] for n in names]
+    families = list(result.summaries[names[0]]["episode"]["per_family"])
+    fig, ax = plt.subplots(figsize=(12, 5))
+    width = 0.8 / len(names)
+    for i, name in enumerate(names):
+        fam = result.summaries[name]["episode"]["per_family"]
+        values = [np.nan if fam[f]["detection_visible"] is None else 100 * fam[f]["detection_visible"] for f in families]
+        featured = name == result.headline["featured"]
+        ax.bar(np.arange(len(families)) + i * width, values, width, label=labels[i],
+               edgecolor="black" if featured else "none", linewidth=1.5 if featured else 0)
+    ax.set_xticks(np.arange(len(families)) + 0.4 - width / 2, families, rotation=20)
+    ax.set_ylabel("visible faults detected (%)")
+    ax.set_title(f"Varied task ({result.bench.context} context): detection per fault family, conformal 1 % threshold")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.tight_layout()
+    paths = [out / "varied_detection_by_family.png"]
+    fig.savefig(paths[0], dpi=120)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for name, label in zip(names, labels):
+        s = result.summaries[name]["episode"]
+        ax.scatter(100 * s["benign_ood_false_alarm"], 100 * s["detection"], s=60,
+                   marker="*" if result.summaries[name]["is_neural_asm"] else "o", label=label)
+    ax.set_xlabel("benign out-of-range episodes flagged (%)")
+    ax.set_ylabel("visible faults detected (%)")
+    ax.set_title("Detection against false alarms on benign variation")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.tight_layout()
+    paths.append(out / "varied_detection_vs_ood.png")
+    fig.savefig(paths[1], dpi=120)
+    plt.close(fig)
+    return paths

@@ -1,0 +1,50 @@
+"""`nasm faults --task varied`: the varied-task benchmark in one call.
+
+Trains the default and the paper-configured Neural ASM on the varied demonstrations, fits every
+baseline of `models.detectors` on the same demonstrations, scores all on the same episodes
+(experiments/varied/score.py) and writes the results. The featured Neural ASM, the one a
+varied-task service ships, is the default network in online recall, decided before any test
+episode was scored: on a varied task the hidden state must follow the episode (its speed, its
+route), which offline recall from a one-step cue cannot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from experiments.varied.methods import Method, baseline_methods, neural_asm_methods, train_neural_asm
+from experiments.varied.score import ALPHA, headline, score_all
+from models import checkpoint
+from models.config import FAITHFUL, FAST, TPCConfig
+from sim.parallel import Backend
+
+FEATURED = "nasm_online"
+
+
+@dataclass
+class VariedResult:
+    bench: VariedBenchmark
+    summaries: dict
+    outcomes: dict
+    headline: dict
+    configs: dict[str, dict]
+
+
+def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = FAST, paper_epochs: int = 200,
+               workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA) -> VariedResult:
+    bench = load_varied_benchmark(data_dir, context, workers, backend)
+    configs = {"nasm": ("Neural ASM, default", fast),
+               "nasm_paper": ("Neural ASM, paper configuration", FAITHFUL.with_(epochs=paper_epochs))}
+    methods: list[Method] = []
+    norm = None
+    for name, (label, config) in configs.items():
+        model = train_neural_asm(bench, config)
+        checkpoint.save(model, out_dir / "models" / f"varied_{context}_{name}.safetensors")
+        norm = norm or model.normaliser
+        methods += neural_asm_methods(model, name, label)
+    methods += baseline_methods(bench, norm)
+    summaries, results = score_all(bench, methods, norm, alpha)
+    return VariedResult(bench, summaries, results, headline(summaries, results, bench, FEATURED, alpha),
+                        {name: config.to_dict() for name, (_, config) in configs.items()})

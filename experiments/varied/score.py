@@ -1,0 +1,126 @@
+"""Score every method on the same episodes with the same thresholds.
+
+Per method: normalised errors on every set; per-step spreads and precision matrices from the
+precision split (the service's own `estimate`), whitened energies; an episode's score is its
+peak energy (for a fault, from its onset on). Thresholds are split-conformal on the
+calibration split at `alpha` (at most that share of normal episodes flagged, in expectation),
+one for the whole episode and one time-varying (per-step scales from the precision split).
+A fault is detected when its energy crosses the threshold at or after its onset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from sklearn.metrics import roc_auc_score
+from tqdm.auto import tqdm
+
+from experiments.varied.data import VariedBenchmark
+from experiments.varied.methods import Method
+from models.calibration import estimate
+from models.conformal import TimeVaryingThreshold, binomial_interval, episode_threshold, mcnemar_exact
+from models.normaliser import Normaliser
+from models.scoring import energy
+
+ALPHA = 0.01
+SETS = ("precision", "calibration", "test", "ood", "faults")
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Per-episode results of one method under one threshold rule."""
+
+    detected: np.ndarray  # (F,) bool
+    first: np.ndarray  # (F,) first crossing step at or after onset, -1 if none
+    fault_score: np.ndarray  # (F,) peak energy from the onset on (relative to the threshold)
+    normal_flagged: np.ndarray  # (N_test,) bool
+    ood_flagged: np.ndarray  # (N_ood,) bool
+    normal_score: np.ndarray  # (N_test,)
+
+
+def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> dict[str, np.ndarray]:
+    """Whitened energies (N, T) of every set under the method's own precisions."""
+    errors = {}
+    for key in SETS:
+        arrays = getattr(bench, key)
+        x = norm.normalise(arrays.x)
+        errors[key] = x - method.expected(x, arrays.skills)
+    cal = estimate("varied", 1, errors["precision"], "precision split", "full")
+    return {key: energy(e, cal.error_std, cal.error_precision) for key, e in errors.items()}
+
+
+def _after_onset(e: np.ndarray, onset: np.ndarray) -> np.ndarray:
+    steps = np.arange(e.shape[1])
+    return np.where(steps[None] >= onset[:, None], e, -np.inf)
+
+
+def outcomes(e: dict[str, np.ndarray], onset: np.ndarray, alpha: float = ALPHA) -> dict[str, Outcome]:
+    """Episode-level conformal threshold and time-varying conformal thresholds."""
+    out = {}
+    thr = episode_threshold(e["calibration"].max(axis=1), alpha)
+    faults = _after_onset(e["faults"], onset)
+    over = faults > thr
+    out["episode"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
+                             faults.max(axis=1) / thr, e["test"].max(axis=1) > thr, e["ood"].max(axis=1) > thr,
+                             e["test"].max(axis=1) / thr)
+    tv = TimeVaryingThreshold().fit(e["precision"], e["calibration"], alpha)
+    rel = {k: e[k] / tv.thresholds[: e[k].shape[1]] for k in ("test", "ood", "faults")}
+    over = _after_onset(rel["faults"], onset) > 1.0
+    out["time_varying"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
+                                  _after_onset(rel["faults"], onset).max(axis=1), rel["test"].max(axis=1) > 1.0,
+                                  rel["ood"].max(axis=1) > 1.0, rel["test"].max(axis=1))
+    return out
+
+
+def summary(o: Outcome, bench: VariedBenchmark) -> dict:
+    visible = bench.visible
+    n_test, k_test = len(o.normal_flagged), int(o.normal_flagged.sum())
+    scores = np.concatenate([o.fault_score[visible], o.normal_score])
+    labels = np.concatenate([np.ones(visible.sum()), np.zeros(n_test)])
+    delay = (o.first - bench.onset)[o.detected & visible]
+    families = {}
+    for kind in np.unique(bench.kinds):
+        m = bench.kinds == kind
+        families[str(kind)] = {"n": int(m.sum()), "visible": int((m & visible).sum()),
+                               "detection": float(o.detected[m].mean()),
+                               "detection_visible": float(o.detected[m & visible].mean()) if (m & visible).any() else None}
+    return {
+        "detection": float(o.detected[visible].mean()),
+        "detection_all_faults": float(o.detected.mean()),
+        "normal_episode_false_alarm": k_test / n_test,
+        "normal_episode_false_alarm_interval95": list(binomial_interval(k_test, n_test)),
+        "benign_ood_false_alarm": float(o.ood_flagged.mean()),
+        "auroc": float(roc_auc_score(labels, scores)),
+        "median_delay_steps": float(np.median(delay)) if len(delay) else None,
+        "per_family": families,
+    }
+
+
+def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, alpha: float = ALPHA
+              ) -> tuple[dict, dict]:
+    """Summaries {method: {rule: summary}} and outcomes {(method, rule): Outcome}."""
+    summaries, results = {}, {}
+    for method in tqdm(methods, desc="scoring"):
+        rules = outcomes(energies(method, bench, norm), bench.onset, alpha)
+        summaries[method.name] = {"label": method.label, "is_neural_asm": method.is_neural_asm,
+                                  **{rule: summary(o, bench) for rule, o in rules.items()}}
+        results.update({(method.name, rule): o for rule, o in rules.items()})
+    return summaries, results
+
+
+def headline(summaries: dict, results: dict, bench: VariedBenchmark, featured: str, alpha: float = ALPHA) -> dict:
+    """The contract's headline: the featured Neural ASM, every method, and an exact McNemar
+    test against the best other method (by detection of visible faults)."""
+    rule = "episode"
+    methods = {name: {"is_neural_asm": s["is_neural_asm"], **{k: s[rule][k] for k in (
+        "detection", "normal_episode_false_alarm", "benign_ood_false_alarm", "auroc", "median_delay_steps")}}
+        for name, s in summaries.items()}
+    rivals = [n for n, s in summaries.items() if not s["is_neural_asm"]]
+    best = max(rivals, key=lambda n: summaries[n][rule]["detection"])
+    visible = bench.visible
+    ours, theirs = results[(featured, rule)].detected[visible], results[(best, rule)].detected[visible]
+    nasm_only, baseline_only = int((ours & ~theirs).sum()), int((~ours & theirs).sum())
+    return {"featured": featured, "episode_fa_target": alpha, "methods": methods,
+            "paired": {"baseline": best, "nasm_only": nasm_only, "baseline_only": baseline_only,
+                       "p_value": mcnemar_exact(nasm_only, baseline_only)}}

@@ -1,0 +1,194 @@
+"""Episodes and episode sets of the varied task (`nasm demos --task varied`).
+
+Sets, on seed ranges of their own (a varied episode's random stream is tagged with the task,
+so it never repeats a paper-task episode):
+
+- `demos`: `SIM.varied.n_demos` demonstrations per skill;
+- `normal`: held-out in-range episodes (error spreads, conformal calibration, measured false
+  alarms);
+- `ood`: benign out-of-range episodes: parameters up to 30 % beyond the demonstrated ranges,
+  at least one beyond; normal operation that a monitor should not flag;
+- `faults`: the fault families of `sim.varied_faults`, over varied contexts;
+- `twins`: each fault's seed without the fault.
+
+Files are the paper task's format (`sim.dataset`): `<set>.mcap` plus its `.npz` cache, with
+the episode's context and the recorded channels (25 + 7 context channels) in every episode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from sim.config import SIM
+from sim.episode import Episode
+from sim.parallel import Backend, parallel_map
+from sim.varied import VARIED_SKILLS, Context, keyframes, make_plan, perceived, post_xy, sample_context, with_context_channels
+from sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestorePads, VariedFault, apply_sensor_fault,
+                               execution_effects)
+
+VARIED_KINDS = ("demos", "normal", "ood", "faults", "twins")
+SEED_BASE = {"demos": 0, "normal": 10_000, "ood": 20_000, "faults": 100_000}
+TASK_TAG = 7  # separates the varied task's random streams from the paper task's
+HOLDING = ("pick_place_right", "pick_place_around", "lift_hold")
+# (kind, episodes, skills it applies to)
+FAULT_PLAN: tuple[tuple[str, int, tuple[str, ...]], ...] = (
+    ("lock", 240, VARIED_SKILLS), ("small_overshoot", 80, VARIED_SKILLS), ("drift", 80, VARIED_SKILLS),
+    ("slip", 48, HOLDING), ("gripper_open", 48, HOLDING), ("force_bias", 48, VARIED_SKILLS),
+    ("stray_post", 48, ("pick_place_right", "pick_place_around", "push")), ("wrong_side", 40, ("pick_place_around",)),
+    ("wrong_cube", 48, VARIED_SKILLS),
+)
+
+
+@dataclass(frozen=True)
+class VariedJob:
+    skill: str
+    seed: int
+    fault: VariedFault | None = None
+    out_of_range: bool = False
+
+
+def _rng(job: VariedJob, stream: int) -> np.random.Generator:
+    return np.random.default_rng((int(job.seed), VARIED_SKILLS.index(job.skill), TASK_TAG, stream))
+
+
+def context_of(job: VariedJob) -> Context:
+    return sample_context(job.skill, _rng(job, 0), job.out_of_range)
+
+
+class _CubeYaw:
+    """Records the cube's yaw at every observation instant (the perception system's input)."""
+
+    def __init__(self, n: int) -> None:
+        self.yaw = np.zeros(n)
+
+    def initialize(self, physics, scene) -> None:
+        self.yaw[:] = 0.0
+
+    def before_tick(self, physics, scene, tick) -> None:
+        if tick.index % SIM.timing.ticks_per_step == 0:
+            w, _, _, z = physics.bind(scene.cube).qpos[3:7]
+            self.yaw[tick.step] = 2.0 * np.arctan2(z, w)
+
+
+def run_varied(job: VariedJob) -> Episode:
+    """Simulate one varied-task episode; its observations have 25 + 7 context channels."""
+    from sim.runner import execute
+
+    ctx = context_of(job)
+    fault = job.fault
+    wrong_cube = None
+    if fault is not None and fault.kind == "wrong_cube":
+        wrong_cube = ctx.cube_xy + fault.value * np.asarray(fault.direction)
+    plan = make_plan(job.skill, ctx, _rng(job, 1), wrong_side=fault is not None and fault.kind == "wrong_side",
+                     cube_xy=wrong_cube)
+    n = len(plan.joints)
+    tracker = _CubeYaw(n)
+    effects = [RestorePads(), tracker, PlacePost(0, post_xy(job.skill, ctx)), *execution_effects(fault)]
+    if fault is not None and fault.kind == "stray_post":
+        effects.append(PlacePost(1, stray_post_xy(job.skill, ctx)))
+    noise = _rng(job, 2).standard_normal((n, 14))
+    target = np.array([*(ctx.cube_xy if job.skill == "lift_hold" else ctx.goal_xy), 0.025])
+    episode = execute(job.skill, job.seed, plan.joints, plan.gripper, ctx.cube_xy, ctx.cube_yaw, noise, effects,
+                      None, fault, None, target)
+    episode = replace(episode, observations=apply_sensor_fault(episode.observations, fault), task=ctx.to_dict())
+    return with_context_channels(episode, perceived(episode, job.skill, ctx, tracker.yaw, _rng(job, 3)))
+
+
+def stray_post_xy(skill: str, ctx: Context) -> np.ndarray:
+    """Where an unreported post blocks the skill's path."""
+    pos, _, _ = keyframes(skill, ctx)
+    if skill == "push":  # halfway along the push, where the cube runs into it
+        return ctx.cube_xy + np.array([0.5 * (ctx.goal_xy[0] - ctx.cube_xy[0]) + 0.05, 0.0])
+    return pos[7, :2]
+
+
+def _step_in(ctx: Context, lo: float, hi: float, rng: np.random.Generator) -> int:
+    """A random observation step whose phase lies in [lo, hi]."""
+    k = np.arange(1, SIM.varied.n_steps)
+    choices = k[(k * ctx.speed >= lo) & (k * ctx.speed <= hi)]
+    return int(rng.choice(choices))
+
+
+def draw_fault(kind: str, job: VariedJob, rng: np.random.Generator) -> VariedFault:
+    """A fault of `kind` for the job's context (times chosen where the fault can act)."""
+    ctx = context_of(job)
+    carry = lambda: _step_in(ctx, 6.0, 9.0, rng)  # noqa: E731 - holding the cube, on the way
+    joint = int(rng.integers(1, 8))
+    if kind == "lock":
+        return VariedFault(kind, _step_in(ctx, 1.0, 12.0, rng), joint, float(rng.choice(np.arange(-15, 16, 5))))
+    if kind == "small_overshoot":
+        return VariedFault(kind, _step_in(ctx, 1.0, 12.0, rng), joint, float(rng.choice([-2.5, 2.5])))
+    if kind == "drift":
+        return VariedFault(kind, _step_in(ctx, 1.0, 8.0, rng), joint, float(rng.uniform(0.25, 1.0) * rng.choice([-1, 1])))
+    if kind == "slip":
+        return VariedFault(kind, carry(), 0, float(rng.uniform(2e-4, 1e-3)))
+    if kind == "gripper_open":
+        return VariedFault(kind, carry())
+    if kind == "force_bias":
+        channel = int(rng.choice(FORCE_CHANNELS))
+        return VariedFault(kind, _step_in(ctx, 1.0, 12.0, rng), channel, float(rng.uniform(0.5, 2.0) * rng.choice([-1, 1])))
+    if kind in ("stray_post", "wrong_side"):
+        return VariedFault(kind, _step_in(ctx, 6.0, 6.0 + ctx.speed, rng))
+    if kind == "wrong_cube":
+        angle = rng.uniform(0, 2 * np.pi)
+        return VariedFault(kind, 1, 0, float(rng.uniform(0.06, 0.10)), (float(np.cos(angle)), float(np.sin(angle))))
+    raise ValueError(f"unknown fault kind {kind!r}")
+
+
+def fault_jobs() -> list[VariedJob]:
+    jobs = []
+    for kind, count, skills in FAULT_PLAN:
+        for i in range(count):
+            job = VariedJob(skills[i % len(skills)], SEED_BASE["faults"] + len(jobs))
+            jobs.append(replace(job, fault=draw_fault(kind, job, np.random.default_rng((job.seed, TASK_TAG, 9)))))
+    return jobs
+
+
+def jobs_for(kind: str, n_demos: int | None = None, n_normal: int = 850, n_ood: int = 200) -> list[VariedJob]:
+    """The jobs of varied set `kind` (one of VARIED_KINDS)."""
+    n_demos = SIM.varied.n_demos if n_demos is None else n_demos
+    k = len(VARIED_SKILLS)
+    if kind == "demos":
+        return [VariedJob(skill, SEED_BASE["demos"] + i) for skill in VARIED_SKILLS for i in range(n_demos)]
+    if kind == "normal":
+        return [VariedJob(VARIED_SKILLS[i % k], SEED_BASE["normal"] + i) for i in range(n_normal)]
+    if kind == "ood":
+        return [VariedJob(VARIED_SKILLS[i % k], SEED_BASE["ood"] + i, out_of_range=True) for i in range(n_ood)]
+    if kind == "faults":
+        return fault_jobs()
+    if kind == "twins":
+        return [replace(job, fault=None) for job in fault_jobs()]
+    raise ValueError(f"kind must be one of {VARIED_KINDS}, got {kind!r}")
+
+
+def run_job(job: VariedJob) -> Episode | str:
+    """Run one job; a failed episode comes back as its error message (never as data)."""
+    from sim.ik import IKError
+    from sim.runner import SimulationError
+    from sim.skills import PlanError
+
+    try:
+        return run_varied(job)
+    except (SimulationError, PlanError, IKError) as err:
+        return f"{job.skill} seed {job.seed}: {err}"
+
+
+def generate(kind: str, out_dir: Path, workers: int = 2, backend: Backend = "processes", **sizes: int
+             ) -> tuple[Path, list[str]]:
+    """Simulate varied set `kind`; write `<out_dir>/<kind>.mcap` and its cache."""
+    from sim.dataset import write_cache, write_mcap
+
+    jobs = jobs_for(kind, **sizes)
+    results = parallel_map(run_job, [(job,) for job in jobs], workers, backend, desc=f"varied {kind}", unit="ep",
+                           chunksize=8)
+    episodes = [r for r in results if isinstance(r, Episode)]
+    path = Path(out_dir) / f"{kind}.mcap"
+    write_mcap(episodes, path)
+    write_cache(episodes, path)
+    return path, [r for r in results if isinstance(r, str)]
+
+
+__all__ = ["VARIED_KINDS", "VariedJob", "run_varied", "jobs_for", "generate", "PLAN_FAULTS"]
