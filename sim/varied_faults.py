@@ -5,7 +5,7 @@
 | `lock` | the paper's joint lock: overshoot, then the brake holds the joint | overshoot (deg) |
 | `small_overshoot` | the joint overshoots its goal for one block, then follows the plan again | deg |
 | `drift` | the joint's command drifts away from the plan | deg/s |
-| `slip` | the finger pads lose their grip (friction drops) and the cube slides | friction left |
+| `slip` | pads and cube turn slippery (friction drops) and the cube slides out | friction left |
 | `gripper_open` | the gripper opens | - |
 | `force_bias` | one finger force axis reads off by a bias (sensor fault) | N |
 | `stray_post` | a post nobody reported stands in the path | - |
@@ -96,26 +96,28 @@ class Drift:
             tick.target[self.fault.joint - 1] += np.deg2rad(self.fault.value) * elapsed
 
 
-def _pads(physics: mjcf.Physics, scene: SceneHandles) -> list:
-    return [physics.bind(scene.panda.root.find("geom", f"{side}_pad")) for side in ("left", "right")]
+def _grip_geoms(scene: SceneHandles) -> list:
+    """The geoms whose friction holds the cube: both finger pads and the cube."""
+    pads = [scene.panda.root.find("geom", f"{side}_pad") for side in ("left", "right")]
+    return [*pads, *scene.cube_body.find_all("geom")]
 
 
-class RestorePads:
-    """Puts the finger pads' friction back to the model's (a slip in an earlier episode of this
+class RestoreFriction:
+    """Puts the grip's friction back to the model's (a slip in an earlier episode of this
     process changed the compiled model, which a reset does not undo)."""
 
     def initialize(self, physics: mjcf.Physics, scene: SceneHandles) -> None:
-        for side, pad in zip(("left", "right"), _pads(physics, scene)):
-            pad.friction = scene.panda.root.find("geom", f"{side}_pad").friction
+        for geom in _grip_geoms(scene):
+            physics.bind(geom).friction = geom.friction
 
     def before_tick(self, physics: mjcf.Physics, scene: SceneHandles, tick: Tick) -> None:
         pass
 
 
 class Slip:
-    """From step `step` on, the finger pads lose their grip (friction `value`): the cube slides.
+    """From step `step` on, pads and cube turn slippery (friction `value`): the cube slides out.
 
-    MuJoCo takes the larger friction of two touching geoms, so the pads, not the cube, change."""
+    MuJoCo takes the larger friction of two touching geoms, so both sides change."""
 
     def __init__(self, fault: VariedFault) -> None:
         self.fault = fault
@@ -125,8 +127,8 @@ class Slip:
 
     def before_tick(self, physics: mjcf.Physics, scene: SceneHandles, tick: Tick) -> None:
         if tick.step >= self.fault.step:
-            for pad in _pads(physics, scene):
-                pad.friction = [self.fault.value, 0.0, 0.0]
+            for geom in _grip_geoms(scene):
+                physics.bind(geom).friction = [self.fault.value, 0.0, 0.0]
 
 
 class GripperOpen:

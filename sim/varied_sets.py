@@ -26,7 +26,7 @@ from sim.config import SIM
 from sim.episode import Episode
 from sim.parallel import Backend, parallel_map
 from sim.varied import VARIED_SKILLS, Context, keyframes, make_plan, perceived, post_xy, sample_context, with_context_channels
-from sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestorePads, VariedFault, apply_sensor_fault,
+from sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestoreFriction, VariedFault, apply_sensor_fault,
                                execution_effects)
 
 VARIED_KINDS = ("demos", "normal", "ood", "faults", "twins")
@@ -86,7 +86,7 @@ def run_varied(job: VariedJob) -> Episode:
                      cube_xy=wrong_cube)
     n = len(plan.joints)
     tracker = _CubeYaw(n)
-    effects = [RestorePads(), tracker, PlacePost(0, post_xy(job.skill, ctx)), *execution_effects(fault)]
+    effects = [RestoreFriction(), tracker, PlacePost(0, post_xy(job.skill, ctx)), *execution_effects(fault)]
     if fault is not None and fault.kind == "stray_post":
         effects.append(PlacePost(1, stray_post_xy(job.skill, ctx)))
     noise = _rng(job, 2).standard_normal((n, 14))

@@ -76,7 +76,8 @@ def ensure_varied_sets(data_dir: Path, workers: int, backend: Backend = "process
     return sets, dropped
 
 
-def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict | None = None) -> VariedBenchmark:
+def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict | None = None,
+                   split: tuple[int, int] = SPLIT) -> VariedBenchmark:
     names = tuple(sets["demos"][0].channel_names)
     columns = context_columns(names, context)
     kept = channel_names(context)
@@ -85,9 +86,9 @@ def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict |
     fault_arr = Arrays.of(faults, columns)
     twin_arr = Arrays.of([twins[e.seed] for e in faults], columns)
     normal = Arrays.of(sets["normal"], columns)
-    n_precision, n_calibration = SPLIT
-    if len(normal.x) < n_precision + n_calibration + 50:
-        raise ValueError(f"need at least {n_precision + n_calibration + 50} normal episodes, got {len(normal.x)}")
+    n_precision, n_calibration = split
+    if len(normal.x) < n_precision + n_calibration + 10:
+        raise ValueError(f"need at least {n_precision + n_calibration + 10} normal episodes, got {len(normal.x)}")
     index = np.arange(len(normal.x))
     precision = normal.take(index[:n_precision])
     onset, visible = departures(fault_arr, twin_arr, precision)

@@ -1,0 +1,74 @@
+"""The varied-task benchmark's scoring on a small simulated set: the headline contract, the
+conformal thresholds and the paired test are computed from the same per-episode outcomes."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from experiments.varied.data import make_benchmark
+from experiments.varied.methods import Method, neural_asm_methods, train_neural_asm
+from experiments.varied.score import headline, score_all
+from models.config import FAST
+from models.detectors import ConditionalTemplate, PerSkillZScore
+from sim.episode import Episode
+from sim.parallel import parallel_map
+from sim.varied import VARIED_SKILLS
+from sim.varied_sets import VariedJob, fault_jobs, run_job
+
+
+@pytest.fixture(scope="module")
+def bench():
+    faults = [job for kind in ("stray_post", "wrong_cube", "force_bias")
+              for job in [j for j in fault_jobs() if j.fault.kind == kind][:3]]
+    jobs = {"demos": [VariedJob(s, i) for s in VARIED_SKILLS for i in range(4)],
+            "normal": [VariedJob(VARIED_SKILLS[i % 4], 10_000 + i) for i in range(36)],
+            "ood": [VariedJob(VARIED_SKILLS[i % 4], 20_000 + i, out_of_range=True) for i in range(8)],
+            "faults": faults, "twins": [replace(j, fault=None) for j in faults]}
+    flat = [(kind, job) for kind, js in jobs.items() for job in js]
+    results = parallel_map(run_job, [(job,) for _, job in flat], 2, progress=False)
+    sets = {kind: [] for kind in jobs}
+    for (kind, _), result in zip(flat, results):
+        if isinstance(result, Episode):
+            sets[kind].append(result)
+    return make_benchmark(sets, "hidden", split=(12, 12))
+
+
+def test_hidden_benchmark_has_no_goal_channel(bench):
+    assert "goal_x" not in bench.channel_names and bench.faults.x.shape[2] == len(bench.channel_names)
+    assert [bench.channel_names[i] for i in bench.context_channels] == \
+        ["cube_seen_x", "cube_seen_y", "cube_seen_yaw", "post_x", "post_y"]
+    assert (bench.onset >= 1).all() and bench.visible.any()
+
+
+def test_headline_follows_the_contract(bench, tmp_path):
+    model = train_neural_asm(bench, FAST.with_(epochs=3, hidden_size=32), progress=False)
+    norm = model.normaliser
+    methods = neural_asm_methods(model, "nasm", "Neural ASM")
+    for detector in (PerSkillZScore(), ConditionalTemplate()):
+        detector.fit(norm.normalise(bench.demos.x), bench.demos.skills, bench.context_channels.tolist())
+        methods.append(Method(detector.name, detector.label, False, detector.expected))
+    summaries, outcomes = score_all(bench, methods, norm)
+    h = headline(summaries, outcomes, bench, "nasm_online")
+    json.dumps(h)  # plain JSON
+    assert h["featured"] == "nasm_online" and h["episode_fa_target"] == 0.01
+    assert set(h["methods"]) == {m.name for m in methods}
+    for values in h["methods"].values():
+        assert set(values) == {"is_neural_asm", "detection", "normal_episode_false_alarm", "benign_ood_false_alarm",
+                               "auroc", "median_delay_steps"}
+    best = h["paired"]["baseline"]
+    assert not h["methods"][best]["is_neural_asm"]
+    assert h["methods"][best]["detection"] == max(v["detection"] for v in h["methods"].values() if not v["is_neural_asm"])
+    ours, theirs = (outcomes[(name, "episode")].detected[bench.visible] for name in ("nasm_online", best))
+    assert h["paired"]["nasm_only"] == int((ours & ~theirs).sum())
+    assert h["paired"]["baseline_only"] == int((theirs & ~ours).sum())
+    assert 0.0 <= h["paired"]["p_value"] <= 1.0
+    # detection counts visible faults only; the all-faults rate is the same rule over every fault
+    s = summaries["nasm_online"]["episode"]
+    detected = outcomes[("nasm_online", "episode")].detected
+    assert s["detection"] == pytest.approx(detected[bench.visible].mean())
+    assert s["detection_all_faults"] == pytest.approx(detected.mean())
+    assert np.isclose(sum(f["n"] for f in s["per_family"].values()), len(bench.faults.x))
