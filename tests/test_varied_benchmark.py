@@ -72,3 +72,20 @@ def test_headline_follows_the_contract(bench, tmp_path):
     assert s["detection"] == pytest.approx(detected[bench.visible].mean())
     assert s["detection_all_faults"] == pytest.approx(detected.mean())
     assert np.isclose(sum(f["n"] for f in s["per_family"].values()), len(bench.faults.x))
+
+
+def test_the_service_hosts_a_varied_model(bench, tmp_path):
+    from fastapi.testclient import TestClient
+
+    from models import checkpoint
+    from service.app import create_app
+    from service.settings import Settings
+
+    model = train_neural_asm(bench, FAST.with_(epochs=2, hidden_size=16), progress=False)
+    checkpoint.save(model, tmp_path / "varied_hidden.safetensors")
+    settings = Settings(models_dir=tmp_path, build_default_model=False, record=False)
+    with TestClient(create_app(settings)) as client:
+        listed = client.get("/models").json()
+    info = next(m for m in (listed if isinstance(listed, list) else listed["models"]) if m["name"] == "varied_hidden")
+    assert info["channel_names"] == list(bench.channel_names)
+    assert info["provenance"]["task"] == "varied" and info["provenance"]["context"] == "hidden"
