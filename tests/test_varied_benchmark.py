@@ -89,3 +89,16 @@ def test_the_service_hosts_a_varied_model(bench, tmp_path):
     info = next(m for m in (listed if isinstance(listed, list) else listed["models"]) if m["name"] == "varied_hidden")
     assert info["channel_names"] == list(bench.channel_names)
     assert info["provenance"]["task"] == "varied" and info["provenance"]["context"] == "hidden"
+
+
+def test_ablation_rows_carry_validation_error_and_test_scores(bench):
+    from experiments.varied.ablation import ablate, ablation_markdown
+
+    tiny = FAST.with_(epochs=2, hidden_size=16)
+    rows = ablate(bench, {"a": ("capped", tiny), "b": ("uncapped", tiny.with_(wf_max_norm=None))}, progress=False)
+    assert [(r["variant"], r["mode"]) for r in rows] == [("a", "offline"), ("a", "online"), ("b", "offline"), ("b", "online")]
+    assert rows[2]["config"]["wf_max_norm"] is None and rows[0]["config"]["wf_max_norm"] == tiny.wf_max_norm
+    for r in rows:
+        assert r["validation_mse"] > 0 and 0.0 <= r["detection"] <= 1.0 and 0.0 <= r["auroc"] <= 1.0
+    table = ablation_markdown(rows, "hidden")
+    assert table.count("\n| ") == 1 + len(rows)  # header and one line per row

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from enum import Enum
 from pathlib import Path
@@ -9,11 +10,11 @@ from pathlib import Path
 import typer
 
 from models.config import FAITHFUL
+from sim.parallel import Backend
 
 # The paper's batch-1 training over 160 varied demonstrations costs ~3 s per epoch here: the
 # varied benchmark caps the paper-configured network's epochs to stay within minutes.
 VARIED_PAPER_EPOCHS = 40
-from sim.parallel import Backend
 
 app = typer.Typer()
 
@@ -37,11 +38,17 @@ def faults(
     data: Path | None = typer.Option(None, help="episode sets, simulated when missing [default: runs/data, runs/data_varied]"),
     paper_epochs: int = typer.Option(FAITHFUL.epochs, help="epochs of the paper-configuration model"),
     fast_epochs: int | None = typer.Option(None, help="override the default model's epochs"),
+    ablation: bool = typer.Option(False, "--ablation", help="varied task: train one Neural ASM per lever "
+                                  "(experiments/varied/ablation.py) and write ablation.json and ablation.md"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
     workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
 ) -> None:
     """Run the 980-fault sweep (or the varied-task benchmark) against baselines; write JSON, markdown and figures."""
+    if task == Task.varied and ablation:
+        _ablation(context.value, out or Path(f"runs/varied_{context.value}"), data or Path("runs/data_varied"),
+                  fast_epochs, workers, backend)
+        return
     if task == Task.varied:
         _varied(context.value, out or Path(f"runs/varied_{context.value}"), data or Path("runs/data_varied"),
                 fast_epochs, paper_epochs, workers, backend)
@@ -77,6 +84,16 @@ def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_
     write_figures(result, out)
     typer.echo((out / "fault_sweep.md").read_text())
     typer.echo(f"wrote {out} in {time.perf_counter() - start:.0f} s")
+
+
+def _ablation(context: str, out: Path, data: Path, epochs: int | None, workers: int, backend: Backend) -> None:
+    from experiments.varied.ablation import ablation_markdown, run_ablation
+
+    rows = run_ablation(data, context, epochs, workers, backend)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "ablation.json").write_text(json.dumps(rows, indent=1))
+    (out / "ablation.md").write_text(ablation_markdown(rows, context))
+    typer.echo((out / "ablation.md").read_text())
 
 
 if __name__ == "__main__":
