@@ -47,6 +47,16 @@ def channel_precision(sequences: np.ndarray, labels: np.ndarray | None, floor: f
     return np.clip((np.median(spread) / np.maximum(spread, 1e-9)) ** 2, floor, 1.0)
 
 
+def context_index(channel_names: Sequence[str], context_channels: Sequence[str], config: TPCConfig) -> tuple[int, ...]:
+    """Indices of the context input channels (none unless ``config.context_input``)."""
+    unknown = [c for c in context_channels if c not in channel_names]
+    if unknown:
+        raise ValueError(f"context channels {unknown} are not among the channels {list(channel_names)}")
+    if not config.context_input:
+        return ()
+    return tuple(list(channel_names).index(c) for c in context_channels)
+
+
 class NeuralASM:
     def __init__(
         self,
@@ -76,8 +86,14 @@ class NeuralASM:
         provenance: dict[str, Any] | None = None,
         validation: np.ndarray | None = None,
         labels: np.ndarray | None = None,
+        context_channels: Sequence[str] = (),
     ) -> "NeuralASM":
         """Fit the normaliser, train the network and estimate precisions on the data.
+
+        ``context_channels`` name the observation channels that describe the episode's
+        context (where the object is, where it must go); with ``config.context_input`` their
+        first-step values drive the hidden state's prior through W_C, so that the recalled
+        plan is the one for this context rather than an average over contexts.
 
         Given held-out ``validation`` sequences (raw) and ``config.keep_best_on_held_out``,
         the weights kept are those of the epoch that recalls them best (see ``train``). ``labels`` (the skill of each
@@ -87,7 +103,7 @@ class NeuralASM:
         """
         data = as_sequences(sequences, len(channel_names))
         normaliser = Normaliser.fit(data)
-        net = TemporalPC(len(channel_names), config)
+        net = TemporalPC(len(channel_names), config, context_index(channel_names, context_channels, config))
         if config.observation_precision == "demo_spread":
             net.set_precision(channel_precision(normaliser.normalise(data), labels))
         held_out = None
@@ -106,6 +122,11 @@ class NeuralASM:
     @property
     def config(self) -> TPCConfig:
         return self.net.config
+
+    @property
+    def context_channels(self) -> tuple[str, ...]:
+        """The channels whose first-step values are the network's context input (W_C)."""
+        return tuple(self.channel_names[i] for i in self.net.context_index)
 
     @property
     def obs_size(self) -> int:
@@ -192,7 +213,7 @@ class SkillStream:
     def batch_key(self) -> tuple[int, str, int, bool]:
         """Streams with equal keys can advance together in one ``step_streams`` call."""
         r = self.recaller
-        return id(self.model), r.mode, r.cue_steps, r.t < r.cue_steps
+        return id(self.model), r.mode, r.cue_steps, r.t == 0, r.t < r.cue_steps
 
     def check(self, observation: np.ndarray) -> np.ndarray:
         """The observation as a float array, or a ValueError naming what is wrong with it."""
@@ -223,6 +244,8 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     steps = [r.t for r in recallers]
     batch = recall_.Recaller(model.net, len(recallers), recallers[0].mode, recallers[0].cue_steps)
     batch.zhat, batch.t = np.concatenate([r.zhat for r in recallers]), steps[0]
+    if steps[0] > 0 and model.net.has_context:
+        batch.context = np.concatenate([r.context for r in recallers])
     x = model.normaliser.normalise(observations)
     expected = batch.step(x)
     errors = x - expected
@@ -236,6 +259,8 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
             scores.append(None)
             continue
         r.zhat, r.t = batch.zhat[i : i + 1].copy(), r.t + 1
+        if batch.context is not None:
+            r.context = batch.context[i : i + 1].copy()
         scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i]))
     return scores
 

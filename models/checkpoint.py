@@ -1,6 +1,6 @@
 """Checkpoints: one safetensors file holding the weights and a JSON metadata header.
 
-Tensors: ``W_H``, ``W_F``, ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
+Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
 calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.step_thresholds`` and, when errors are whitened,
 ``calibration.<key>.error_precision`` (absent: channels weighed independently). The header entry ``neural_asm`` is a JSON
@@ -25,14 +25,14 @@ from safetensors import SafetensorError
 from safetensors.torch import load as st_load
 from safetensors.torch import save as st_save
 
-from models.asm import NeuralASM
+from models.asm import NeuralASM, context_index
 from models.calibration import Calibration
 from models.config import TPCConfig
 from models.normaliser import Normaliser
 from models.tpc import TemporalPC
 
-FORMAT_VERSION = 3  # 2: observation precisions; 3: optional whitening precision matrices
-READABLE_VERSIONS = (2, 3)  # a version-2 file simply has no precision matrices
+FORMAT_VERSION = 4  # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C
+READABLE_VERSIONS = (2, 3, 4)  # older files simply have no precision matrices or context input
 HEADER_KEY = "neural_asm"
 
 
@@ -47,10 +47,6 @@ def _package_version() -> str:
         return "unknown"
 
 
-def _f32(a: np.ndarray) -> torch.Tensor:
-    return torch.from_numpy(np.ascontiguousarray(a, np.float32))
-
-
 def _f64(a: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(a, np.float64))
 
@@ -63,6 +59,8 @@ def to_bytes(model: NeuralASM) -> bytes:
         "normaliser.mean": _f64(model.normaliser.mean),
         "normaliser.std": _f64(model.normaliser.std),
     }
+    if model.net.has_context:
+        tensors["W_C"] = model.net.W_C.contiguous()
     calibrations = []
     for key, cal in model.calibrations.items():
         fprs = sorted(cal.step_thresholds)
@@ -89,6 +87,7 @@ def to_bytes(model: NeuralASM) -> bytes:
         "package_version": _package_version(),
         "config": model.config.to_dict(),
         "channel_names": list(model.channel_names),
+        "context_channels": list(model.context_channels),
         "calibrations": calibrations,
         "provenance": model.provenance,
         "history": model.history,
@@ -139,8 +138,8 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
     try:
         config = TPCConfig.from_dict(meta["config"])
         names = meta["channel_names"]
-        net = TemporalPC(len(names), config)
-        net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"])
+        net = TemporalPC(len(names), config, context_index(names, meta.get("context_channels", []), config))
+        net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"], tensors.get("W_C"))
         normaliser = Normaliser(tensors["normaliser.mean"].numpy(), tensors["normaliser.std"].numpy())
         calibrations = {}
         for c in meta["calibrations"]:

@@ -44,6 +44,10 @@ class TPCConfig:
     # With held-out sequences given to NeuralASM.fit, keep the weights of the epoch that
     # recalls them best instead of the last epoch's (the paper keeps the last).
     keep_best_on_held_out: bool = True
+    # With context channels named at fit (cube pose, goal, ...), feed their first-step values
+    # into the prior, z_prior = W_H f(zhat) + W_C c (the tPC with inputs). False keeps them
+    # as observations only, which the paper's network reconstructs like any other channel.
+    context_input: bool = True
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -99,6 +103,7 @@ FAITHFUL = TPCConfig(
     wf_max_norm=None,
     observation_precision="uniform",
     keep_best_on_held_out=False,
+    context_input=False,
 )
 FAST = TPCConfig()
 PRESETS: dict[str, TPCConfig] = {"fast": FAST, "faithful": FAITHFUL}

@@ -45,6 +45,7 @@ class Recaller:
         check_recall(mode, cue_steps)
         self.net, self.mode, self.cue_steps = net, mode, cue_steps
         self.zhat = net.initial_state(batch, rng or np.random.default_rng(0))
+        self.context: np.ndarray | None = None  # read from the first observation (networks with W_C)
         self.t = 0
 
     @property
@@ -53,7 +54,11 @@ class Recaller:
 
     def step(self, x: np.ndarray | None) -> np.ndarray:
         """Advance one step given observation x (B, D); returns what was expected of it."""
-        prior = self.net.prior(self.zhat)
+        if self.t == 0 and self.net.has_context:
+            if x is None:
+                raise ValueError("step 0 needs an observation: it sets the context input")
+            self.context = self.net.context_of(x)
+        prior = self.net.prior(self.zhat, self.context)
         if self.infers_now:
             if x is None:
                 raise ValueError(f"step {self.t} needs an observation in {self.mode} recall")
@@ -68,7 +73,7 @@ class Recaller:
 
     def forecast(self) -> np.ndarray:
         """Prediction of the next observation, W_F f(W_H f(zhat))."""
-        return self.net.observe(self.net.prior(self.zhat))
+        return self.net.observe(self.net.prior(self.zhat, self.context))
 
 
 def run(

@@ -2,7 +2,11 @@
 
 The energy at step mu is (eq. 1)
 
-    F = ||z - W_H f(zhat_prev)||^2 + ||x - W_F f(z)||^2,   f = tanh, no biases.
+    F = ||z - W_H f(zhat_prev) - W_C c||^2 + ||x - W_F f(z)||^2,   f = tanh, no biases.
+
+W_C c is optional: the tPC with inputs of the temporal predictive coding literature, where c is
+what the episode's first observation says of its context (cube pose, goal, obstacle). Without
+context channels the term is absent and the energy is the paper's.
 
 torch holds the parameters and the optimiser. The relaxation of z (eq. 2) runs on
 numpy views of the same memory: it is a loop of ~8 tiny operations repeated K=100
@@ -32,17 +36,26 @@ def stable_wf_norm(inference_rate: float, margin: float = 0.5) -> float:
 
 
 class TemporalPC:
-    """Weights W_H (H x H) and W_F (D x H) and the inference and learning rules."""
+    """Weights W_H (H x H), W_F (D x H), optionally W_C (H x C), and the inference and learning rules.
 
-    def __init__(self, obs_size: int, config: TPCConfig) -> None:
+    ``context_index`` names the observation channels whose values at the first step are the
+    context input c of every later prior (empty: the paper's network, no W_C).
+    """
+
+    def __init__(self, obs_size: int, config: TPCConfig, context_index: tuple[int, ...] = ()) -> None:
         self.config = config
         self.obs_size = obs_size
+        self.context_index = tuple(int(i) for i in context_index)
+        if any(not 0 <= i < obs_size for i in self.context_index) or len(set(self.context_index)) != len(self.context_index):
+            raise ValueError(f"context_index must be distinct channels in [0, {obs_size}), got {context_index!r}")
         h = config.hidden_size
         gen = torch.Generator().manual_seed(config.seed)
         # nn.Linear's Kaiming-uniform initialisation, U(+-1/sqrt(fan_in)), as the paper says.
         bound = 1.0 / math.sqrt(h)
         self.W_H = (torch.rand(h, h, generator=gen) * 2 - 1) * bound
         self.W_F = (torch.rand(obs_size, h, generator=gen) * 2 - 1) * bound
+        n_context = len(self.context_index)
+        self.W_C = (torch.rand(h, n_context, generator=gen) * 2 - 1) / math.sqrt(max(n_context, 1))
         # Precision of each observation channel in the energy, ||x - W_F f(z)||^2_Pi.
         # All ones is the paper's model; values are kept in (0, 1] so the stability
         # bound on W_F (stable_wf_norm) is unchanged.
@@ -52,7 +65,21 @@ class TemporalPC:
     def _bind_views(self) -> None:
         self.w_h = self.W_H.numpy()
         self.w_f = self.W_F.numpy()
+        self.w_c = self.W_C.numpy()
         self.pi = self.precision.numpy()
+
+    @property
+    def has_context(self) -> bool:
+        return bool(self.context_index)
+
+    @property
+    def parameters(self) -> list[torch.Tensor]:
+        """The weights that learn: W_H, W_F and, with context channels, W_C."""
+        return [self.W_H, self.W_F, self.W_C] if self.has_context else [self.W_H, self.W_F]
+
+    def context_of(self, x: np.ndarray) -> np.ndarray | None:
+        """The context input c of a (normalised) observation batch (B, D), or None without W_C."""
+        return np.ascontiguousarray(x[:, self.context_index]) if self.has_context else None
 
     def set_precision(self, precision: np.ndarray) -> None:
         precision = np.asarray(precision, np.float32)
@@ -61,15 +88,22 @@ class TemporalPC:
         self.precision = torch.from_numpy(precision.copy())
         self._bind_views()
 
-    def load_weights(self, W_H: torch.Tensor, W_F: torch.Tensor, precision: torch.Tensor | None = None) -> None:
+    def load_weights(self, W_H: torch.Tensor, W_F: torch.Tensor, precision: torch.Tensor | None = None,
+                     W_C: torch.Tensor | None = None) -> None:
         h = self.config.hidden_size
         if tuple(W_H.shape) != (h, h) or tuple(W_F.shape) != (self.obs_size, h):
             raise ValueError(
                 f"weight shapes W_H {tuple(W_H.shape)}, W_F {tuple(W_F.shape)} do not match "
                 f"hidden_size={h}, obs_size={self.obs_size}"
             )
+        n_context = len(self.context_index)
+        if (W_C is None) != (n_context == 0) or (W_C is not None and tuple(W_C.shape) != (h, n_context)):
+            got = None if W_C is None else tuple(W_C.shape)
+            raise ValueError(f"W_C {got} does not match {n_context} context channels and hidden_size={h}")
         self.W_H = W_H.detach().to(torch.float32).contiguous().clone()
         self.W_F = W_F.detach().to(torch.float32).contiguous().clone()
+        if W_C is not None:
+            self.W_C = W_C.detach().to(torch.float32).contiguous().clone()
         self._bind_views()
         if precision is not None:
             self.set_precision(precision.numpy())
@@ -87,9 +121,12 @@ class TemporalPC:
         bound = math.sqrt(6.0 / h)
         return rng.uniform(-bound, bound, (batch, h)).astype(np.float32)
 
-    def prior(self, zhat_prev: np.ndarray) -> np.ndarray:
-        """Temporal prediction of the hidden state, W_H f(zhat_prev)."""
-        return np.tanh(zhat_prev) @ self.w_h.T
+    def prior(self, zhat_prev: np.ndarray, context: np.ndarray | None = None) -> np.ndarray:
+        """Temporal prediction of the hidden state, W_H f(zhat_prev) (+ W_C c with a context input)."""
+        prior = np.tanh(zhat_prev) @ self.w_h.T
+        if context is not None:
+            prior += context @ self.w_c.T
+        return prior
 
     def observe(self, z: np.ndarray) -> np.ndarray:
         """Prediction of the observation from a hidden state, W_F f(z)."""
@@ -122,18 +159,22 @@ class TemporalPC:
         return z
 
     def hebbian_gradients(
-        self, zhat_prev: np.ndarray, prior: np.ndarray, z: np.ndarray, x: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, float]:
-        """Negative Hebbian terms of eqs. 3-4, averaged over the batch, and the energy F."""
+        self, zhat_prev: np.ndarray, prior: np.ndarray, z: np.ndarray, x: np.ndarray,
+        context: np.ndarray | None = None,
+    ) -> tuple[list[np.ndarray], float]:
+        """Negative Hebbian terms of eqs. 3-4 (in the order of ``parameters``), averaged over
+        the batch, and the energy F. W_C learns like W_H, from eps_z and its presynaptic c."""
         batch = x.shape[0]
         fz = np.tanh(z)
         eps_z = z - prior
         eps_x = x - fz @ self.w_f.T
-        grad_h = -(eps_z.T @ np.tanh(zhat_prev)) / batch
+        grads = [-(eps_z.T @ np.tanh(zhat_prev)) / batch]
         weighted = eps_x * self.pi
-        grad_f = -(weighted.T @ fz) / batch
+        grads.append(-(weighted.T @ fz) / batch)
+        if self.has_context:
+            grads.append(-(eps_z.T @ context) / batch)
         energy = float((eps_z * eps_z).sum() + (weighted * eps_x).sum()) / batch
-        return grad_h, grad_f, energy
+        return grads, energy
 
     def project(self) -> None:
         """Keep ||W_F||_2 <= wf_max_norm so that inference stays stable (see stable_wf_norm)."""

@@ -21,7 +21,7 @@ EpochCallback = Callable[[int, float], None]
 
 
 def make_optimizer(net: TemporalPC) -> torch.optim.Optimizer:
-    params = [net.W_H, net.W_F]
+    params = net.parameters
     lr = net.config.learning_rate
     if net.config.optimizer == "adam":
         return torch.optim.Adam(params, lr=lr)
@@ -57,13 +57,14 @@ def train_epoch(
     for start in range(0, n, batch):
         x_seq = sequences[order[start : start + batch]]
         zhat = net.initial_state(len(x_seq), rng)
+        context = net.context_of(x_seq[:, 0])
         for t in range(steps):
             x = x_seq[:, t]
-            prior = net.prior(zhat)
+            prior = net.prior(zhat, context)
             z = net.infer(prior, x)
-            grad_h, grad_f, energy = net.hebbian_gradients(zhat, prior, z, x)
-            net.W_H.grad = torch.from_numpy(grad_h)
-            net.W_F.grad = torch.from_numpy(grad_f)
+            grads, energy = net.hebbian_gradients(zhat, prior, z, x, context)
+            for weight, grad in zip(net.parameters, grads):
+                weight.grad = torch.from_numpy(grad)
             optimizer.step()
             net.project()
             total += energy
@@ -122,13 +123,13 @@ def train(
             if validation is not None and ((epoch + 1) % eval_every == 0 or epoch + 1 == net.config.epochs):
                 error = recall_error(net, validation)
                 if error < best[0]:
-                    best = (error, epoch, (net.W_H.clone(), net.W_F.clone()))
+                    best = (error, epoch, [w.clone() for w in net.parameters])
                 bar.set_postfix(energy=f"{energy:.4g}", held_out=f"{error:.4g}", refresh=False)
             else:
                 bar.set_postfix(energy=f"{energy:.4g}", refresh=False)
             if on_epoch is not None:
                 on_epoch(epoch, energy)
     if best[2] is not None:
-        net.W_H.copy_(best[2][0])
-        net.W_F.copy_(best[2][1])
+        for weight, kept in zip(net.parameters, best[2]):
+            weight.copy_(kept)
     return history, best[1]

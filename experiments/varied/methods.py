@@ -37,8 +37,9 @@ def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool =
     provenance = {"source": "simulated Panda, varied task (sim/varied.py)", "task": "varied",
                   "context": bench.context, "demo_seeds": bench.demos.seeds.tolist(),
                   "skills": sorted(set(bench.demos.skills.tolist()))}
+    context = [bench.channel_names[i] for i in bench.context_channels]
     model = NeuralASM.fit(bench.demos.x, bench.channel_names, config, progress=progress, provenance=provenance,
-                          validation=bench.precision.x, labels=bench.demos.skills)
+                          validation=bench.precision.x, labels=bench.demos.skills, context_channels=context)
     for mode in ("offline", "online"):
         model.calibrate(bench.precision.x, bench.calibration.x, mode, 1,
                         source="held-out normal episodes of the varied task (simulated Panda)")
