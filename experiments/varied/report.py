@@ -42,19 +42,21 @@ def write_markdown(result: VariedResult, path: Path) -> None:
              f"Conformal episode threshold at {100 * h['episode_fa_target']:.0f} % (calibration split); detection of "
              f"the {int(result.bench.visible.sum())} visible faults of {len(result.bench.faults.x)}; false alarms on "
              f"{len(result.bench.test.x)} held-out normal and {len(result.bench.ood.x)} benign out-of-range episodes.", "",
-             "| method | detection (visible) | detection (all) | normal flagged | out-of-range flagged | AUROC | median delay | detection, time-varying threshold | normal flagged, time-varying |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| method | held-out error (MSE) | detection (visible) | detection (all) | normal flagged | out-of-range flagged | AUROC | median delay | detection, time-varying threshold | normal flagged, time-varying |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     order = sorted(result.summaries, key=lambda n: -result.summaries[n]["episode"]["detection"])
     for name in order:
         s = result.summaries[name]
         e, t = s["episode"], s["time_varying"]
         label = f"**{s['label']}**" if name == h["featured"] else s["label"]
         delay = "-" if e["median_delay_steps"] is None else f"{e['median_delay_steps']:.0f}"
-        lines.append(f"| {label} | {_pct(e['detection'])} | {_pct(e['detection_all_faults'])} | "
+        lines.append(f"| {label} | {s['held_out_mse']:.3f} | {_pct(e['detection'])} | {_pct(e['detection_all_faults'])} | "
                      f"{_pct(e['normal_episode_false_alarm'])} | {_pct(e['benign_ood_false_alarm'])} | {e['auroc']:.3f} | "
                      f"{delay} | {_pct(t['detection'])} | {_pct(t['normal_episode_false_alarm'])} |")
     p = h["paired"]
-    lines += ["", f"Paired against the best other method ({p['baseline']}): Neural ASM alone {p['nasm_only']}, "
+    lines += ["", "Held-out error: mean squared normalised error of what the method expects of the precision "
+              "split's normal episodes after their first step.", "",
+              f"Paired against the best other method ({p['baseline']}): Neural ASM alone {p['nasm_only']}, "
               f"baseline alone {p['baseline_only']}, exact McNemar p = {p['p_value']:.3g}.", "",
               "Detection of visible faults per family (episode threshold):", "",
               "| method | " + " | ".join(result.summaries[order[0]]["episode"]["per_family"]) + " |",

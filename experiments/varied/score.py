@@ -39,15 +39,18 @@ class Outcome:
     normal_score: np.ndarray  # (N_test,)
 
 
-def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> dict[str, np.ndarray]:
-    """Whitened energies (N, T) of every set under the method's own precisions."""
+def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> tuple[dict[str, np.ndarray], float]:
+    """Whitened energies (N, T) of every set under the method's own precisions, and the
+    method's mean squared normalised error after the first step on the precision split
+    (how well it expects held-out normal episodes, before any weighting)."""
     errors = {}
     for key in SETS:
         arrays = getattr(bench, key)
         x = norm.normalise(arrays.x)
         errors[key] = x - method.expected(x, arrays.skills)
     cal = estimate("varied", 1, errors["precision"], "precision split", "full")
-    return {key: energy(e, cal.error_std, cal.error_precision) for key, e in errors.items()}
+    held_out_mse = float(np.mean(errors["precision"][:, 1:] ** 2))
+    return {key: energy(e, cal.error_std, cal.error_precision) for key, e in errors.items()}, held_out_mse
 
 
 def _after_onset(e: np.ndarray, onset: np.ndarray) -> np.ndarray:
@@ -102,8 +105,10 @@ def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, a
     """Summaries {method: {rule: summary}} and outcomes {(method, rule): Outcome}."""
     summaries, results = {}, {}
     for method in tqdm(methods, desc="scoring"):
-        rules = outcomes(energies(method, bench, norm), bench.onset, alpha)
+        e, held_out_mse = energies(method, bench, norm)
+        rules = outcomes(e, bench.onset, alpha)
         summaries[method.name] = {"label": method.label, "is_neural_asm": method.is_neural_asm,
+                                  "held_out_mse": held_out_mse,
                                   **{rule: summary(o, bench) for rule, o in rules.items()}}
         results.update({(method.name, rule): o for rule, o in rules.items()})
     return summaries, results
