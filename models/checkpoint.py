@@ -6,12 +6,15 @@ calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.error_precision`` (absent: channels weighed independently). The header entry ``neural_asm`` is a JSON
 document with the format version, the TPCConfig, the channel names, each
 calibration's thresholds and source, the data provenance and the training energy
-curve. No pickle is involved; writes go to a temporary file that replaces the target
-only once complete, so a crash never leaves a half-written checkpoint.
+curve, and a SHA-256 digest of every tensor's name, dtype, shape and bytes, checked on load
+so that flipped bytes in the weights are refused rather than served. No pickle is involved;
+writes go to a temporary file that replaces the target only once complete, so a crash never
+leaves a half-written checkpoint.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -32,8 +35,10 @@ from models.normaliser import Normaliser
 from models.tpc import TemporalPC
 
 FORMAT_VERSION = 4  # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C
-READABLE_VERSIONS = (2, 3, 4)  # older files simply have no precision matrices or context input
+READABLE_VERSIONS = (2, 3, 4)  # older files simply have no precision matrices, context input or digest
 HEADER_KEY = "neural_asm"
+# No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
+MAX_ABS_WEIGHT = 1e3
 
 
 class CheckpointError(ValueError):
@@ -49,6 +54,16 @@ def _package_version() -> str:
 
 def _f64(a: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(a, np.float64))
+
+
+def tensor_digest(tensors: dict[str, torch.Tensor]) -> str:
+    """SHA-256 over every tensor's name, dtype, shape and bytes, in name order."""
+    h = hashlib.sha256()
+    for name in sorted(tensors):
+        t = tensors[name].contiguous()
+        h.update(f"{name}|{t.dtype}|{tuple(t.shape)}|".encode())
+        h.update(t.numpy().tobytes())
+    return h.hexdigest()
 
 
 def to_bytes(model: NeuralASM) -> bytes:
@@ -91,6 +106,7 @@ def to_bytes(model: NeuralASM) -> bytes:
         "calibrations": calibrations,
         "provenance": model.provenance,
         "history": model.history,
+        "tensor_sha256": tensor_digest(tensors),
     }
     return st_save(tensors, metadata={HEADER_KEY: json.dumps(meta)})
 
@@ -135,6 +151,8 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
         tensors = st_load(data)
     except (SafetensorError, ValueError, RuntimeError) as exc:
         raise CheckpointError(f"{where} is corrupt or truncated: {exc}") from exc
+    if meta["format_version"] >= 4 and tensor_digest(tensors) != meta.get("tensor_sha256"):
+        raise CheckpointError(f"{where} is corrupt: its tensors do not match the digest in its header")
     try:
         config = TPCConfig.from_dict(meta["config"])
         names = meta["channel_names"]
@@ -169,6 +187,9 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
             )
     if not all(torch.isfinite(t).all() for t in tensors.values()):
         raise CheckpointError(f"{where} holds NaN or inf values")
+    for name in ("W_H", "W_F", "W_C"):
+        if name in tensors and tensors[name].numel() and float(tensors[name].abs().max()) > MAX_ABS_WEIGHT:
+            raise CheckpointError(f"{where}: {name} holds values beyond +-{MAX_ABS_WEIGHT:g}, not a trained network")
     return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"))
 
 

@@ -32,6 +32,31 @@ def test_truncated_checkpoint_is_rejected(trained, tmp_path):
         checkpoint.load(path)
 
 
+def test_flipped_weight_bytes_are_refused(trained, tmp_path):
+    path = checkpoint.save(trained, tmp_path / "m.safetensors")
+    data = bytearray(path.read_bytes())
+    n = int.from_bytes(data[:8], "little")
+    offsets = json.loads(data[8 : 8 + n])["W_H"]["data_offsets"]
+    data[8 + n + offsets[0] + 3] ^= 0x7F  # the exponent byte of the first float32 of W_H
+    path.write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match="digest"):
+        checkpoint.load(path)
+
+
+def test_insane_weights_are_refused_even_with_a_matching_digest(trained, tmp_path):
+    import torch
+
+    saved = trained.net.W_H.clone()
+    try:
+        trained.net.W_H[0, 0] = 3.5e28
+        path = checkpoint.save(trained, tmp_path / "m.safetensors")
+    finally:
+        trained.net.W_H.copy_(saved)
+    with pytest.raises(CheckpointError, match="W_H holds values beyond"):
+        checkpoint.load(path)
+    assert torch.equal(trained.net.W_H, saved)
+
+
 def test_garbage_and_missing_files_are_rejected(tmp_path):
     bad = tmp_path / "bad.safetensors"
     bad.write_bytes(b"\x00" * 64)
