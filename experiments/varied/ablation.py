@@ -17,12 +17,10 @@ from models.config import FAST, TPCConfig
 from sim.parallel import Backend
 
 VARIANTS: dict[str, tuple[str, TPCConfig]] = {
-    "default": ("default preset (context channels drive the prior through W_C)", FAST),
-    "no_context_input": ("context channels observed only, no W_C (the paper's network)", FAST.with_(context_input=False)),
+    "default": ("default preset", FAST),
+    "context_input": ("context channels drive the prior through W_C", FAST.with_(context_input=True)),
     "k25": ("25 relaxation steps at gamma 0.04 (same gamma K)", FAST.with_(inference_steps=25, inference_rate=0.04)),
-    "uncapped": ("W_F bounded by the relaxation's stability only", FAST.with_(wf_max_norm=None)),
     "uniform_precision": ("uniform observation precision (the paper's)", FAST.with_(observation_precision="uniform")),
-    "h512_uncapped": ("512 hidden units, W_F uncapped", FAST.with_(hidden_size=512, wf_max_norm=None)),
 }
 
 
