@@ -50,6 +50,10 @@ class TPCConfig:
     # 0.409) and did not raise detection (experiments/varied/ablation.py). Off, the context
     # channels are observations only, reconstructed like any other channel.
     context_input: bool = False
+    # Standard deviation of Gaussian noise added to every normalised training observation,
+    # redrawn each epoch (0: none). A regulariser for few demonstrations: the memory must
+    # recall a skill from observations that are never exactly the demonstrated ones.
+    training_noise: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -74,6 +78,8 @@ class TPCConfig:
                 "TPCConfig.observation_precision must be 'uniform' or 'demo_spread', "
                 f"got {self.observation_precision!r}"
             )
+        if not self.training_noise >= 0:
+            raise ValueError(f"TPCConfig.training_noise must be >= 0, got {self.training_noise}")
         if self.wf_max_norm is not None and not self.wf_max_norm > 0:
             raise ValueError(f"TPCConfig.wf_max_norm must be > 0 or None, got {self.wf_max_norm}")
 

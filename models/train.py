@@ -56,6 +56,8 @@ def train_epoch(
     total, count = 0.0, 0
     for start in range(0, n, batch):
         x_seq = sequences[order[start : start + batch]]
+        if net.config.training_noise > 0:
+            x_seq = x_seq + np.float32(net.config.training_noise) * rng.standard_normal(x_seq.shape, np.float32)
         zhat = net.initial_state(len(x_seq), rng)
         context = net.context_of(x_seq[:, 0])
         for t in range(steps):

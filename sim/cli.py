@@ -35,7 +35,7 @@ def demos(
     out: Path | None = typer.Option(None, "--out", help="Output directory [default: runs/data, runs/data_varied]."),
     workers: int = typer.Option(2, "--workers", min=1, help="Worker processes (CPUs of a local Ray instance)."),
     backend: Backend = typer.Option("processes", "--backend", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)."),
-    n_demos: int = typer.Option(10, "--n-demos", min=1, help="Demonstrations per skill."),
+    n_demos: int | None = typer.Option(None, "--n-demos", min=1, help="Demonstrations per skill [default: 10 paper, 40 varied]."),
     n_normal: int = typer.Option(200, "--n-normal", min=1, help="Held-out normal episodes."),
 ) -> None:
     """Simulate episode sets and write <out>/<set>.mcap and <set>.npz."""
@@ -46,7 +46,8 @@ def demos(
 
         out = out or Path("runs/data_varied")
         for kind in varied_sets.VARIED_KINDS:
-            path, failures = varied_sets.generate(kind, out, workers, backend)
+            sizes = {"n_demos": n_demos} if kind == "demos" and n_demos is not None else {}
+            path, failures = varied_sets.generate(kind, out, workers, backend, **sizes)
             typer.echo(f"varied {kind}: {len(load_episodes(path))} episodes -> {path} "
                        f"({len(failures)} refused by the simulation: velocity limits or IK)")
         return
@@ -55,7 +56,7 @@ def demos(
     kinds = {"demos": ["demos"], "normal": ["normal"], "faults": ["faults", "twins"],
              "all": ["demos", "normal", "faults", "twins"]}[sets.value]
     for kind in kinds:
-        path, failures = generate(kind, out, workers, n_demos, n_normal, backend)
+        path, failures = generate(kind, out, workers, 10 if n_demos is None else n_demos, n_normal, backend)
         episodes = load_episodes(path)
         placed = sum(e.success for e in episodes)
         typer.echo(f"{kind}: {len(episodes)} episodes -> {path} (cube placed within 1 cm: {placed}/{len(episodes)})")

@@ -167,3 +167,17 @@ def test_keeping_the_best_held_out_epoch(skills):
     assert recall_error(best.net, held_out) <= recall_error(last.net, held_out) + 1e-9
     assert 1 <= best.provenance["kept_epoch"] <= 100
     assert last.provenance["kept_epoch"] == 100
+
+
+def test_training_noise_is_seeded_and_regularises(skills):
+    """Noisy training observations give a different but reproducible network that still learns."""
+    train, test = skills
+    cfg = SMALL.with_(hidden_size=48, epochs=60)
+    clean = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False)
+    noisy = [NeuralASM.fit(train.sequences, train.channel_names, cfg.with_(training_noise=0.2), progress=False)
+             for _ in range(2)]
+    assert np.array_equal(noisy[0].net.w_h, noisy[1].net.w_h)
+    assert not np.array_equal(noisy[0].net.w_h, clean.net.w_h)
+    assert noisy[0].history[-1] < noisy[0].history[0] / 3
+    with pytest.raises(ValueError, match="training_noise"):
+        TPCConfig(training_noise=-0.1)

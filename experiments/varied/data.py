@@ -72,7 +72,9 @@ def ensure_varied_sets(data_dir: Path, workers: int, backend: Backend = "process
         if not path.exists():
             generate(kind, data_dir, workers, backend)
         sets[kind] = load_episodes(path)
-        dropped[kind] = len(jobs_for(kind)) - len(sets[kind])
+        # a demos file may hold any number per skill (nasm demos --n-demos): its seeds say how many
+        sizes = {"n_demos": 1 + max(e.seed for e in sets[kind])} if kind == "demos" else {}
+        dropped[kind] = len(jobs_for(kind, **sizes)) - len(sets[kind])
     return sets, dropped
 
 
