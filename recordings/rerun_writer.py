@@ -13,8 +13,8 @@ import numpy as np
 import rerun as rr
 
 from recordings import blueprint as bp
-from recordings.paths import APP_ID
 from recordings.records import StepRecord, WorldRecord, joint_indices
+from recordings.rerun_file import RrdFile
 
 CUBE_HALF_SIZE = 0.025  # m
 LINK_RADIUS = 0.04  # m
@@ -32,8 +32,7 @@ class RerunEpisode:
         self.joints = joint_indices(channel_names)
         self.step_period_s = step_period_s
         self.ee_path: list[np.ndarray] = []
-        self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
-        self.rec.save(path, default_blueprint=bp.episode_blueprint())
+        self.rrd = RrdFile(path, recording_id, bp.episode_blueprint())
         self._log_series_names()
 
     def _log_series_names(self) -> None:
@@ -47,15 +46,15 @@ class RerunEpisode:
             bp.JOINTS_EXPECTED: rr.SeriesLines(names=[f"{n} expected" for n in joint_names]),
         }
         for path, series in static.items():
-            self.rec.log(path, series, static=True)
+            self.rrd.rec.log(path, series, static=True)
 
     def _set_time(self, time_s: float) -> None:
-        self.rec.set_time("step", sequence=int(time_s / self.step_period_s + 1e-9))
-        self.rec.set_time("time", duration=time_s)
+        self.rrd.rec.set_time("step", sequence=int(time_s / self.step_period_s + 1e-9))
+        self.rrd.rec.set_time("time", duration=time_s)
 
     def write_step(self, r: StepRecord) -> None:
         self._set_time(r.step * self.step_period_s if r.time_s is None else r.time_s)
-        log = self.rec.log
+        log = self.rrd.rec.log
         log(bp.OBSERVATION, rr.Scalars(r.observation))
         if self.joints:
             log(bp.JOINTS_OBSERVED, rr.Scalars(r.observation[self.joints]))
@@ -71,7 +70,7 @@ class RerunEpisode:
 
     def write_world(self, w: WorldRecord) -> None:
         self._set_time(w.time_s)
-        log = self.rec.log
+        log = self.rrd.rec.log
         if w.link_positions is not None:
             log(bp.ARM, rr.LineStrips3D([w.link_positions], radii=LINK_RADIUS))
             log(bp.ARM_JOINTS, rr.Points3D(w.link_positions, radii=LINK_RADIUS * 1.2))
@@ -82,5 +81,4 @@ class RerunEpisode:
             log(bp.CUBE, rr.Boxes3D(centers=[w.cube], half_sizes=[[CUBE_HALF_SIZE] * 3]))
 
     def close(self) -> None:
-        self.rec.flush()
-        self.rec.disconnect()
+        self.rrd.close()

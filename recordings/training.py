@@ -17,7 +17,8 @@ import rerun as rr
 from recordings import blueprint as bp
 from recordings import mcap_schemas as schemas
 from recordings.mcap_file import McapFile
-from recordings.paths import APP_ID, DEFAULT_DIR, run_paths
+from recordings.paths import DEFAULT_DIR, run_paths
+from recordings.rerun_file import RrdFile
 
 
 class TrainingRecorder:
@@ -25,17 +26,16 @@ class TrainingRecorder:
         self.run_id = run_id
         rrd, mcap = run_paths(folder, run_id)
         self.paths = {"rrd": rrd, "mcap": mcap}
-        self.rec = rr.RecordingStream(APP_ID, recording_id=run_id)
-        self.rec.save(rrd, default_blueprint=bp.training_blueprint())
-        self.rec.log(bp.TRAIN_ENERGY, rr.SeriesLines(names=["energy"]), static=True)
+        self.rrd = RrdFile(rrd, run_id, bp.training_blueprint())
+        self.rrd.rec.log(bp.TRAIN_ENERGY, rr.SeriesLines(names=["energy"]), static=True)
         self.out = McapFile(mcap)
         self.start_ns = time.time_ns()
         self.out.write(self.out.channel("/metadata", schemas.METADATA), self.start_ns, {"run_id": run_id, **(metadata or {})})
         self.epoch_channel = self.out.channel("/train/energy", schemas.TRAINING)
 
     def log_epoch(self, epoch: int, energy: float) -> None:
-        self.rec.set_time("epoch", sequence=epoch)
-        self.rec.log(bp.TRAIN_ENERGY, rr.Scalars([energy]))
+        self.rrd.rec.set_time("epoch", sequence=epoch)
+        self.rrd.rec.log(bp.TRAIN_ENERGY, rr.Scalars([energy]))
         self._write_epoch(epoch, energy)
         self.out.flush()
 
@@ -43,7 +43,7 @@ class TrainingRecorder:
         """A whole energy curve at once (one columnar send for Rerun)."""
         energies = np.asarray(history, np.float64)
         epochs = np.arange(len(energies))
-        self.rec.send_columns(
+        self.rrd.rec.send_columns(
             bp.TRAIN_ENERGY,
             indexes=[rr.TimeColumn("epoch", sequence=epochs)],
             columns=rr.Scalars.columns(scalars=energies),
@@ -58,8 +58,7 @@ class TrainingRecorder:
 
     def close(self) -> None:
         try:
-            self.rec.flush()
-            self.rec.disconnect()
+            self.rrd.close()
         finally:
             self.out.close()
 

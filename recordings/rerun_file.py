@@ -1,0 +1,62 @@
+"""A Rerun stream saved to an ``.rrd`` file, and freed when the file is closed.
+
+rerun-sdk 0.41 frees no stream when Python drops it: the bindings keep every stream,
+with its batcher and sink threads, in a global list that only ``rr.init`` sweeps. And
+``save(default_blueprint=...)`` logs the layout into a stream of its own whose memory
+sink refers back to that stream, a cycle no sweep breaks. Together ~1.2 MB and four
+threads per file, for the life of the process (tests/test_recording_leak.py). So the
+layout's stream is built here and disconnected once the file has the layout, and
+``close`` sweeps the streams nothing refers to any more, as ``rr.init`` does.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import rerun as rr
+import rerun.blueprint as rrb
+from rerun import bindings
+
+from recordings.paths import APP_ID
+
+
+class RrdFile:
+    """``rec`` logs to ``path``, which starts with ``blueprint`` as its default layout."""
+
+    def __init__(self, path: Path, recording_id: str, blueprint: rrb.Blueprint) -> None:
+        self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
+        layout = _layout_stream(blueprint)
+        try:
+            bindings.save(path=str(path), default_blueprint=layout.memory_recording().storage,
+                          recording=self.rec.to_native(), write_footer=True)
+        finally:
+            layout.disconnect()  # drops the memory sink, and with it the cycle
+
+    def close(self) -> None:
+        """Finish the file and free the stream; ``rec`` is gone afterwards."""
+        self.rec.flush()
+        self.rec.disconnect()
+        del self.rec  # Python's last reference: the sweep frees only streams nobody holds
+        _free_dropped_streams()
+
+
+def _layout_stream(blueprint: rrb.Blueprint) -> rr.RecordingStream:
+    """The stream ``rrb.api.create_in_memory_blueprint`` builds, kept so it can be disconnected."""
+    stream = rr.RecordingStream._from_native(
+        bindings.new_blueprint(application_id=APP_ID, make_default=False, make_thread_default=False,
+                               default_enabled=True)
+    )
+    stream.set_time("blueprint", sequence=0)
+    blueprint._log_to_stream(stream)
+    return stream
+
+
+def _free_dropped_streams() -> None:
+    """Free every stream only the bindings still hold (``rr.init``'s sweep).
+
+    The sweep also flushes the live streams and unsets the global recording, which is
+    put back for whoever set it.
+    """
+    global_recording = rr.get_global_data_recording()
+    bindings.flush_and_cleanup_orphaned_recordings()
+    rr.set_global_data_recording(global_recording)
