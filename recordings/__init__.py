@@ -8,9 +8,10 @@
 Every writer is a context manager that closes its files on normal exit, Ctrl-C and
 errors. After a hard crash (SIGKILL, power loss) what was written stays readable:
 
-- ``.mcap``: messages are written unchunked and flushed every step, so a truncated file
-  reads with ``readers.read_mcap`` (it stops at the torn record) or is repaired with the
-  MCAP CLI: ``mcap recover broken.mcap -o fixed.mcap``.
+- ``.mcap``: messages go into 4 KiB chunks flushed as they fill, so a kill loses the
+  chunk being filled and the rest reads with ``readers.read_mcap`` or mcap's
+  ``NonSeekingReader`` (both stop at the torn chunk) or is repaired with the MCAP CLI:
+  ``mcap recover broken.mcap -o fixed.mcap``.
 - ``.rrd``: Rerun streams to the file as it goes; ``rerun rrd verify FILE`` checks it
   and ``rerun rrd merge --continue-on-error FILE -o fixed.rrd`` keeps what decodes.
 """

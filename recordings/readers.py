@@ -47,7 +47,7 @@ def repair_rrd(path: str | Path, out: str | Path) -> None:
 
 
 def read_mcap(path: str | Path) -> dict[str, list[dict[str, Any]]]:
-    """Every JSON message by topic, in file order; stops at a record torn by a crash."""
+    """Every JSON message by topic, in file order; stops at a chunk torn by a crash."""
     channels: dict[int, Channel] = {}
     messages: dict[str, list[dict[str, Any]]] = defaultdict(list)
     with open(path, "rb") as f:
