@@ -113,7 +113,12 @@ FAITHFUL = TPCConfig(
     keep_best_on_held_out=False,
 )
 FAST = TPCConfig()
-PRESETS: dict[str, TPCConfig] = {"fast": FAST, "faithful": FAITHFUL}
+# FAST trained on noisy observations: the varied task's default. On it, noise of 0, 0.2, 0.35
+# and 0.5 normalised units gave held-out online errors of 0.366, 0.354, 0.341 and 0.354
+# (experiments/varied/ablation.py); 0.35 was kept. Not yet measured on the paper's task, whose
+# default stays FAST.
+ROBUST = FAST.with_(training_noise=0.35)
+PRESETS: dict[str, TPCConfig] = {"fast": FAST, "faithful": FAITHFUL, "robust": ROBUST}
 
 
 @dataclass(frozen=True)

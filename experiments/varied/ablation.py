@@ -13,14 +13,16 @@ from pathlib import Path
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.methods import neural_asm_methods, train_neural_asm
 from experiments.varied.score import ALPHA, score_all
-from models.config import FAST, TPCConfig
+from models.config import FAST, ROBUST, TPCConfig
 from sim.parallel import Backend
 
 VARIANTS: dict[str, tuple[str, TPCConfig]] = {
-    "default": ("default preset", FAST),
-    "context_input": ("context channels drive the prior through W_C", FAST.with_(context_input=True)),
-    "k25": ("25 relaxation steps at gamma 0.04 (same gamma K)", FAST.with_(inference_steps=25, inference_rate=0.04)),
-    "uniform_precision": ("uniform observation precision (the paper's)", FAST.with_(observation_precision="uniform")),
+    "default": ("robust preset: training noise 0.35 (the benchmark's default)", ROBUST),
+    "no_noise": ("no training noise (the fast preset)", FAST),
+    "noise_0.2": ("training noise 0.2", FAST.with_(training_noise=0.2)),
+    "noise_0.5": ("training noise 0.5", FAST.with_(training_noise=0.5)),
+    "context_input": ("no noise, context channels drive the prior through W_C", FAST.with_(context_input=True)),
+    "k25": ("no noise, 25 relaxation steps at gamma 0.04 (same gamma K)", FAST.with_(inference_steps=25, inference_rate=0.04)),
 }
 
 

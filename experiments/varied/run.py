@@ -5,7 +5,8 @@ baseline of `models.detectors` on the same demonstrations, scores all on the sam
 (experiments/varied/score.py) and writes the results. The featured Neural ASM, the one a
 varied-task service ships, is the default network in online recall, decided before any test
 episode was scored: on a varied task the hidden state must follow the episode (its speed, its
-route), which offline recall from a one-step cue cannot.
+route), which offline recall from a one-step cue cannot. Its preset, `ROBUST`, is the default
+network trained on noisy observations, chosen by held-out error (models/config.py).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.methods import Method, baseline_methods, neural_asm_methods, train_neural_asm
 from experiments.varied.score import ALPHA, headline, score_all
 from models import checkpoint
-from models.config import FAITHFUL, FAST, TPCConfig
+from models.config import FAITHFUL, ROBUST, TPCConfig
 from sim.parallel import Backend
 
 FEATURED = "nasm_online"
@@ -32,10 +33,10 @@ class VariedResult:
     configs: dict[str, dict]
 
 
-def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = FAST, paper_epochs: int = 200,
+def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = ROBUST, paper_epochs: int = 200,
                workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA) -> VariedResult:
     bench = load_varied_benchmark(data_dir, context, workers, backend)
-    configs = {"nasm": ("Neural ASM, default", fast),
+    configs = {"nasm": ("Neural ASM, default (robust preset)", fast),
                "nasm_paper": ("Neural ASM, paper configuration", FAITHFUL.with_(epochs=paper_epochs))}
     methods: list[Method] = []
     norm = None
