@@ -72,13 +72,14 @@ def write_figures(result: VariedResult, out: Path) -> list[Path]:
     names = sorted(result.summaries, key=lambda n: -result.summaries[n]["episode"]["detection"])
     labels = [result.summaries[n]["label"] for n in names]
     families = list(result.summaries[names[0]]["episode"]["per_family"])
+    colours = plt.cm.tab20(np.linspace(0.0, 1.0, len(names)))  # tab10 repeats past ten methods
     fig, ax = plt.subplots(figsize=(12, 5))
     width = 0.8 / len(names)
     for i, name in enumerate(names):
         fam = result.summaries[name]["episode"]["per_family"]
         values = [np.nan if fam[f]["detection_visible"] is None else 100 * fam[f]["detection_visible"] for f in families]
         featured = name == result.headline["featured"]
-        ax.bar(np.arange(len(families)) + i * width, values, width, label=labels[i],
+        ax.bar(np.arange(len(families)) + i * width, values, width, label=labels[i], color=colours[i],
                edgecolor="black" if featured else "none", linewidth=1.5 if featured else 0)
     ax.set_xticks(np.arange(len(families)) + 0.4 - width / 2, families, rotation=20)
     ax.set_ylabel("visible faults detected (%)")
@@ -90,9 +91,9 @@ def write_figures(result: VariedResult, out: Path) -> list[Path]:
     plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(8, 5))
-    for name, label in zip(names, labels):
+    for name, label, colour in zip(names, labels, colours):
         s = result.summaries[name]["episode"]
-        ax.scatter(100 * s["benign_ood_false_alarm"], 100 * s["detection"], s=60,
+        ax.scatter(100 * s["benign_ood_false_alarm"], 100 * s["detection"], s=60, color=colour,
                    marker="*" if result.summaries[name]["is_neural_asm"] else "o", label=label)
     ax.set_xlabel("benign out-of-range episodes flagged (%)")
     ax.set_ylabel("visible faults detected (%)")
