@@ -47,7 +47,7 @@ class TPCConfig:
     # With context channels named at fit (cube pose, goal, ...), feed their first-step values
     # into the prior, z_prior = W_H f(zhat) + W_C c (the tPC with inputs). Off by default:
     # on the varied task it raised the online one-step error on held-out episodes (0.366 ->
-    # 0.409) and did not raise detection (experiments/varied/ablation.py). Off, the context
+    # 0.41-0.43) and did not raise detection (experiments/varied/ablation.py). Off, the context
     # channels are observations only, reconstructed like any other channel.
     context_input: bool = False
     # Standard deviation of Gaussian noise added to every normalised training observation,
@@ -114,7 +114,7 @@ FAITHFUL = TPCConfig(
 )
 FAST = TPCConfig()
 # FAST trained on noisy observations: the varied task's default. On it, noise of 0, 0.2, 0.35
-# and 0.5 normalised units gave held-out online errors of 0.366, 0.354, 0.341 and 0.354
+# and 0.5 normalised units gave held-out online errors of 0.366, 0.354, 0.341-0.344 and 0.354
 # (experiments/varied/ablation.py); 0.35 was kept. Not yet measured on the paper's task, whose
 # default stays FAST.
 ROBUST = FAST.with_(training_noise=0.35)
