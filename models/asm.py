@@ -210,7 +210,7 @@ class SkillStream:
         return self.recaller.t
 
     @property
-    def batch_key(self) -> tuple[int, str, int, bool]:
+    def batch_key(self) -> tuple[int, str, int, bool, bool]:
         """Streams with equal keys can advance together in one ``step_streams`` call."""
         r = self.recaller
         return id(self.model), r.mode, r.cue_steps, r.t == 0, r.t < r.cue_steps
