@@ -269,13 +269,13 @@ def weigh_step(
     errors: np.ndarray, calibrations: Sequence[Calibration | None], steps: Sequence[int]
 ) -> tuple[np.ndarray, np.ndarray]:
     """Errors (B, D) of one step of each stream divided by their spreads, and their energies."""
-    ones, eye = np.ones(errors.shape[1]), np.eye(errors.shape[1])
-    spread = np.stack([ones if c is None else step_row(c.error_std, t) for c, t in zip(calibrations, steps)])
+    width = errors.shape[1]
+    spread = np.stack([np.ones(width) if c is None else step_row(c.error_std, t) for c, t in zip(calibrations, steps)])
     weighted = errors / spread
     if all(c is None or c.error_precision is None for c in calibrations):
         return weighted, quadratic(weighted, None)
     precision = np.stack([
-        eye if c is None or c.error_precision is None else step_row(c.error_precision, t)
+        np.eye(width) if c is None or c.error_precision is None else step_row(c.error_precision, t)
         for c, t in zip(calibrations, steps)
     ])
     return weighted, quadratic(weighted, precision)

@@ -34,8 +34,10 @@ from models.config import TPCConfig
 from models.normaliser import Normaliser
 from models.tpc import TemporalPC
 
-FORMAT_VERSION = 4  # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C
-READABLE_VERSIONS = (2, 3, 4)  # older files simply have no precision matrices, context input or digest
+# 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
+# digest; 5: the inference solver in the config.
+FORMAT_VERSION = 5
+READABLE_VERSIONS = (2, 3, 4, 5)  # older files simply have no precision matrices, context input or digest
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
 MAX_ABS_WEIGHT = 1e3
@@ -154,7 +156,8 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
     if meta["format_version"] >= 4 and tensor_digest(tensors) != meta.get("tensor_sha256"):
         raise CheckpointError(f"{where} is corrupt: its tensors do not match the digest in its header")
     try:
-        config = TPCConfig.from_dict(meta["config"])
+        # Networks saved before the solver was a setting were trained with gradient descent.
+        config = TPCConfig.from_dict({"solver": "gradient", **meta["config"]})
         names = meta["channel_names"]
         net = TemporalPC(len(names), config, context_index(names, meta.get("context_channels", []), config))
         net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"], tensors.get("W_C"))

@@ -15,6 +15,7 @@ from typing import Any, Literal
 Optimizer = Literal["adam", "sgd"]
 InitialState = Literal["zeros", "random"]
 Covariance = Literal["full", "diagonal"]
+Solver = Literal["gradient", "gauss_newton"]
 
 
 @dataclass(frozen=True)
@@ -22,8 +23,14 @@ class TPCConfig:
     """Hyper-parameters of a Neural ASM (paper eqs. 1-6)."""
 
     hidden_size: int = 256
-    inference_steps: int = 100  # K
-    inference_rate: float = 1e-2  # gamma
+    # How z relaxes to the minimum of the energy at every step (TemporalPC.infer): the
+    # paper's K steps of gradient descent at rate gamma, or a few Gauss-Newton steps. On the
+    # paper's task K=100 leaves ~1 % of the energy above the minimum; two Gauss-Newton steps
+    # leave ~1e-6 of it, in a fifth of the time (benchmarks/bench_models.py).
+    solver: Solver = "gauss_newton"
+    solver_iterations: int = 2  # Gauss-Newton steps
+    inference_steps: int = 100  # K, gradient descent
+    inference_rate: float = 1e-2  # gamma, gradient descent
     learning_rate: float = 2e-3
     # Cosine decay to this fraction of learning_rate by the last epoch; 1 keeps it constant.
     lr_final_fraction: float = 0.01
@@ -57,7 +64,7 @@ class TPCConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        positive = ("hidden_size", "inference_steps", "inference_rate", "learning_rate", "epochs")
+        positive = ("hidden_size", "solver_iterations", "inference_steps", "inference_rate", "learning_rate", "epochs")
         for name in positive:
             if not getattr(self, name) > 0:
                 raise ValueError(f"TPCConfig.{name} must be > 0, got {getattr(self, name)!r}")
@@ -67,6 +74,8 @@ class TPCConfig:
             )
         if self.batch_size < 0:
             raise ValueError(f"TPCConfig.batch_size must be >= 0, got {self.batch_size}")
+        if self.solver not in ("gradient", "gauss_newton"):
+            raise ValueError(f"TPCConfig.solver must be 'gradient' or 'gauss_newton', got {self.solver!r}")
         if self.optimizer not in ("adam", "sgd"):
             raise ValueError(f"TPCConfig.optimizer must be 'adam' or 'sgd', got {self.optimizer!r}")
         if self.initial_state not in ("zeros", "random"):
@@ -100,6 +109,7 @@ class TPCConfig:
 
 FAITHFUL = TPCConfig(
     hidden_size=256,
+    solver="gradient",
     inference_steps=100,
     inference_rate=1e-2,
     learning_rate=1e-4,

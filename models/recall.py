@@ -44,7 +44,7 @@ class Recaller:
     ) -> None:
         check_recall(mode, cue_steps)
         self.net, self.mode, self.cue_steps = net, mode, cue_steps
-        self.zhat = net.initial_state(batch, rng or np.random.default_rng(0))
+        self.zhat = net.initial_state(batch, rng)
         self.context: np.ndarray | None = None  # read from the first observation (networks with W_C)
         self.t = 0
 

@@ -88,6 +88,19 @@ def test_mismatched_metadata_is_rejected(trained, tmp_path):
         checkpoint.from_bytes(newer)
 
 
+def test_checkpoint_from_before_the_solver_setting_keeps_gradient_descent(trained, tmp_path):
+    """A network trained by gradient descent must not be served with another solver."""
+    data = checkpoint.save(trained, tmp_path / "m.safetensors").read_bytes()
+    assert checkpoint.from_bytes(data).config.solver == "gauss_newton"
+
+    def as_version_4(meta):
+        meta["format_version"] = 4
+        del meta["config"]["solver"], meta["config"]["solver_iterations"]
+
+    old = checkpoint.from_bytes(_rewrite_header(data, as_version_4))
+    assert old.config.solver == "gradient" and old.config.inference_steps == trained.config.inference_steps
+
+
 def test_failed_write_leaves_previous_checkpoint_intact(trained, tmp_path, monkeypatch):
     path = checkpoint.save(trained, tmp_path / "m.safetensors")
     before = path.read_bytes()

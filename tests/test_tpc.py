@@ -6,7 +6,7 @@ import pytest
 from models import recall
 from models.asm import NeuralASM, channel_precision
 from models.config import FAITHFUL, TPCConfig
-from models.tpc import TemporalPC, stable_wf_norm
+from models.tpc import Cholesky, TemporalPC, stable_wf_norm
 from models.train import recall_error
 
 from conftest import SMALL
@@ -105,7 +105,7 @@ def test_both_modes_learn(skills, name):
 
 def test_wf_guard_keeps_the_relaxation_descending(rng):
     """Past the bound on ||W_F|| the relaxation of eq. 2 climbs the energy; projected, it descends."""
-    cfg = TPCConfig(hidden_size=64, wf_max_norm=None)
+    cfg = TPCConfig(hidden_size=64, wf_max_norm=None, solver="gradient")
     net = TemporalPC(10, cfg)
     bound = stable_wf_norm(cfg.inference_rate)
     net.W_F.mul_(5 * bound / float(np.linalg.norm(net.w_f, 2)))  # what unchecked growth leads to
@@ -119,6 +119,40 @@ def test_wf_guard_keeps_the_relaxation_descending(rng):
     net.project()
     assert np.linalg.norm(net.w_f, 2) <= bound * (1 + 1e-5)
     assert (energy(net.infer(prior, x)) < energy(prior)).all()
+
+
+def test_gauss_newton_reaches_the_minimum_gradient_descent_approaches(trained, rng):
+    """A few Gauss-Newton steps land where 20000 small gradient steps end, far past the paper's K."""
+    net = trained.net
+    x = net.observe(rng.standard_normal((40, net.config.hidden_size)).astype(np.float32))
+    x += 0.3 * rng.standard_normal(x.shape).astype(np.float32)  # observations the network cannot fit exactly
+    prior = net.prior(0.5 * rng.standard_normal((40, net.config.hidden_size)).astype(np.float32))
+    gradient = TemporalPC(net.obs_size, net.config.with_(solver="gradient"))
+    gradient.load_weights(net.W_H, net.W_F, net.precision)
+
+    def energy(z):
+        return ((z - prior) ** 2).sum(1) + (net.pi * (x - net.observe(z)) ** 2).sum(1)
+
+    converged = energy(gradient.infer(prior, x, steps=20000))
+
+    def gap(z):
+        return float(((energy(z) - converged) / converged).mean())
+
+    assert gap(gradient.infer(prior, x, steps=100)) > 3e-3  # the paper's K is not there yet
+    assert gap(net.infer(prior, x)) < 1e-3
+    assert abs(gap(net.infer(prior, x, steps=8))) < 1e-5
+    assert gap(net.infer(prior, x, steps=1)) < gap(prior)
+
+
+def test_cholesky_solves_one_system_and_a_batch_alike(rng):
+    a = rng.standard_normal((5, 25, 40)).astype(np.float32)
+    a = a @ a.transpose(0, 2, 1) + np.eye(25, dtype=np.float32)
+    b = rng.standard_normal((5, 25)).astype(np.float32)
+    expected = np.linalg.solve(a.astype(np.float64), b[..., None].astype(np.float64))[..., 0]
+    np.testing.assert_allclose(Cholesky(a).solve(b), expected, rtol=1e-3, atol=1e-4)
+    np.testing.assert_allclose(Cholesky(a[:1]).solve(b[:1]), expected[:1], rtol=1e-3, atol=1e-4)
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
+        Cholesky(-a[:1])
 
 
 def test_long_training_5000_epochs_is_finite(skills):

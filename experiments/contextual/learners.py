@@ -30,9 +30,10 @@ class Fitted:
 def recall_with_iterations(
     net: TemporalPC, cue: np.ndarray, horizon: int, iterations: int
 ) -> np.ndarray:
-    """Offline recall with K iterations of cued inference, sharing the trained weights."""
-    probe = TemporalPC(net.obs_size, net.config.with_(inference_steps=iterations))
-    probe.load_weights(net.W_H, net.W_F)
+    """Offline recall with K iterations of the paper's gradient descent at the cue, sharing
+    the trained weights: the speed-accuracy trade-off is that of gradient descent."""
+    probe = TemporalPC(net.obs_size, net.config.with_(solver="gradient", inference_steps=iterations))
+    probe.load_weights(net.W_H, net.W_F, net.precision)
     return offline_recall(probe, cue, horizon, np.random.default_rng(net.config.seed))
 
 
@@ -44,7 +45,8 @@ def fit_neural_asm(
     steps, motor = x.shape[1], train.motor
     recall = lambda k: recall_with_iterations(model.net, x[:, :1], steps, k)[..., motor]  # noqa: E731
     by_iterations = {k: recall(k) for k in sweep}
-    return Fitted(model.normaliser, recall(config.inference_steps), model.history, by_iterations)
+    recalled = offline_recall(model.net, x[:, :1], steps, np.random.default_rng(config.seed))[..., motor]
+    return Fitted(model.normaliser, recalled, model.history, by_iterations)
 
 
 def fit_s_to_m(train: ContextualData, test: ContextualData, config: TPCConfig) -> Fitted:
