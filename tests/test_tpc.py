@@ -144,6 +144,20 @@ def test_gauss_newton_reaches_the_minimum_gradient_descent_approaches(trained, r
     assert gap(net.infer(prior, x, steps=1)) < gap(prior)
 
 
+def test_gauss_newton_never_climbs_on_observations_far_off(trained, rng):
+    """Where tanh saturates a full Gauss-Newton step overshoots; halved steps still descend."""
+    net = trained.net
+    prior = net.prior(0.5 * rng.standard_normal((40, net.config.hidden_size)).astype(np.float32))
+    for offset in (100.0, 1000.0):
+        x = net.observe(prior) + offset * rng.standard_normal((40, net.obs_size)).astype(np.float32)
+
+        def energy(z):
+            return ((z - prior) ** 2).sum(1) + (net.pi * (x - net.observe(z)) ** 2).sum(1)
+
+        for steps in (1, 2, 5):
+            assert np.all(energy(net.infer(prior, x, steps=steps)) <= energy(prior) * (1 + 1e-6))
+
+
 def test_cholesky_solves_one_system_and_a_batch_alike(rng):
     a = rng.standard_normal((5, 25, 40)).astype(np.float32)
     a = a @ a.transpose(0, 2, 1) + np.eye(25, dtype=np.float32)
