@@ -1,10 +1,11 @@
 """Configuration of the tPC network and its training, in one typed place.
 
-Two presets exist. ``FAITHFUL`` is the paper's setting (Methods, "Network training
-details"): H=256, Adam lr 1e-4, 1000 learning iterations, batch size 1, K=100
-inference iterations at gamma=1e-2. ``FAST`` is the default: the same network and
-inference, but all demonstrations relax in one batch and learn at a larger rate for
-fewer epochs. ``benchmarks/bench_models.py`` compares the two on held-out recall.
+``FAITHFUL`` is the paper's setting (Methods, "Network training details"): H=256, Adam lr
+1e-4, 1000 learning iterations, batch size 1, K=100 gradient-descent inference iterations at
+gamma=1e-2. ``FAST`` is the default: the same network and energy, minimised in z by two
+Gauss-Newton steps, with all demonstrations relaxing in one batch and learning at a larger rate
+for fewer epochs. ``ROBUST`` is ``FAST`` trained on noisy observations.
+``benchmarks/bench_models.py`` compares them on held-out recall.
 """
 
 from __future__ import annotations

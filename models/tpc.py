@@ -9,10 +9,10 @@ what the episode's first observation says of its context (cube pose, goal, obsta
 context channels the term is absent and the energy is the paper's.
 
 torch holds the parameters and the optimiser. The relaxation of z (eq. 2) runs on
-numpy views of the same memory: it is a loop of ~8 tiny operations repeated K=100
-times per step, where torch's per-call overhead (~3 us) costs about three times
-numpy's (measured in benchmarks/bench_models.py), and no autograd is needed because
-the learning rules (eqs. 3-4) are local Hebbian products written out below.
+numpy views of the same memory: it is a loop of tiny operations (K=100 gradient steps, or two
+Gauss-Newton steps), where torch's per-call overhead (~3 us) costs about three times
+numpy's, and no autograd is needed because the learning rules (eqs. 3-4) are local Hebbian
+products written out below.
 """
 
 from __future__ import annotations
