@@ -11,7 +11,11 @@ from test_detectors import varied_task
 
 CONTEXT_NAMES = ["c0", "c1"]
 NAMES = CONTEXT_NAMES + [f"x{i}" for i in range(6)]
-CONFIG = FAST.with_(hidden_size=64, epochs=600, context_input=True)
+# Gradient-descent inference: with it the context input lowers the offline error on the moving
+# channels to 0.53 of what it is without (seed 0; 0.80 with seed 1). With the default
+# Gauss-Newton solver the gain shrinks to 0.74 / 0.93: a z relaxed to the minimum at the cue
+# already takes the context from the observation, so W_C adds less.
+CONFIG = FAST.with_(hidden_size=64, epochs=600, context_input=True, solver="gradient")
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +33,7 @@ def with_context(task):
 
 def test_context_input_makes_the_recalled_plan_follow_the_context(task, with_context):
     demos, skills, test, _ = task
-    without = NeuralASM.fit(demos, NAMES, FAST.with_(hidden_size=64, epochs=600), progress=False, labels=skills,
+    without = NeuralASM.fit(demos, NAMES, CONFIG.with_(context_input=False), progress=False, labels=skills,
                             context_channels=CONTEXT_NAMES)
     assert with_context.net.W_C.shape == (64, 2) and without.context_channels == ()
     motion = slice(2, None)  # the channels the context shapes
