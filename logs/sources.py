@@ -13,7 +13,7 @@ import numpy as np
 
 from logs import lerobot, rosbag
 from logs.errors import LogError
-from logs.mapping import Kind, Mapping, load_mapping
+from logs.mapping import Kind, Mapping, check_checkpoint, load_mapping, parse_mapping
 from logs.recorded import Recorded
 from nasm.data import Sequences
 
@@ -47,3 +47,9 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "") ->
 def load_log_sequences(source: str | Path, mapping_file: str | Path) -> Sequences:
     """``read_mapped`` with the mapping read from its file."""
     return read_mapped(source, load_mapping(mapping_file), str(mapping_file))
+
+
+def check_model(seqs: Sequences, channel_names: tuple[str, ...], provenance: dict) -> None:
+    """Refuse logged sequences mapped otherwise than the model's training data (no-op for other sources)."""
+    if "mapping" in seqs.provenance:
+        check_checkpoint(parse_mapping(seqs.provenance["mapping"], "the mapping"), channel_names, provenance)
