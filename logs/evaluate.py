@@ -24,7 +24,7 @@ def _flags(model: NeuralASM, seqs: Sequences, mode: str, threshold: float, error
     for i, e in enumerate(result.energy):
         above = np.flatnonzero(e > threshold)
         first = int(above[0]) if len(above) else None
-        rows.append({"episode": seqs.provenance.get("episodes", [str(i)] * len(seqs.data))[i], "skill": str(seqs.labels[i]),
+        rows.append({"episode": seqs.provenance["episodes"][i], "skill": str(seqs.labels[i]),
                      "peak_energy": float(e.max()), "first_flag_step": first, "steps_flagged": len(above),
                      "isolated_joint": None if first is None else isolate(weighted[i, first], model.channel_names)[0]})
     return rows
