@@ -195,14 +195,15 @@ def read_episodes(source: Path, mapping: Mapping) -> Iterator[Recorded | str]:
         if msgs.damage:
             yield msgs.damage
         windows = _windows(msgs, mapping, split)
+        stamps = {t: np.array([s for s, _ in m], np.int64) for t, m in msgs.by_topic.items()}
+        values = {ch.name: channel_values(ch, msgs.by_topic[ch.topic], msgs.types.get(ch.topic, "?"))  # type: ignore[index]
+                  for ch in mapping.channels}
         for k, (lo, hi) in enumerate(windows):
             what = f"bag {bag.name}, episode {k}" + (f" (from {lo / NS:.3f} s)" if len(windows) > 1 else "")
             try:
-                streams = []
-                for ch in mapping.channels:
-                    picked = [(t, m) for t, m in msgs.by_topic[ch.topic] if lo <= t < hi]  # type: ignore[index]
-                    t = (np.array([t for t, _ in picked], np.int64) - lo) / NS
-                    streams.append(Stream(ch, t, channel_values(ch, picked, msgs.types.get(ch.topic or "", "?"))))
+                picked = {t: (s >= lo) & (s < hi) for t, s in stamps.items()}  # in bag order: stamps may go back
+                streams = [Stream(ch, (stamps[ch.topic][picked[ch.topic]] - lo) / NS, values[ch.name][picked[ch.topic]])  # type: ignore[index]
+                           for ch in mapping.channels]
                 data = resample(streams, mapping.timing, what)
             except LogError as exc:
                 if msgs.damage and k == len(windows) - 1:
