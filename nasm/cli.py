@@ -19,6 +19,7 @@ from models import checkpoint  # noqa: E402
 from models.asm import NeuralASM  # noqa: E402
 from models.config import PRESETS  # noqa: E402
 from models.recall import RECALL_MODES  # noqa: E402
+from logs.cli import MAPPING_HELP, evaluate, read_logs, replay  # noqa: E402
 from nasm.data import SYNTHETIC, load_sequences  # noqa: E402
 
 torch.set_num_threads(1)
@@ -51,6 +52,7 @@ def train(
     epochs: int | None = typer.Option(None, help="override the preset's epochs"),
     hidden: int | None = typer.Option(None, help="override the preset's hidden size"),
     seed: int = typer.Option(0, help="seed of the weights and the training order"),
+    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS 2 bag or LeRobot dataset"),
 ) -> None:
     """Train a Neural ASM on demonstrations and write a checkpoint."""
     if preset not in PRESETS:
@@ -60,7 +62,7 @@ def train(
         config = config.with_(epochs=epochs)
     if hidden is not None:
         config = config.with_(hidden_size=hidden)
-    seqs = load_sequences(data)
+    seqs = read_logs(data, mapping) if mapping else load_sequences(data)
     provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs.data)}
     model = NeuralASM.fit(seqs.data, seqs.channel_names, config, provenance=provenance)
     checkpoint.save(model, out)
@@ -94,11 +96,12 @@ def score(
     cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
     weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)"),
     as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON"),
+    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS 2 bag or LeRobot dataset"),
 ) -> None:
     """Energy of every step of every sequence, and the channel with the largest error."""
     _check_mode(mode)
     model = _load_model(model_path)
-    seqs = load_sequences(data)
+    seqs = read_logs(data, mapping, model) if mapping else load_sequences(data)
     try:
         result = model.score(seqs.data, mode, cue_steps, weighted)
     except (KeyError, ValueError) as exc:
@@ -138,7 +141,7 @@ from experiments.fault_sweep.cli import faults  # noqa: E402
 from service.cli import serve  # noqa: E402
 from sim.cli import demos  # noqa: E402
 
-for command in (demos, faults, correction, contextual, serve):  # each package owns its commands
+for command in (demos, faults, correction, contextual, serve, replay, evaluate):  # each package owns its commands
     app.command()(command)
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 """Where the command line finds sequences: the built-in synthetic skills, an .npz
-file of arrays, or an MCAP episode set written by ``nasm demos``."""
+file of arrays, an MCAP episode set written by ``nasm demos``, or, with a channel mapping, a
+robot's ROS 2 bags or LeRobot dataset (``logs``)."""
 
 from __future__ import annotations
 
@@ -22,9 +23,14 @@ class Sequences:
     provenance: dict[str, Any] = field(default_factory=dict)
 
 
-def load_sequences(source: str) -> Sequences:
+def load_sequences(source: str, mapping: str | Path | None = None) -> Sequences:
     """``synthetic``, ``file.npz`` (arrays ``sequences``, ``channel_names``, optional
-    ``skills``) or an episode set ``file.mcap`` from the simulator."""
+    ``skills``) or an episode set ``file.mcap`` from the simulator; given a ``mapping`` file,
+    ROS 2 bags or a LeRobot dataset read through it."""
+    if mapping is not None:
+        from logs.sources import load_log_sequences  # the log readers are only needed for logs
+
+        return load_log_sequences(source, mapping)
     if source == SYNTHETIC:
         s = make_skills()
         labels = np.array([f"skill{k}" for k in s.skills])

@@ -180,12 +180,13 @@ def stream_episode(
     reconnect: bool = False,
     quiet: bool = False,
     after_step: Callable[[int], None] | None = None,
+    period: float = 1.0 / SIM.timing.observation_hz,
 ) -> EpisodeSummary:
-    """Stream one simulated episode to the service, recording it; never leaves files open."""
+    """Stream one episode (simulated, or recorded with no 40 Hz world trace) to the service,
+    recording it; never leaves files open. ``period`` is the time between its observations."""
     names = tuple(ep.channel_names)
     run_id = new_run_id("client")
     recording_id = run_id  # shared with the service session so both files merge
-    period = 1.0 / SIM.timing.observation_hz
     summary = EpisodeSummary(
         episode=index, skill=ep.skill, seed=ep.seed,
         fault=None if ep.fault is None else ep.fault.to_dict(),
@@ -266,7 +267,7 @@ def stream_episode(
                 if after_step is not None:
                     after_step(k)
                 k += 1
-            for _, world in world_records(ep, float(ep.t_hi[-1]), next_row):  # the settling block
+            for _, world in world_records(ep, float(ep.t_hi[-1]) if len(ep.t_hi) else 0.0, next_row):  # settling
                 rec.log_world(world)
             summary.completed = True
             with contextlib.suppress(ServiceLost):

@@ -1,0 +1,198 @@
+"""The channel mapping file: which topic field or dataset feature element becomes which model
+channel, in which units, at which step period, and which channels are joints.
+
+A mapping is TOML (``.toml``, read with tomllib) or YAML (``.yaml``/``.yml``); both hold the
+same tables, checked here with one schema so that a typo is refused with the table, the
+channel and the reason rather than turning into a silently wrong model. See
+``examples/panda_ros2.toml`` and README "Your robot's logs".
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal, Sequence
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from logs.errors import LogError
+from models.fault import JOINT_PREFIX
+
+Kind = Literal["rosbag", "lerobot"]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Timing(_Strict):
+    """The model's clock: every episode is resampled to ``steps`` samples ``period_s`` apart."""
+
+    period_s: float = Field(gt=0, description="the model's step period (s); 0.5 for the simulated Panda")
+    steps: int = Field(ge=2, description="steps per episode; shorter episodes are refused")
+    max_gap_s: float | None = Field(None, gt=0, description="longest silence of a stream inside an "
+                                    "episode [default: period_s]")
+
+    @property
+    def gap_limit_s(self) -> float:
+        return self.period_s if self.max_gap_s is None else self.max_gap_s
+
+
+class Episodes(_Strict):
+    """How a ROS 2 bag is cut into episodes and where their time stamps and skill names come from."""
+
+    split: Literal["file", "marker", "gap"] = Field("file", description="file: one episode per bag; marker: "
+                                                    "one per message on marker_topic; gap: a silence longer than gap_s")
+    marker_topic: str | None = None
+    gap_s: float | None = Field(None, gt=0)
+    label_topic: str | None = Field(None, description="a std_msgs/msg/String topic whose data names the skill")
+    stamp: Literal["log", "header"] = Field("log", description="log: the bag's receive time; header: "
+                                                   "header.stamp (the log time for messages without a header)")
+
+    @model_validator(mode="after")
+    def _split_needs(self) -> "Episodes":
+        if self.split == "marker" and not self.marker_topic:
+            raise ValueError("split = 'marker' needs marker_topic")
+        if self.split == "gap" and self.gap_s is None:
+            raise ValueError("split = 'gap' needs gap_s")
+        return self
+
+
+class Channel(_Strict):
+    """One model channel: ``topic`` + ``field`` in a bag, or ``feature`` in a LeRobot dataset."""
+
+    name: str = Field(min_length=1)
+    units: str = Field(min_length=1, description="the channel's units, e.g. rad, m, N, N m, or 1")
+    joint: bool = Field(False, description="a joint angle: a candidate for fault isolation")
+    topic: str | None = None
+    field: str | None = Field(None, description="dotted path in the message, e.g. position or wrench.force.x")
+    feature: str | None = None
+    index: int | None = Field(None, ge=0, description="element of an array field or vector feature")
+    key: str | None = Field(None, description="element by name: the message's name[] (JointState) "
+                            "or the feature's names in meta/info.json")
+    scale: float = Field(1.0, description="value = recorded value x scale (e.g. 0.001 for mm to m)")
+    interpolation: Literal["linear", "previous"] = "linear"
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Channel":
+        if (self.topic is None) == (self.feature is None):
+            raise ValueError("give either topic (a ROS 2 bag) or feature (a LeRobot dataset)")
+        if self.topic is not None and not self.field:
+            raise ValueError("a topic channel needs field, e.g. 'position' or 'wrench.force.x'")
+        if self.feature is not None and self.field is not None:
+            raise ValueError("field is for topics; pick a feature's element with index or key")
+        if self.index is not None and self.key is not None:
+            raise ValueError("give index or key, not both")
+        if self.joint != self.name.startswith(JOINT_PREFIX):
+            raise ValueError(f"joint channels, and only they, must be named {JOINT_PREFIX}...: "
+                             "fault isolation picks joints by that prefix")
+        return self
+
+    @property
+    def source(self) -> str:
+        """Where the channel is read, for messages."""
+        return f"{self.topic} {self.field}" if self.topic is not None else f"feature {self.feature}"
+
+
+class Mapping(_Strict):
+    description: str = ""
+    timing: Timing
+    episodes: Episodes | None = Field(None, description="ROS 2 bags only")
+    channels: list[Channel] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Mapping":
+        names = [c.name for c in self.channels]
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        if repeated:
+            raise ValueError(f"channel names must be unique; repeated: {repeated}")
+        kinds = {"rosbag" if c.topic is not None else "lerobot" for c in self.channels}
+        if len(kinds) > 1:
+            raise ValueError("channels mix topics and features: one mapping reads one kind of source")
+        if "lerobot" in kinds and self.episodes is not None:
+            raise ValueError("[episodes] is for ROS 2 bags; a LeRobot dataset's episodes come from episode_index")
+        ep = self.episodes
+        if ep is not None and ep.split == "gap" and ep.gap_s is not None and ep.gap_s <= self.timing.gap_limit_s:
+            raise ValueError(f"episodes.gap_s ({ep.gap_s}) must exceed timing.max_gap_s ({self.timing.gap_limit_s}): "
+                             "a silence that splits episodes cannot also be allowed inside one")
+        return self
+
+    @property
+    def kind(self) -> Kind:
+        return "rosbag" if self.channels[0].topic is not None else "lerobot"
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.channels)
+
+    @property
+    def split(self) -> Episodes:
+        return self.episodes or Episodes()
+
+    def to_dict(self) -> dict[str, Any]:
+        return self.model_dump(mode="json", exclude_none=True)
+
+
+def _where(loc: tuple[Any, ...], raw: Any) -> str:
+    """``channels[3] ('joint4').topic`` from a pydantic location."""
+    text, node = "", raw
+    for item in loc:
+        if isinstance(item, int):
+            node = node[item] if isinstance(node, list) and item < len(node) else None
+            name = node.get("name") if isinstance(node, dict) else None
+            text += f"[{item}]" + (f" ({name!r})" if name else "")
+        else:
+            node = node.get(item) if isinstance(node, dict) else None
+            text += f".{item}" if text else str(item)
+    return text or "mapping"
+
+
+def parse_mapping(raw: Any, where: str) -> Mapping:
+    """Validate a mapping document; every problem in one message."""
+    try:
+        return Mapping.model_validate(raw)
+    except ValidationError as exc:
+        problems = [f"  {_where(e['loc'], raw)}: {e['msg'].removeprefix('Value error, ')}" for e in exc.errors()]
+        raise LogError(f"{where} is not a valid channel mapping:\n" + "\n".join(problems)) from None
+
+
+def load_mapping(path: str | Path) -> Mapping:
+    """Read and validate a TOML or YAML mapping file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise LogError(f"cannot read the mapping {path}: {exc.strerror or exc}") from None
+    try:
+        if path.suffix == ".toml":
+            raw = tomllib.loads(text)
+        elif path.suffix in (".yaml", ".yml"):
+            raw = yaml.safe_load(text)
+        else:
+            raise LogError(f"mapping {path}: use a .toml or .yaml file")
+    except (tomllib.TOMLDecodeError, yaml.YAMLError) as exc:
+        raise LogError(f"mapping {path} is not valid {path.suffix[1:].upper()}: {exc}") from None
+    return parse_mapping(raw, str(path))
+
+
+def check_checkpoint(mapping: Mapping, channel_names: Sequence[str], provenance: dict[str, Any]) -> None:
+    """Refuse data mapped otherwise than the checkpoint's training data (channels, units, clock)."""
+    mine, theirs = mapping.channel_names, tuple(channel_names)
+    if mine != theirs:
+        missing = [n for n in theirs if n not in mine]
+        extra = [n for n in mine if n not in theirs]
+        why = (f"missing {missing}" if missing else "") + ("; " if missing and extra else "") + (f"extra {extra}" if extra else "")
+        raise LogError(f"the mapping gives channels {list(mine)} but the model expects {list(theirs)} "
+                       f"({why or 'same channels, other order'})")
+    trained = provenance.get("mapping")
+    if not trained:
+        return
+    before = parse_mapping(trained, "the checkpoint's mapping")
+    if (before.timing.period_s, before.timing.steps) != (mapping.timing.period_s, mapping.timing.steps):
+        raise LogError(f"the mapping resamples to {mapping.timing.steps} steps of {mapping.timing.period_s} s; "
+                       f"the model was trained on {before.timing.steps} steps of {before.timing.period_s} s")
+    for old, new in zip(before.channels, mapping.channels):
+        if old.units != new.units:
+            raise LogError(f"channel {new.name} is in {new.units!r} in the mapping but the model was trained "
+                           f"on {old.units!r}")

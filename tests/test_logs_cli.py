@@ -1,0 +1,150 @@
+"""``nasm train``/``score``/``evaluate`` with ``--mapping`` and ``nasm replay`` on ROS 2 bags and a
+LeRobot dataset of simulated Panda episodes, against a real service on loopback."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from experiments.robot_logs.write import bag_mapping, lerobot_mapping, write_bag, write_lerobot, write_mapping
+from logs.mapping import parse_mapping
+from logs.sources import read_mapped
+from models import checkpoint
+from models.asm import NeuralASM
+from models.config import FAST
+from nasm.cli import app
+from recordings.readers import read_mcap
+from service.embedded import start_embedded
+from service.settings import Settings
+from sim.client import stream_episode
+from sim.faults import FaultSpec
+from sim.runner import run_episode
+from sim.skills import SKILLS
+
+runner = CliRunner()
+TEST_SEED = 40
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("logs")
+    demos = [run_episode(s, seed) for s in SKILLS for seed in range(4)]
+    normal = [run_episode(SKILLS[0], TEST_SEED), run_episode(SKILLS[1], TEST_SEED + 1)]
+    faults = [run_episode(SKILLS[0], TEST_SEED, fault=FaultSpec(joint=2, time_s=3.0, overshoot_deg=15.0)),
+              run_episode(SKILLS[1], TEST_SEED + 1, fault=FaultSpec(joint=4, time_s=2.0, overshoot_deg=-15.0))]
+    return {"demos": write_bag(demos, folder / "demos.mcap", jitter_s=0.002),
+            "normal": write_bag(normal, folder / "normal.mcap"), "faults": write_bag(faults, folder / "faults.mcap"),
+            "mapping": write_mapping(bag_mapping("marker"), folder / "mapping.yaml"),
+            "lerobot": write_lerobot(demos, folder / "lerobot"),
+            "lerobot_mapping": write_mapping(lerobot_mapping(), folder / "lerobot.yaml")}
+
+
+def _nasm(*args: object) -> object:
+    return runner.invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def cli_model(logs, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("cli-model") / "model.safetensors"
+    result = _nasm("train", logs["demos"], "--mapping", logs["mapping"], "--epochs", 40, "--hidden", 32, "--out", out)
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_train_from_a_bag_keeps_source_and_mapping_in_the_checkpoint(cli_model, logs):
+    model = checkpoint.load(cli_model)
+    assert model.provenance["source"] == str(logs["demos"]) and model.provenance["format"] == "rosbag"
+    assert model.provenance["mapping"] == parse_mapping(bag_mapping("marker"), "m").to_dict()
+    assert model.provenance["mapping_file"] == str(logs["mapping"])
+    assert model.provenance["skills"] == sorted(SKILLS) and model.provenance["sequences"] == 8
+
+
+def test_score_a_bag_and_refuse_a_mapping_that_does_not_match(cli_model, logs, tmp_path):
+    result = _nasm("score", cli_model, logs["faults"], "--mapping", logs["mapping"])
+    assert result.exit_code == 0, result.output
+    assert len(result.output.strip().splitlines()) == 2
+    doc = bag_mapping("marker")
+    doc["channels"][1]["units"] = "deg"
+    result = _nasm("score", cli_model, logs["faults"], "--mapping", write_mapping(doc, tmp_path / "deg.yaml"))
+    assert result.exit_code == 2
+    assert "channel joint2 is in 'deg' in the mapping but the model was trained on 'rad'" in result.output
+
+
+def test_a_bad_source_fails_with_one_message_and_writes_nothing(logs, tmp_path):
+    doc = bag_mapping("marker")
+    doc["channels"][3]["topic"] = "/joint_state"
+    out = tmp_path / "never.safetensors"
+    result = _nasm("train", logs["demos"], "--mapping", write_mapping(doc, tmp_path / "typo.yaml"), "--out", out)
+    assert result.exit_code == 2
+    assert "bag demos has no topic /joint_state; its topics:" in result.output
+    assert not out.exists() and list(tmp_path.iterdir()) == [tmp_path / "typo.yaml"]
+
+
+def test_train_from_a_lerobot_dataset(logs, tmp_path):
+    out = tmp_path / "lerobot.safetensors"
+    result = _nasm("train", logs["lerobot"], "--mapping", logs["lerobot_mapping"], "--epochs", 5, "--hidden", 16,
+                   "--out", out)
+    assert result.exit_code == 0, result.output
+    assert checkpoint.load(out).provenance["format"] == "lerobot"
+
+
+@pytest.fixture(scope="module")
+def served(logs, tmp_path_factory):
+    """A calibrated model trained from the demonstration bag, hosted by an in-process service."""
+    folder = tmp_path_factory.mktemp("models")
+    demos = read_mapped(logs["demos"], parse_mapping(bag_mapping("marker"), "m"))
+    precision = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(10, 15)])
+    thresholds = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(20, 25)])
+    model = NeuralASM.fit(demos.data, demos.channel_names, FAST.with_(hidden_size=64, epochs=150), progress=False,
+                          provenance=demos.provenance)
+    for mode in ("offline", "online"):
+        model.calibrate(precision, thresholds, mode, 1)
+    path = checkpoint.save(model, folder / "panda.safetensors")
+    settings = Settings(models_dir=folder, recordings_dir=tmp_path_factory.mktemp("service-recordings"),
+                        build_default_model=False)
+    with start_embedded(settings) as server:
+        yield server, path
+
+
+def test_replay_streams_like_the_live_client(served, logs, tmp_path):
+    server, _ = served
+    summaries = tmp_path / "replay.json"
+    result = _nasm("replay", logs["faults"], "--mapping", logs["mapping"], "--url", server.url,
+                   "--out", tmp_path / "rec", "--json", summaries)
+    assert result.exit_code == 0, result.output
+    replayed = json.loads(summaries.read_text())
+    assert [s["steps_scored"] for s in replayed] == [15, 15] and all(s["completed"] for s in replayed)
+    assert result.output.count("summary: episode") == 2
+    # the first fault episode streamed live by the client's own code gives the same energies
+    live = stream_episode(run_episode(SKILLS[0], TEST_SEED, fault=FaultSpec(joint=2, time_s=3.0, overshoot_deg=15.0)),
+                          0, server.url, None, "offline", tmp_path / "live", quiet=True)
+    np.testing.assert_allclose([line["energy"] for line in replayed[0]["steps"]], live.energies, rtol=1e-9)
+    assert replayed[0]["detected"] == live.detected and replayed[0]["isolated_joint"] == live.isolated_joint
+    recorded = read_mcap(replayed[0]["recordings"]["mcap"])["/fault"]
+    assert [m["energy"] for m in recorded] == [line["energy"] for line in replayed[0]["steps"]]
+
+
+def test_replay_refuses_an_episode_the_source_does_not_have(served, logs, tmp_path):
+    server, _ = served
+    result = _nasm("replay", logs["faults"], "--mapping", logs["mapping"], "--url", server.url, "--episode", 5,
+                   "--out", tmp_path)
+    assert result.exit_code == 2 and "has episodes 0..1" in result.output
+    assert not list(tmp_path.iterdir())
+
+
+def test_evaluate_detects_the_joint_locks_in_a_bag(served, logs, tmp_path):
+    _, model_path = served
+    out = tmp_path / "eval.json"
+    result = _nasm("evaluate", model_path, logs["normal"], logs["faults"], "--mapping", logs["mapping"],
+                   "--fpr", 0.01, "--json", out)
+    assert result.exit_code == 0, result.output
+    report = json.loads(out.read_text())
+    first = report["episodes"]["faults"][0]
+    assert first["first_flag_step"] is not None and first["first_flag_step"] >= 6  # the lock starts at step 6
+    assert first["isolated_joint"] is not None and first["isolated_joint"].startswith("joint")
+    assert 0.5 <= report["detection_rate"] <= 1.0 and 0.0 <= report["auroc"] <= 1.0
+    assert "faulty episodes detected" in result.output
