@@ -226,14 +226,12 @@ class TemporalPC:
         fz = np.tanh(z)
         residual = target - fz @ w.T  # Pi^1/2 eps_x
         energy = (residual * residual).sum(1)
-        for step in range(steps):
-            slope = 1.0 - fz * fz  # f'(z)
-            if step == 0:
-                slope_0 = slope
-                curvature = ((slope_0 * slope_0)[:, None, :] * w) @ w.T  # J J^T, (B, D, D)
-                curvature += np.eye(self.obs_size, dtype=np.float32)
-                factor = Cholesky(curvature)
-            grad = (z - prior) - slope * (residual @ w)
+        slope_0 = 1.0 - fz * fz  # f'(prior): the curvature of every step is evaluated here
+        curvature = ((slope_0 * slope_0)[:, None, :] * w) @ w.T  # J J^T, (B, D, D)
+        curvature += np.eye(self.obs_size, dtype=np.float32)
+        factor = Cholesky(curvature)
+        for _ in range(steps):
+            grad = (z - prior) - (1.0 - fz * fz) * (residual @ w)
             dz = grad - slope_0 * (factor.solve((slope_0 * grad) @ w.T) @ w)
             for _ in range(MAX_HALVINGS + 1):
                 new_z = z - dz
