@@ -12,18 +12,16 @@ machines are shared and noisy. One JSON object is the last line.
 
 from __future__ import annotations
 
-import os
+import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+import argparse
+import json
+import time
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import time  # noqa: E402
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from models.baselines import LinearOneStep as RidgeOneStep  # noqa: E402
-from models.detectors import all_detectors  # noqa: E402
+from models.baselines import LinearOneStep as RidgeOneStep
+from models.detectors import all_detectors
 
 SKILLS, CONTEXT, STEPS, CHANNELS = ("pick", "place", "push", "stack"), 4, 15, 30
 

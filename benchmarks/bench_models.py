@@ -17,24 +17,22 @@ report how far above the energy minimum they stop (``energy_gap_vs_converged``).
 
 from __future__ import annotations
 
-import os
+import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+import argparse
+import json
+import time
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import time  # noqa: E402
+import numpy as np
+import torch
 
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-
-from models.asm import NeuralASM  # noqa: E402
-from models.baselines import LinearOneStep, StepStatistics  # noqa: E402
-from models.config import FAITHFUL, FAST  # noqa: E402
-from models.recall import Recaller  # noqa: E402
-from models.tpc import TemporalPC  # noqa: E402
-from experiments.fault_sweep.data import EpisodeArrays  # noqa: E402
-from sim.dataset import demonstrations, held_out_normal, run_jobs  # noqa: E402
+from models.asm import NeuralASM
+from models.baselines import LinearOneStep, StepStatistics
+from models.config import FAITHFUL, FAST
+from models.recall import Recaller
+from models.tpc import TemporalPC
+from experiments.fault_sweep.data import EpisodeArrays
+from sim.dataset import demonstrations, held_out_normal, run_jobs
 
 torch.set_num_threads(1)
 

@@ -3,24 +3,27 @@ the packages offer (simulated demonstrations, the service, the experiments)."""
 
 from __future__ import annotations
 
+import runtime  # noqa: F401  (first: one BLAS thread, no display)
+
 import json
-import os
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")  # before torch: its matrices here are tiny
-os.environ.setdefault("MUJOCO_GL", "disable")
+from pathlib import Path
 
-from pathlib import Path  # noqa: E402
+import numpy as np
+import torch
+import typer
 
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-import typer  # noqa: E402
-
-from models import checkpoint  # noqa: E402
-from models.asm import NeuralASM  # noqa: E402
-from models.config import PRESETS  # noqa: E402
-from models.recall import RECALL_MODES  # noqa: E402
-from logs.cli import MAPPING_HELP, evaluate, read_logs, replay  # noqa: E402
-from nasm.data import SYNTHETIC, load_sequences  # noqa: E402
+from models import checkpoint
+from models.asm import NeuralASM
+from models.config import PRESETS
+from models.recall import RECALL_MODES
+from experiments.contextual.cli import contextual
+from experiments.correction.cli import correction
+from experiments.fault_sweep.cli import faults
+from logs.cli import MAPPING_HELP, evaluate, read_logs, replay
+from nasm.data import SYNTHETIC, load_sequences
+from service.cli import serve
+from sim.cli import demos
 
 torch.set_num_threads(1)
 app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
@@ -134,12 +137,6 @@ def info(model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"
     }
     typer.echo(json.dumps(summary, indent=2, default=str))
 
-
-from experiments.contextual.cli import contextual  # noqa: E402
-from experiments.correction.cli import correction  # noqa: E402
-from experiments.fault_sweep.cli import faults  # noqa: E402
-from service.cli import serve  # noqa: E402
-from sim.cli import demos  # noqa: E402
 
 for command in (demos, faults, correction, contextual, serve, replay, evaluate):  # each package owns its commands
     app.command()(command)

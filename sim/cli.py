@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from sim.parallel import Backend
+from runtime.parallel import Backend
 
 app = typer.Typer(help="Simulated Panda pick-and-place episode sets.", no_args_is_help=True)
 

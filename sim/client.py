@@ -29,7 +29,8 @@ CLI; it returns one ``EpisodeSummary`` per episode.
 
 from __future__ import annotations
 
-import os
+import runtime  # noqa: F401  (first: one BLAS thread, no display)
+
 import sys
 from pathlib import Path
 
@@ -38,28 +39,25 @@ if __package__ in (None, ""):  # run as a script: import the project, not sim/'s
     sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _here]
     sys.path.insert(0, str(_here.parent))
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")  # before torch is imported (embedded service)
-os.environ.setdefault("MUJOCO_GL", "disable")
+import contextlib
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Iterator
 
-import contextlib  # noqa: E402
-import json  # noqa: E402
-import time  # noqa: E402
-from dataclasses import asdict, dataclass, field  # noqa: E402
-from typing import Any, Callable, Iterator  # noqa: E402
+import numpy as np
+import typer
 
-import numpy as np  # noqa: E402
-import typer  # noqa: E402
-
-from recordings import DEFAULT_DIR, EpisodeRecorder, new_run_id  # noqa: E402
-from recordings.records import StepRecord, WorldRecord  # noqa: E402
-from sim.config import SIM  # noqa: E402
-from sim.disturbances import FallingObject  # noqa: E402
-from sim.episode import Episode  # noqa: E402
-from sim.faults import FaultSpec  # noqa: E402
-from sim.panda import dh_frames  # noqa: E402
-from sim.runner import run_episode  # noqa: E402
-from sim.skills import SKILLS  # noqa: E402
-from sim.transport import TRANSPORTS, ServiceError, ServiceLost, Transport  # noqa: E402
+from recordings import DEFAULT_DIR, EpisodeRecorder, new_run_id
+from recordings.records import StepRecord, WorldRecord
+from sim.config import SIM
+from sim.disturbances import FallingObject
+from sim.episode import Episode
+from sim.faults import FaultSpec
+from sim.panda import dh_frames
+from sim.runner import run_episode
+from sim.skills import SKILLS
+from sim.transport import TRANSPORTS, ServiceError, ServiceLost, Transport
 
 RECONNECT_ATTEMPTS = 5
 RECONNECT_BACKOFF_S = (0.5, 1.0, 2.0, 4.0, 8.0)

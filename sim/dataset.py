@@ -38,7 +38,7 @@ from sim.config import SIM
 from sim.disturbances import FallingObject
 from sim.episode import Episode
 from sim.faults import FaultSpec, fault_grid
-from sim.parallel import Backend, parallel_map
+from runtime.parallel import Backend, parallel_map
 from sim.skills import SKILLS
 from sim.varied_faults import VariedFault
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from sim.config import SIM
 from sim.episode import Episode
-from sim.parallel import Backend, parallel_map
+from runtime.parallel import Backend, parallel_map
 from sim.varied import VARIED_SKILLS, Context, keyframes, make_plan, perceived, post_xy, sample_context, with_context_channels
 from sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestoreFriction, VariedFault, apply_sensor_fault,
                                execution_effects)

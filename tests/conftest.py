@@ -1,15 +1,12 @@
-import os
+import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("MUJOCO_GL", "disable")
+import numpy as np
+import pytest
+import torch
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-import torch  # noqa: E402
-
-from models.asm import NeuralASM  # noqa: E402
-from models.config import FAST  # noqa: E402
-from models.synthetic import make_skills, split  # noqa: E402
+from models.asm import NeuralASM
+from models.config import FAST
+from models.synthetic import make_skills, split
 
 torch.set_num_threads(1)
 

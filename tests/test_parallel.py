@@ -5,7 +5,7 @@ import pytest
 
 from sim.config import SIM
 from sim.dataset import Job, run_jobs
-from sim.parallel import parallel_map
+from runtime.parallel import parallel_map
 from sim.skills import SKILLS
 
 

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import os
 
-os.environ.setdefault("MUJOCO_GL", "disable")
 
 import numpy as np
 import pytest

@@ -15,7 +15,7 @@ from experiments.varied.score import headline, score_all
 from models.config import FAST
 from models.detectors import ConditionalTemplate, PerSkillZScore
 from sim.episode import Episode
-from sim.parallel import parallel_map
+from runtime.parallel import parallel_map
 from sim.varied import VARIED_SKILLS
 from sim.varied_sets import VariedJob, fault_jobs, run_job
 

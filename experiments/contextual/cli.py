@@ -2,22 +2,19 @@
 
 from __future__ import annotations
 
-import os
+import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")  # before torch: its matrices here are tiny
-os.environ.setdefault("MUJOCO_GL", "disable")
+from pathlib import Path
 
-from pathlib import Path  # noqa: E402
+import torch
+import typer
 
-import torch  # noqa: E402
-import typer  # noqa: E402
-
-from experiments.contextual import figures, report  # noqa: E402
-from experiments.contextual.config import CONTEXTUAL, QUICK  # noqa: E402
-from experiments.contextual.dataset import conditions_data  # noqa: E402
-from experiments.contextual.protocol import run_protocol  # noqa: E402
-from models.config import PRESETS  # noqa: E402
-from sim.parallel import Backend  # noqa: E402
+from experiments.contextual import figures, report
+from experiments.contextual.config import CONTEXTUAL, QUICK
+from experiments.contextual.dataset import conditions_data
+from experiments.contextual.protocol import run_protocol
+from models.config import PRESETS
+from runtime.parallel import Backend
 
 app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
 

@@ -16,16 +16,14 @@ same hand paths and differ only in what the data shows:
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Sequence
 
-os.environ.setdefault("MUJOCO_GL", "disable")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from experiments.contextual.config import CONDITIONS, SKILLS, ContextualConfig, Skill  # noqa: E402
+from experiments.contextual.config import CONDITIONS, SKILLS, ContextualConfig, Skill
 
 HAND_CHANNELS = ("ee_x", "ee_y")
 JOINT_CHANNELS = tuple(f"q{i}" for i in range(1, 8))

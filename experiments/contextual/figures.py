@@ -6,14 +6,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import matplotlib
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig  # noqa: E402
-from experiments.contextual.dataset import JOINT_CHANNELS, ContextualData  # noqa: E402
+from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig
+from experiments.contextual.dataset import JOINT_CHANNELS, ContextualData
 
 CUE_COLOURS = {"CW": "tab:red", "CCW": "tab:blue", "CW_wide": "tab:orange", "CCW_wide": "tab:cyan"}
 LABELS = {

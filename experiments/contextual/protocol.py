@@ -3,21 +3,19 @@ of skills) training, run in parallel worker processes, then summarised over seed
 
 from __future__ import annotations
 
-import os
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import time  # noqa: E402
-from dataclasses import asdict  # noqa: E402
-from typing import Any, Callable, Sequence  # noqa: E402
+import time
+from dataclasses import asdict
+from typing import Any, Callable, Sequence
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig  # noqa: E402
-from experiments.contextual.dataset import MOTOR_CHANNELS, channel_names  # noqa: E402
-from experiments.contextual.tasks import init_worker, separation_task, skills_task  # noqa: E402
-from models.config import TPCConfig  # noqa: E402
-from sim.parallel import Backend, parallel_map  # noqa: E402
+from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig
+from experiments.contextual.dataset import MOTOR_CHANNELS, channel_names
+from experiments.contextual.tasks import init_worker, separation_task, skills_task
+from models.config import TPCConfig
+from runtime.parallel import Backend, parallel_map
 
 Job = tuple[Callable[..., dict[str, Any]], tuple[Any, ...]]
 CUES = tuple(s.name for s in SKILLS[:2])

@@ -3,23 +3,21 @@ spawned worker process can run it."""
 
 from __future__ import annotations
 
-import os
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from typing import Any  # noqa: E402
+from typing import Any
 
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
+import numpy as np
+import torch
 
-from experiments.contextual.config import SKILLS, ContextualConfig  # noqa: E402
-from experiments.contextual.dataset import HAND_CHANNELS, conditions_data  # noqa: E402
-from experiments.contextual.learners import fit  # noqa: E402
-from experiments.contextual.metrics import pead, recall_error  # noqa: E402
-from models.config import TPCConfig  # noqa: E402
-from models.normaliser import Normaliser  # noqa: E402
-from models.tpc import TemporalPC  # noqa: E402
-from models.train import train  # noqa: E402
+from experiments.contextual.config import SKILLS, ContextualConfig
+from experiments.contextual.dataset import HAND_CHANNELS, conditions_data
+from experiments.contextual.learners import fit
+from experiments.contextual.metrics import pead, recall_error
+from models.config import TPCConfig
+from models.normaliser import Normaliser
+from models.tpc import TemporalPC
+from models.train import train
 
 
 def init_worker() -> None:

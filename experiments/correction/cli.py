@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import os
+import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("MUJOCO_GL", "disable")
+from pathlib import Path
 
-from pathlib import Path  # noqa: E402
-
-import typer  # noqa: E402
+import typer
 
 app = typer.Typer()
 

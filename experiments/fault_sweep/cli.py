@@ -10,7 +10,7 @@ from pathlib import Path
 import typer
 
 from models.config import FAITHFUL
-from sim.parallel import Backend
+from runtime.parallel import Backend
 
 # The paper's batch-1 training over 160 varied demonstrations costs ~3 s per epoch here: the
 # varied benchmark caps the paper-configured network's epochs to stay within minutes.

@@ -14,7 +14,7 @@ import numpy as np
 
 from sim.dataset import generate, load_episodes
 from sim.episode import Episode
-from sim.parallel import Backend
+from runtime.parallel import Backend
 
 SETS = ("demos", "normal", "faults", "twins")
 

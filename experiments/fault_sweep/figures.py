@@ -4,16 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, Weighted, weigh  # noqa: E402
-from experiments.fault_sweep.run import SweepResult  # noqa: E402
-from models.calibration import quantile_threshold  # noqa: E402
-from models.fault import joint_channels  # noqa: E402
+from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, Weighted, weigh
+from experiments.fault_sweep.run import SweepResult
+from models.calibration import quantile_threshold
+from models.fault import joint_channels
 
 BEST = ("nasm_offline", "whitened")  # the paper's setting, errors weighted by a full precision
 EXAMPLES = ((5, 3.0, 10.0), (2, 3.0, 10.0))  # (joint, time s, overshoot deg), the paper's two

@@ -22,7 +22,7 @@ from models import checkpoint
 from models.asm import NeuralASM
 from models.config import FAITHFUL, FAST, TPCConfig
 from models.normaliser import Normaliser
-from sim.parallel import Backend
+from runtime.parallel import Backend
 
 
 @dataclass

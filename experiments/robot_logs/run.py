@@ -10,24 +10,22 @@ does on the native episodes; both results are printed side by side.
 
 from __future__ import annotations
 
+import runtime  # noqa: F401  (first: one BLAS thread, no display)
+
 import dataclasses
 import json
-import os
 import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("MUJOCO_GL", "disable")
+import typer
 
-import typer  # noqa: E402
-
-from experiments.fault_sweep.data import SETS, ensure_sets, make_benchmark  # noqa: E402
-from experiments.fault_sweep.methods import neural_asm_methods  # noqa: E402
-from experiments.fault_sweep.run import score_methods, train_models  # noqa: E402
-from experiments.robot_logs.write import bag_mapping, write_bag, write_mapping  # noqa: E402
-from logs.sources import load_log_sequences  # noqa: E402
-from models.config import FAST  # noqa: E402
-from sim.episode import Episode  # noqa: E402
+from experiments.fault_sweep.data import SETS, ensure_sets, make_benchmark
+from experiments.fault_sweep.methods import neural_asm_methods
+from experiments.fault_sweep.run import score_methods, train_models
+from experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
+from logs.sources import load_log_sequences
+from models.config import FAST
+from sim.episode import Episode
 
 ROWS = (("detected @1 % FPR", "detection_rate", "0.01"), ("detected @5 % FPR", "detection_rate", "0.05"),
         ("measured FPR @1 %", "measured_fpr", "0.01"), ("normal episodes flagged @1 %", "episode_false_alarm_rate", "0.01"),

@@ -14,7 +14,7 @@ from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.methods import neural_asm_methods, train_neural_asm
 from experiments.varied.score import ALPHA, score_all
 from models.config import FAST, ROBUST, TPCConfig
-from sim.parallel import Backend
+from runtime.parallel import Backend
 
 VARIANTS: dict[str, tuple[str, TPCConfig]] = {
     "default": ("robust preset: training noise 0.35 (the benchmark's default)", ROBUST),

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.episode import Episode
-from sim.parallel import Backend
+from runtime.parallel import Backend
 from sim.varied import channel_names, context_columns
 from sim.varied_sets import VARIED_KINDS, generate
 

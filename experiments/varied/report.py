@@ -6,13 +6,11 @@ import json
 import os
 from pathlib import Path
 
-import matplotlib
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from experiments.varied.run import VariedResult  # noqa: E402
+from experiments.varied.run import VariedResult
 
 
 def _facts(result: VariedResult) -> dict:

@@ -19,7 +19,7 @@ from experiments.varied.methods import Method, baseline_methods, neural_asm_meth
 from experiments.varied.score import ALPHA, headline, score_all
 from models import checkpoint
 from models.config import FAITHFUL, ROBUST, TPCConfig
-from sim.parallel import Backend
+from runtime.parallel import Backend
 
 FEATURED = "nasm_online"
 
