@@ -1,0 +1,43 @@
+"""The one container every dataset here is passed around in: (N, T, D) sequences, the skill
+of each, and the names of their D channels.
+
+Synthetic skills, simulated episode sets, robot logs and the contextual demonstrations all
+arrive as ``Sequences``, so training, scoring and the experiments take one type.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Sequences:
+    data: np.ndarray  # (N, T, D), original units
+    labels: np.ndarray  # (N,) skill of each sequence: a name, or an index into a skill list
+    channel_names: tuple[str, ...]
+    seeds: np.ndarray | None = None  # (N,) simulation seeds, where the sequences were simulated
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.data.ndim != 3:
+            raise ValueError(f"sequences must be (N, T, D), got shape {self.data.shape}")
+        if len(self.labels) != len(self.data):
+            raise ValueError(f"{len(self.labels)} labels for {len(self.data)} sequences")
+        if len(self.channel_names) != self.data.shape[2]:
+            raise ValueError(f"{len(self.channel_names)} channel names for {self.data.shape[2]} channels")
+        if self.seeds is not None and len(self.seeds) != len(self.data):
+            raise ValueError(f"{len(self.seeds)} seeds for {len(self.data)} sequences")
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+    def take(self, index: np.ndarray) -> Sequences:
+        """The sequences at ``index`` (integer indices or a boolean mask), same channels."""
+        seeds = None if self.seeds is None else self.seeds[index]
+        return replace(self, data=self.data[index], labels=self.labels[index], seeds=seeds)
+
+    def of_skill(self, skill: Any) -> Sequences:
+        return self.take(self.labels == skill)
