@@ -31,7 +31,7 @@ from models.baselines import LinearOneStep, StepStatistics
 from models.config import FAITHFUL, FAST
 from models.recall import Recaller
 from models.tpc import TemporalPC
-from experiments.fault_sweep.data import EpisodeArrays
+from pipelines.episodes import as_sequences
 from sim.dataset import demonstrations, held_out_normal, run_jobs
 
 torch.set_num_threads(1)
@@ -130,57 +130,57 @@ def main() -> None:
 
     demos, _ = run_jobs(demonstrations(10), workers=2, desc="demonstrations")
     held_out, _ = run_jobs(held_out_normal(60), workers=2, desc="held-out episodes")
-    train = EpisodeArrays.of(demos)
-    validation = EpisodeArrays.of(held_out[:20])
-    test = EpisodeArrays.of(held_out[20:])
+    train = as_sequences(demos)
+    validation = as_sequences(held_out[:20])
+    test = as_sequences(held_out[20:])
     names = tuple(demos[0].channel_names)
 
     print("training the default (fast) configuration ...", flush=True)
     start = time.perf_counter()
-    fast = NeuralASM.fit(train.x, names, FAST, labels=train.skills, validation=validation.x)
+    fast = NeuralASM.fit(train.data, names, FAST, labels=train.labels, validation=validation.data)
     train_seconds = time.perf_counter() - start
     epoch_ms = train_seconds / FAST.epochs * 1e3
 
     print("timing the reference loop ...", flush=True)
     norm = fast.normaliser
-    ref_ms = reference_epoch_ms(norm.normalise(train.x))
+    ref_ms = reference_epoch_ms(norm.normalise(train.data))
 
     # The same weights relaxed by the paper's K gradient steps: the reference for the solver.
     net = TemporalPC(fast.obs_size, FAST.with_(solver="gradient"))
     net.load_weights(fast.net.W_H, fast.net.W_F, fast.net.precision)
     gradient = NeuralASM(net, fast.normaliser, names, fast.calibrations)
-    step_default, step_gradient = step_ms(fast, test.x[0]), step_ms(gradient, test.x[0])
+    step_default, step_gradient = step_ms(fast, test.data[0]), step_ms(gradient, test.data[0])
 
     print(f"training the default configuration with {args.seeds - 1} more seed(s) ...", flush=True)
     fast_models = [fast] + [
-        NeuralASM.fit(train.x, names, FAST.with_(seed=FAST.seed + k), labels=train.skills, validation=validation.x)
+        NeuralASM.fit(train.data, names, FAST.with_(seed=FAST.seed + k), labels=train.labels, validation=validation.data)
         for k in range(1, args.seeds)
     ]
     print(f"training the default configuration with gradient descent, {args.seeds} seed(s) ...", flush=True)
     start = time.perf_counter()
     gradient_models = [
-        NeuralASM.fit(train.x, names, FAST.with_(solver="gradient", seed=FAST.seed + k), labels=train.skills,
-                      validation=validation.x)
+        NeuralASM.fit(train.data, names, FAST.with_(solver="gradient", seed=FAST.seed + k), labels=train.labels,
+                      validation=validation.data)
         for k in range(args.seeds)
     ]
     train_seconds_gradient = (time.perf_counter() - start) / args.seeds
 
     print(f"training the faithful configuration ({args.faithful_epochs} epochs, batch 1) ...", flush=True)
-    faithful = NeuralASM.fit(train.x, names, FAITHFUL.with_(epochs=args.faithful_epochs))
+    faithful = NeuralASM.fit(train.data, names, FAITHFUL.with_(epochs=args.faithful_epochs))
 
-    xtr, xte = norm.normalise(train.x), norm.normalise(test.x)
+    xtr, xte = norm.normalise(train.data), norm.normalise(test.data)
     steps = xte.shape[1]
     def recall_mse(models: list[NeuralASM]) -> list[float]:
-        return [mse(m.normaliser.normalise(m.recall(test.x[:, :1], steps)), m.normaliser.normalise(test.x))
+        return [mse(m.normaliser.normalise(m.recall(test.data[:, :1], steps)), m.normaliser.normalise(test.data))
                 for m in models]
 
     def online_mse(models: list[NeuralASM]) -> list[float]:
-        return [float((m.errors(test.x, "online")[:, 1:] ** 2).mean()) for m in models]
+        return [float((m.errors(test.data, "online")[:, 1:] ** 2).mean()) for m in models]
 
     recall_fast, online_fast = recall_mse(fast_models), online_mse(fast_models)
     recall_gradient, online_gradient = recall_mse(gradient_models), online_mse(gradient_models)
-    recall_faithful = faithful.normaliser.normalise(faithful.recall(test.x[:, :1], steps))
-    skill_mean = StepStatistics.fit(xtr, train.skills).expected(xte)
+    recall_faithful = faithful.normaliser.normalise(faithful.recall(test.data[:, :1], steps))
+    skill_mean = StepStatistics.fit(xtr, train.labels).expected(xte)
     linear = LinearOneStep.fit(xtr)
     result = {
         "train_seconds": round(train_seconds, 2),
@@ -193,13 +193,13 @@ def main() -> None:
         "step_ms_gradient_descent": round(step_gradient, 3),
         "solver": FAST.solver,
         "solver_iterations": FAST.solver_iterations,
-        "energy_gap_vs_converged": float(f"{converged_energy_gap(fast, norm.normalise(test.x)):.3g}"),
+        "energy_gap_vs_converged": float(f"{converged_energy_gap(fast, norm.normalise(test.data)):.3g}"),
         "energy_gap_vs_converged_gradient_descent": float(
-            f"{converged_energy_gap(gradient, norm.normalise(test.x)):.3g}"),
+            f"{converged_energy_gap(gradient, norm.normalise(test.data)):.3g}"),
         "recall_mse_fast": round(float(np.mean(recall_fast)), 5),  # mean over training seeds
         "recall_mse_fast_per_seed": [round(v, 5) for v in recall_fast],
         "recall_mse_fast_gradient_descent": round(float(np.mean(recall_gradient)), 5),
-        "recall_mse_faithful": round(mse(recall_faithful, faithful.normaliser.normalise(test.x)), 5),
+        "recall_mse_faithful": round(mse(recall_faithful, faithful.normaliser.normalise(test.data)), 5),
         "faithful_epochs": args.faithful_epochs,
         "recall_mse_skill_mean": round(mse(skill_mean, xte), 5),
         "recall_mse_linear_rollout": round(mse(linear.rollout(xte[:, :1], steps), xte), 5),

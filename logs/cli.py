@@ -9,10 +9,10 @@ from pathlib import Path
 import typer
 
 from logs.errors import LogError
-from logs.sources import check_model
+from logs.sources import check_model, load_log_sequences
 from models import checkpoint
 from models.asm import NeuralASM
-from nasm.data import Sequences, load_sequences
+from models.sequences import Sequences
 from recordings import DEFAULT_DIR
 from sim.transport import TRANSPORTS, ServiceError, ServiceLost
 
@@ -28,7 +28,7 @@ def read_logs(source: str, mapping: Path, model: NeuralASM | None = None) -> Seq
     """Sequences from logs, checked against ``model`` if given, with their warnings printed;
     any LogError ends the command with its message before anything is written."""
     try:
-        seqs = load_sequences(source, mapping)
+        seqs = load_log_sequences(source, mapping)
         if model is not None:
             check_model(seqs, model.channel_names, model.provenance)
     except LogError as exc:

@@ -14,7 +14,7 @@ from logs.errors import LogError
 from models.asm import NeuralASM
 from models.fault import isolate
 from models.scoring import step_rows
-from nasm.data import Sequences
+from models.sequences import Sequences
 
 
 def _flags(model: NeuralASM, seqs: Sequences, mode: str, threshold: float, error_std: np.ndarray) -> list[dict[str, Any]]:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasm.data import Sequences
+from models.sequences import Sequences
 from sim.client import EpisodeSummary, stream_episode
 from sim.episode import Episode
 

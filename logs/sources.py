@@ -15,7 +15,7 @@ from logs import lerobot, rosbag
 from logs.errors import LogError
 from logs.mapping import Kind, Mapping, check_checkpoint, load_mapping, parse_mapping
 from logs.recorded import Recorded
-from nasm.data import Sequences
+from models.sequences import Sequences
 
 
 def source_kind(source: Path) -> Kind:
@@ -40,8 +40,8 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "") ->
         raise LogError(f"{path} holds no episode" + (f" ({'; '.join(warnings)})" if warnings else ""))
     provenance = {"source": str(path), "format": kind, "mapping_file": mapping_file, "mapping": mapping.to_dict(),
                   "episodes": [e.origin for e in episodes], "warnings": warnings}
-    return Sequences(np.stack([e.data for e in episodes]), mapping.channel_names,
-                     np.array([e.label for e in episodes]), provenance)
+    return Sequences(np.stack([e.data for e in episodes]), np.array([e.label for e in episodes]),
+                     mapping.channel_names, provenance=provenance)
 
 
 def load_log_sequences(source: str | Path, mapping_file: str | Path) -> Sequences:

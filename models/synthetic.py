@@ -8,16 +8,9 @@ model be trained and checked without the simulator.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-
-@dataclass(frozen=True)
-class SyntheticSkills:
-    sequences: np.ndarray  # (n_skills * repetitions, T, D)
-    skills: np.ndarray  # (N,) skill index of each sequence
-    channel_names: tuple[str, ...]
+from models.sequences import Sequences
 
 
 def make_skills(
@@ -28,7 +21,7 @@ def make_skills(
     jitter: float = 0.05,
     noise: float = 0.02,
     seed: int = 0,
-) -> SyntheticSkills:
+) -> Sequences:
     rng = np.random.default_rng(seed)
     phase = np.linspace(0.0, 1.0, steps)
     sequences, labels = [], []
@@ -45,13 +38,12 @@ def make_skills(
             sequences.append(clean + noise * rng.standard_normal(clean.shape))
             labels.append(skill)
     names = tuple(f"ch{i}" for i in range(channels))
-    return SyntheticSkills(np.array(sequences), np.array(labels), names)
+    return Sequences(np.array(sequences), np.array(labels), names, provenance={"source": "synthetic", "seed": seed})
 
 
-def split(data: SyntheticSkills, held_out_per_skill: int) -> tuple[SyntheticSkills, SyntheticSkills]:
+def split(data: Sequences, held_out_per_skill: int) -> tuple[Sequences, Sequences]:
     """Hold out the last repetitions of every skill."""
-    test = np.zeros(len(data.skills), bool)
-    for skill in np.unique(data.skills):
-        test[np.flatnonzero(data.skills == skill)[-held_out_per_skill:]] = True
-    pick = lambda mask: SyntheticSkills(data.sequences[mask], data.skills[mask], data.channel_names)  # noqa: E731
-    return pick(~test), pick(test)
+    test = np.zeros(len(data), bool)
+    for skill in np.unique(data.labels):
+        test[np.flatnonzero(data.labels == skill)[-held_out_per_skill:]] = True
+    return data.take(~test), data.take(test)

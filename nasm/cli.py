@@ -66,10 +66,12 @@ def train(
     if hidden is not None:
         config = config.with_(hidden_size=hidden)
     seqs = read_logs(data, mapping) if mapping else load_sequences(data)
-    provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs.data)}
+    provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs)}
+    if seqs.seeds is not None:
+        provenance["seeds"] = seqs.seeds.tolist()
     model = NeuralASM.fit(seqs.data, seqs.channel_names, config, provenance=provenance)
     checkpoint.save(model, out)
-    typer.echo(f"trained on {len(seqs.data)} sequences; final energy {model.history[-1]:.4g}; wrote {out}")
+    typer.echo(f"trained on {len(seqs)} sequences; final energy {model.history[-1]:.4g}; wrote {out}")
 
 
 @app.command()

@@ -4,23 +4,15 @@ robot's ROS 2 bags or LeRobot dataset (``logs``)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from models.sequences import Sequences
 from models.synthetic import make_skills
 
 SYNTHETIC = "synthetic"
-
-
-@dataclass(frozen=True)
-class Sequences:
-    data: np.ndarray  # (N, T, D), original units
-    channel_names: tuple[str, ...]
-    labels: np.ndarray  # (N,) skill name of each sequence
-    provenance: dict[str, Any] = field(default_factory=dict)
 
 
 def load_sequences(source: str, mapping: str | Path | None = None) -> Sequences:
@@ -33,8 +25,7 @@ def load_sequences(source: str, mapping: str | Path | None = None) -> Sequences:
         return load_log_sequences(source, mapping)
     if source == SYNTHETIC:
         s = make_skills()
-        labels = np.array([f"skill{k}" for k in s.skills])
-        return Sequences(s.sequences, s.channel_names, labels, {"source": "synthetic", "seed": 0})
+        return replace(s, labels=np.array([f"skill{k}" for k in s.labels]))
     path = Path(source)
     if not path.exists():
         raise FileNotFoundError(f"no data at {path} (expected '{SYNTHETIC}', an .npz or an .mcap file)")
@@ -45,17 +36,13 @@ def load_sequences(source: str, mapping: str | Path | None = None) -> Sequences:
             data = f["sequences"]
             labels = f["skills"].astype(str) if "skills" in f else np.full(len(data), "unknown")
             names = tuple(str(n) for n in f["channel_names"])
-        return Sequences(data, names, labels, {"source": str(path)})
+        return Sequences(data, labels, names, provenance={"source": str(path)})
     if path.suffix == ".mcap":
-        from sim.dataset import load_episodes  # the simulator is only needed for its files
+        from pipelines.episodes import as_sequences  # the simulator is only needed for its files
+        from sim.dataset import load_episodes
 
         episodes = load_episodes(path)
         if not episodes:
             raise ValueError(f"{path} holds no episodes")
-        return Sequences(
-            np.stack([e.observations for e in episodes]),
-            tuple(episodes[0].channel_names),
-            np.array([e.skill for e in episodes]),
-            {"source": str(path), "seeds": [int(e.seed) for e in episodes]},
-        )
+        return as_sequences(episodes, provenance={"source": str(path)})
     raise ValueError(f"unsupported data file {path}: use .npz or .mcap")

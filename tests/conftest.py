@@ -22,7 +22,7 @@ def skills():
 @pytest.fixture(scope="session")
 def trained(skills):
     train, _ = skills
-    return NeuralASM.fit(train.sequences, train.channel_names, SMALL, progress=False)
+    return NeuralASM.fit(train.data, train.channel_names, SMALL, progress=False)
 
 
 @pytest.fixture

@@ -42,8 +42,8 @@ def sweep():
                             {"demos": demos, "normal": normal, "faults": faults, "twins": twins}.items()})
     model = train_models(bench, {"nasm": FAST.with_(hidden_size=96, epochs=250)}, {"test": True})["nasm"]
     norm = model.normaliser
-    methods = neural_asm_methods(model, "nasm") + baseline_methods(norm.normalise(bench.normal.demos.x),
-                                                                  bench.normal.demos.skills)
+    methods = neural_asm_methods(model, "nasm") + baseline_methods(norm.normalise(bench.normal.demos.data),
+                                                                  bench.normal.demos.labels)
     return score_methods(bench, methods, norm), model
 
 
@@ -77,7 +77,7 @@ def test_normal_episodes_are_not_flagged_by_the_episode_threshold(sweep):
 def test_calibrated_threshold_meets_its_fpr_on_the_calibration_set(sweep):
     result, model = sweep
     cal = model.calibration("online", 1)
-    energies = model.score(result.bench.normal.calibration.x, "online").energy
+    energies = model.score(result.bench.normal.calibration.data, "online").energy
     for fpr in FPRS:
         assert (energies > cal.thresholds[fpr]).mean() <= fpr
         assert cal.thresholds[fpr] == pytest.approx(quantile_threshold(energies, fpr))

@@ -37,12 +37,12 @@ def test_identity_precision_is_the_diagonal_energy(rng):
 def test_calibration_whitens_by_default_and_diagonal_on_request(trained, skills):
     model = checkpoint.from_bytes(checkpoint.to_bytes(trained))  # a copy: `trained` is shared
     train, test = skills
-    full = model.calibrate(train.sequences, test.sequences, "offline", 1)
+    full = model.calibrate(train.data, test.data, "offline", 1)
     steps, channels = full.error_std.shape
     assert full.error_precision is not None and full.error_precision.shape == (steps, channels, channels)
-    diagonal = model.calibrate(train.sequences, test.sequences, "offline", 1, covariance="diagonal")
+    diagonal = model.calibrate(train.data, test.data, "offline", 1, covariance="diagonal")
     assert diagonal.error_precision is None
-    errors = model.errors(test.sequences, "offline", 1)
-    np.testing.assert_allclose(model.score(test.sequences, "offline").energy, energy(errors, diagonal.error_std))
+    errors = model.errors(test.data, "offline", 1)
+    np.testing.assert_allclose(model.score(test.data, "offline").energy, energy(errors, diagonal.error_std))
     with pytest.raises(ValueError, match="covariance"):
-        model.calibrate(train.sequences, test.sequences, "offline", 1, covariance="sparse")  # type: ignore[arg-type]
+        model.calibrate(train.data, test.data, "offline", 1, covariance="sparse")  # type: ignore[arg-type]

@@ -18,12 +18,12 @@ def test_training_lowers_energy_tenfold(trained):
 
 def test_offline_recall_recognises_every_skill_from_first_observation(trained, skills):
     train, test = skills
-    x = trained.normaliser.normalise(test.sequences)
-    plan = trained.normaliser.normalise(trained.recall(test.sequences[:, :1], 15))
-    means = np.stack([trained.normaliser.normalise(train.sequences[train.skills == s]).mean(0) for s in range(3)])
+    x = trained.normaliser.normalise(test.data)
+    plan = trained.normaliser.normalise(trained.recall(test.data[:, :1], 15))
+    means = np.stack([trained.normaliser.normalise(train.data[train.labels == s]).mean(0) for s in range(3)])
     # distance of every recalled plan to every skill's mean trajectory
     dist = ((plan[:, None, 1:] - means[None, :, 1:]) ** 2).mean(axis=(2, 3))
-    assert (dist.argmin(axis=1) == test.skills).all()
+    assert (dist.argmin(axis=1) == test.labels).all()
     err = ((plan - x)[:, 1:] ** 2).mean()
     between = min(((means[a] - means[b]) ** 2).mean() for a in range(3) for b in range(a + 1, 3))
     assert err < between / 20
@@ -31,18 +31,18 @@ def test_offline_recall_recognises_every_skill_from_first_observation(trained, s
 
 def test_online_recall_beats_offline(trained, skills):
     _, test = skills
-    off = (trained.errors(test.sequences, "offline")[:, 1:] ** 2).mean()
-    on = (trained.errors(test.sequences, "online")[:, 1:] ** 2).mean()
+    off = (trained.errors(test.data, "offline")[:, 1:] ** 2).mean()
+    on = (trained.errors(test.data, "online")[:, 1:] ** 2).mean()
     assert on < off
 
 
 def test_perturbed_channel_raises_energy_and_is_isolated(trained, skills):
     _, test = skills
-    seq = test.sequences[0].copy()
+    seq = test.data[0].copy()
     channel, step = 4, 7
     seq[step:, channel] += 6 * trained.normaliser.std[channel]
     for mode in ("offline", "online"):
-        clean = trained.score(test.sequences[:1], mode, weighted=False)
+        clean = trained.score(test.data[:1], mode, weighted=False)
         bad = trained.score(seq, mode, weighted=False)
         assert bad.energy[0, step] > 10 * clean.energy[0, step]
         assert np.abs(bad.errors[0, step]).argmax() == channel
@@ -51,9 +51,9 @@ def test_perturbed_channel_raises_energy_and_is_isolated(trained, skills):
 def test_stream_matches_sequence_scoring(trained, skills):
     _, test = skills
     for mode in ("offline", "online"):
-        whole = trained.score(test.sequences[1], mode)
+        whole = trained.score(test.data[1], mode)
         stream = trained.stream(mode)
-        steps = [stream.step(x) for x in test.sequences[1]]
+        steps = [stream.step(x) for x in test.data[1]]
         np.testing.assert_allclose([s.energy for s in steps], whole.energy[0], rtol=1e-4)
         np.testing.assert_allclose(steps[3].expected, whole.expected[0, 3], rtol=1e-4, atol=1e-6)
         # the forecast made at step t is what online recall expects at t + 1
@@ -73,20 +73,20 @@ def test_stream_rejects_bad_observations(trained):
 
 def test_predictions_are_in_original_units(trained, skills):
     _, test = skills
-    shifted = test.sequences + 100.0  # far outside the data: predictions must not follow
-    plan = trained.recall(test.sequences[:, :1], 15)
-    assert np.abs(plan.mean() - test.sequences.mean()) < 0.5
+    shifted = test.data + 100.0  # far outside the data: predictions must not follow
+    plan = trained.recall(test.data[:, :1], 15)
+    assert np.abs(plan.mean() - test.data.mean()) < 0.5
     assert np.abs(trained.recall(shifted[:, :1], 15).mean() - shifted.mean()) > 50
 
 
 def test_same_seed_same_weights_and_predictions(skills):
     train, test = skills
     cfg = SMALL.with_(epochs=20)
-    a = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False)
-    b = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False)
+    a = NeuralASM.fit(train.data, train.channel_names, cfg, progress=False)
+    b = NeuralASM.fit(train.data, train.channel_names, cfg, progress=False)
     assert np.array_equal(a.net.w_h, b.net.w_h) and np.array_equal(a.net.w_f, b.net.w_f)
-    assert np.array_equal(a.recall(test.sequences[:, :1], 15), b.recall(test.sequences[:, :1], 15))
-    c = NeuralASM.fit(train.sequences, train.channel_names, cfg.with_(seed=1), progress=False)
+    assert np.array_equal(a.recall(test.data[:, :1], 15), b.recall(test.data[:, :1], 15))
+    c = NeuralASM.fit(train.data, train.channel_names, cfg.with_(seed=1), progress=False)
     assert not np.array_equal(a.net.w_f, c.net.w_f)
 
 
@@ -95,11 +95,11 @@ def test_both_modes_learn(skills, name):
     train, test = skills
     base = FAITHFUL if name == "faithful" else SMALL
     cfg = base.with_(hidden_size=96, epochs=40 if name == "faithful" else 200)
-    model = NeuralASM.fit(train.sequences[::3], train.channel_names, cfg, progress=False)
+    model = NeuralASM.fit(train.data[::3], train.channel_names, cfg, progress=False)
     assert model.history[-1] < model.history[0] / 3
-    untrained = NeuralASM.fit(train.sequences[::3], train.channel_names, cfg.with_(epochs=1), progress=False)
-    after = (model.errors(test.sequences, "online")[:, 1:] ** 2).mean()
-    before = (untrained.errors(test.sequences, "online")[:, 1:] ** 2).mean()
+    untrained = NeuralASM.fit(train.data[::3], train.channel_names, cfg.with_(epochs=1), progress=False)
+    after = (model.errors(test.data, "online")[:, 1:] ** 2).mean()
+    before = (untrained.errors(test.data, "online")[:, 1:] ** 2).mean()
     assert after < before / 2
 
 
@@ -171,7 +171,7 @@ def test_cholesky_solves_one_system_and_a_batch_alike(rng):
 
 def test_long_training_5000_epochs_is_finite(skills):
     train, _ = skills
-    small = train.sequences[::10]
+    small = train.data[::10]
     cfg = TPCConfig(hidden_size=16, inference_steps=10, epochs=5000, learning_rate=3e-3, lr_final_fraction=1.0)
     model = NeuralASM.fit(small, train.channel_names, cfg, progress=False)
     assert np.isfinite(model.history).all()
@@ -209,9 +209,9 @@ def test_channel_precision_trusts_steady_channels_more(rng):
 def test_keeping_the_best_held_out_epoch(skills):
     train, test = skills
     cfg = SMALL.with_(epochs=100, lr_final_fraction=1.0, learning_rate=5e-3)
-    last = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False)
-    best = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False, validation=test.sequences)
-    held_out = best.normaliser.normalise(test.sequences)
+    last = NeuralASM.fit(train.data, train.channel_names, cfg, progress=False)
+    best = NeuralASM.fit(train.data, train.channel_names, cfg, progress=False, validation=test.data)
+    held_out = best.normaliser.normalise(test.data)
     assert recall_error(best.net, held_out) <= recall_error(last.net, held_out) + 1e-9
     assert 1 <= best.provenance["kept_epoch"] <= 100
     assert last.provenance["kept_epoch"] == 100
@@ -221,8 +221,8 @@ def test_training_noise_is_seeded_and_regularises(skills):
     """Noisy training observations give a different but reproducible network that still learns."""
     train, test = skills
     cfg = SMALL.with_(hidden_size=48, epochs=60)
-    clean = NeuralASM.fit(train.sequences, train.channel_names, cfg, progress=False)
-    noisy = [NeuralASM.fit(train.sequences, train.channel_names, cfg.with_(training_noise=0.2), progress=False)
+    clean = NeuralASM.fit(train.data, train.channel_names, cfg, progress=False)
+    noisy = [NeuralASM.fit(train.data, train.channel_names, cfg.with_(training_noise=0.2), progress=False)
              for _ in range(2)]
     assert np.array_equal(noisy[0].net.w_h, noisy[1].net.w_h)
     assert not np.array_equal(noisy[0].net.w_h, clean.net.w_h)

@@ -38,7 +38,7 @@ def bench():
 
 
 def test_hidden_benchmark_has_no_goal_channel(bench):
-    assert "goal_x" not in bench.channel_names and bench.faults.x.shape[2] == len(bench.channel_names)
+    assert "goal_x" not in bench.channel_names and bench.faults.data.shape[2] == len(bench.channel_names)
     assert [bench.channel_names[i] for i in bench.context_channels] == \
         ["cube_seen_x", "cube_seen_y", "cube_seen_yaw", "post_x", "post_y"]
     assert (bench.onset >= 1).all() and bench.visible.any()
@@ -49,7 +49,7 @@ def test_headline_follows_the_contract(bench, tmp_path):
     norm = model.normaliser
     methods = neural_asm_methods(model, "nasm", "Neural ASM")
     for detector in (PerSkillZScore(), ConditionalTemplate()):
-        detector.fit(norm.normalise(bench.demos.x), bench.demos.skills, bench.context_channels.tolist())
+        detector.fit(norm.normalise(bench.demos.data), bench.demos.labels, bench.context_channels.tolist())
         methods.append(Method(detector.name, detector.label, False, detector.expected))
     summaries, outcomes = score_all(bench, methods, norm)
     h = headline(summaries, outcomes, bench, "nasm_online")
@@ -71,7 +71,7 @@ def test_headline_follows_the_contract(bench, tmp_path):
     detected = outcomes[("nasm_online", "episode")].detected
     assert s["detection"] == pytest.approx(detected[bench.visible].mean())
     assert s["detection_all_faults"] == pytest.approx(detected.mean())
-    assert np.isclose(sum(f["n"] for f in s["per_family"].values()), len(bench.faults.x))
+    assert np.isclose(sum(f["n"] for f in s["per_family"].values()), len(bench.faults))
 
 
 def test_the_service_hosts_a_varied_model(bench, tmp_path):

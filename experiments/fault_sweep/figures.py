@@ -91,10 +91,10 @@ def worked_examples(result: SweepResult, w: Weighted, out: Path) -> None:
     b = result.bench
     names = b.normal.channel_names
     joints = joint_channels(names)
-    skill = b.faults.skills[0]
+    skill = b.faults.labels[0]
     for joint, time_s, overshoot in EXAMPLES:
         pick = np.flatnonzero((b.fault_joint == joint) & (b.fault_time == time_s) & (b.overshoot == overshoot)
-                              & (b.faults.skills == skill))
+                              & (b.faults.labels == skill))
         if not len(pick):
             continue
         i = pick[0]
@@ -115,8 +115,8 @@ def worked_examples(result: SweepResult, w: Weighted, out: Path) -> None:
                     title="|exteroceptive error| (finger forces/torques)")
         axes[2].tick_params(axis="y", labelsize=6)
         col = joints[joint - 1]
-        axes[3].plot(steps * 0.5, np.degrees(b.faults.x[i, :, col]), marker="o", label="fault")
-        axes[3].plot(steps * 0.5, np.degrees(b.twins.x[i, :, col]), ls="--", label="no-fault twin")
+        axes[3].plot(steps * 0.5, np.degrees(b.faults.data[i, :, col]), marker="o", label="fault")
+        axes[3].plot(steps * 0.5, np.degrees(b.twins.data[i, :, col]), ls="--", label="no-fault twin")
         axes[3].set(xlabel="t (s)", ylabel=f"joint {joint} (deg)")
         axes[3].legend(fontsize=7)
         _save(fig, out / f"example_joint{joint}.png")

@@ -19,11 +19,11 @@ def write_json(result: SweepResult, path: Path) -> None:
     ceiling = {k: v for k, v in result.ceilings.items() if k != "visible"}
     doc = {
         "episodes": {
-            "faults": len(result.bench.faults.x),
-            "demonstrations": len(result.bench.normal.demos.x),
-            "normal_precision": len(result.bench.normal.precision.x),
-            "normal_calibration": len(result.bench.normal.calibration.x),
-            "normal_test": len(result.bench.normal.normal_test.x),
+            "faults": len(result.bench.faults),
+            "demonstrations": len(result.bench.normal.demos),
+            "normal_precision": len(result.bench.normal.precision),
+            "normal_calibration": len(result.bench.normal.calibration),
+            "normal_test": len(result.bench.normal.normal_test),
         },
         "fprs": list(FPRS),
         "ceilings": ceiling,
@@ -88,8 +88,8 @@ def write_csv(result: SweepResult, path: Path) -> None:
             header += [f"{name}/{weighting}/{col}" for col in
                        ("first_detection_step", "isolated_at_fault_step", "isolated_at_detection", "peak_energy")]
         writer.writerow(header)
-        for i in range(len(b.faults.x)):
-            row = [i, b.faults.skills[i], int(b.faults.seeds[i]), int(b.fault_joint[i]), float(b.fault_time[i]),
+        for i in range(len(b.faults)):
+            row = [i, b.faults.labels[i], int(b.faults.seeds[i]), int(b.fault_joint[i]), float(b.fault_time[i]),
                    int(b.fault_step[i]), float(b.overshoot[i]), bool(result.ceilings["visible"][i])]
             for k in keys:
                 o = result.outcomes[k]

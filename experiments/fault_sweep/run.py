@@ -17,7 +17,7 @@ from tqdm.auto import tqdm
 from experiments.fault_sweep.data import Benchmark, load_benchmark
 from experiments.fault_sweep.methods import Method, baseline_methods, neural_asm_methods
 from experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
-from experiments.panda_model import provenance_of, train_calibrated
+from pipelines.default_model import provenance_of, train_calibrated
 from models import checkpoint
 from models.asm import NeuralASM
 from models.config import FAITHFUL, FAST, TPCConfig
@@ -44,10 +44,10 @@ def method_errors(method: Method, bench: Benchmark, norm: Normaliser) -> tuple[E
     }
     errors, spread = {}, {}
     for key, s in sets.items():
-        x = norm.normalise(s.x)
-        errors[key] = x - method.expected(x, s.skills)
+        x = norm.normalise(s.data)
+        errors[key] = x - method.expected(x, s.labels)
         if method.demo_spread is not None:
-            spread[key] = method.demo_spread(x, s.skills)
+            spread[key] = method.demo_spread(x, s.labels)
     return Errors(**errors), (spread or None)
 
 
@@ -66,8 +66,8 @@ def score_methods(bench: Benchmark, methods: list[Method], norm: Normaliser) -> 
             summary[method.name][weighting] = {"family": method.family, **metrics}
             outcomes[(method.name, weighting)] = outcome
     normal = bench.normal
-    ceiling = ceilings(norm.normalise(bench.faults.x), norm.normalise(bench.twins.x),
-                       norm.normalise(normal.precision.x), bench.faults.skills, normal.precision.skills,
+    ceiling = ceilings(norm.normalise(bench.faults.data), norm.normalise(bench.twins.data),
+                       norm.normalise(normal.precision.data), bench.faults.labels, normal.precision.labels,
                        names, bench.fault_step, bench.fault_joint)
     return SweepResult(summary, outcomes, ceiling, bench, norm, all_errors)
 
@@ -93,5 +93,5 @@ def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs
         checkpoint.save(model, out_dir / "models" / f"{label}.safetensors")
     norm = trained["nasm"].normaliser
     methods = [m for label, model in trained.items() for m in neural_asm_methods(model, label)]
-    methods += baseline_methods(norm.normalise(bench.normal.demos.x), bench.normal.demos.skills)
+    methods += baseline_methods(norm.normalise(bench.normal.demos.data), bench.normal.demos.labels)
     return score_methods(bench, methods, norm)

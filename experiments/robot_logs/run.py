@@ -19,7 +19,8 @@ from pathlib import Path
 
 import typer
 
-from experiments.fault_sweep.data import SETS, ensure_sets, make_benchmark
+from experiments.fault_sweep.data import SETS, make_benchmark
+from pipelines.episodes import ensure_sets
 from experiments.fault_sweep.methods import neural_asm_methods
 from experiments.fault_sweep.run import score_methods, train_models
 from experiments.robot_logs.write import bag_mapping, write_bag, write_mapping

@@ -16,8 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.episode import Episode
+from models.sequences import Sequences
+from pipelines.episodes import as_sequences
 from runtime.parallel import Backend
+from sim.episode import Episode
 from sim.varied import channel_names, context_columns
 from sim.varied_sets import VARIED_KINDS, generate
 
@@ -26,34 +28,17 @@ SPLIT = (150, 300)  # precision, calibration; the rest of the normal set is the 
 
 
 @dataclass(frozen=True)
-class Arrays:
-    """Sequences (N, T, D) in original units, their skills and seeds."""
-
-    x: np.ndarray
-    skills: np.ndarray
-    seeds: np.ndarray
-
-    @classmethod
-    def of(cls, episodes: list[Episode], columns: np.ndarray) -> "Arrays":
-        return cls(np.stack([e.observations[:, columns] for e in episodes]), np.array([e.skill for e in episodes]),
-                   np.array([e.seed for e in episodes]))
-
-    def take(self, index: np.ndarray) -> "Arrays":
-        return Arrays(self.x[index], self.skills[index], self.seeds[index])
-
-
-@dataclass(frozen=True)
 class VariedBenchmark:
     context: str
     channel_names: tuple[str, ...]
     context_channels: np.ndarray  # indices of the perceived cube, goal and post channels
-    demos: Arrays
-    precision: Arrays
-    calibration: Arrays
-    test: Arrays
-    ood: Arrays
-    faults: Arrays
-    twins: Arrays
+    demos: Sequences
+    precision: Sequences
+    calibration: Sequences
+    test: Sequences
+    ood: Sequences
+    faults: Sequences
+    twins: Sequences
     kinds: np.ndarray  # (F,) fault family
     fault_step: np.ndarray  # (F,) nominal start step of the fault
     onset: np.ndarray  # (F,) first step departing from the twin
@@ -85,34 +70,34 @@ def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict |
     kept = channel_names(context)
     twins = {e.seed: e for e in sets["twins"]}
     faults = [e for e in sets["faults"] if e.seed in twins]
-    fault_arr = Arrays.of(faults, columns)
-    twin_arr = Arrays.of([twins[e.seed] for e in faults], columns)
-    normal = Arrays.of(sets["normal"], columns)
+    fault_arr = as_sequences(faults, columns)
+    twin_arr = as_sequences([twins[e.seed] for e in faults], columns)
+    normal = as_sequences(sets["normal"], columns)
     n_precision, n_calibration = split
-    if len(normal.x) < n_precision + n_calibration + 10:
-        raise ValueError(f"need at least {n_precision + n_calibration + 10} normal episodes, got {len(normal.x)}")
-    index = np.arange(len(normal.x))
+    if len(normal) < n_precision + n_calibration + 10:
+        raise ValueError(f"need at least {n_precision + n_calibration + 10} normal episodes, got {len(normal)}")
+    index = np.arange(len(normal))
     precision = normal.take(index[:n_precision])
     onset, visible = departures(fault_arr, twin_arr, precision)
     ctx_names = [n for n in kept if n.startswith(("cube_seen", "goal", "post"))]
     return VariedBenchmark(
         context=context, channel_names=kept, context_channels=np.array([kept.index(n) for n in ctx_names]),
-        demos=Arrays.of(sets["demos"], columns), precision=precision,
+        demos=as_sequences(sets["demos"], columns), precision=precision,
         calibration=normal.take(index[n_precision:n_precision + n_calibration]),
-        test=normal.take(index[n_precision + n_calibration:]), ood=Arrays.of(sets["ood"], columns),
+        test=normal.take(index[n_precision + n_calibration:]), ood=as_sequences(sets["ood"], columns),
         faults=fault_arr, twins=twin_arr, kinds=np.array([e.fault.kind for e in faults]),
         fault_step=np.array([e.fault.step for e in faults]), onset=onset, visible=visible, dropped=dict(dropped or {}))
 
 
-def departures(faults: Arrays, twins: Arrays, normal: Arrays) -> tuple[np.ndarray, np.ndarray]:
+def departures(faults: Sequences, twins: Sequences, normal: Sequences) -> tuple[np.ndarray, np.ndarray]:
     """Each fault's first step departing from its twin, and whether it ever departs by more
     than VISIBLE_K normal standard deviations (per skill, step, channel) from then on."""
-    diff = np.abs(faults.x - twins.x)
+    diff = np.abs(faults.data - twins.data)
     moved = diff.max(axis=2) > 1e-6
-    onset = np.where(moved.any(axis=1), moved.argmax(axis=1), faults.x.shape[1] - 1)
-    sigma = np.ones_like(faults.x)
-    for skill in np.unique(faults.skills):
-        sigma[faults.skills == skill] = np.maximum(normal.x[normal.skills == skill].std(axis=0), 1e-6)
+    onset = np.where(moved.any(axis=1), moved.argmax(axis=1), faults.data.shape[1] - 1)
+    sigma = np.ones_like(faults.data)
+    for skill in np.unique(faults.labels):
+        sigma[faults.labels == skill] = np.maximum(normal.data[normal.labels == skill].std(axis=0), 1e-6)
     steps = np.arange(diff.shape[1])
     after = np.where((steps[None] >= onset[:, None])[..., None], diff / sigma, 0.0)
     return onset, after.max(axis=(1, 2)) > VISIBLE_K

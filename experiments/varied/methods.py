@@ -36,12 +36,12 @@ def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool =
     """A Neural ASM trained on the demonstrations, calibrated on the precision and calibration splits."""
     provenance = {"source": "simulated Panda, varied task (sim/varied.py)", "task": "varied",
                   "context": bench.context, "demo_seeds": bench.demos.seeds.tolist(),
-                  "skills": sorted(set(bench.demos.skills.tolist()))}
+                  "skills": sorted(set(bench.demos.labels.tolist()))}
     context = [bench.channel_names[i] for i in bench.context_channels]
-    model = NeuralASM.fit(bench.demos.x, bench.channel_names, config, progress=progress, provenance=provenance,
-                          validation=bench.precision.x, labels=bench.demos.skills, context_channels=context)
+    model = NeuralASM.fit(bench.demos.data, bench.channel_names, config, progress=progress, provenance=provenance,
+                          validation=bench.precision.data, labels=bench.demos.labels, context_channels=context)
     for mode in ("offline", "online"):
-        model.calibrate(bench.precision.x, bench.calibration.x, mode, 1,
+        model.calibrate(bench.precision.data, bench.calibration.data, mode, 1,
                         source="held-out normal episodes of the varied task (simulated Panda)")
     return model
 
@@ -54,9 +54,9 @@ def neural_asm_methods(model: NeuralASM, name: str, label: str) -> list[Method]:
 
 
 def baseline_methods(bench: VariedBenchmark, norm: Normaliser, seed: int = 0) -> list[Method]:
-    demos = norm.normalise(bench.demos.x)
+    demos = norm.normalise(bench.demos.data)
     methods = []
     for detector in tqdm(all_detectors(), desc="fitting baselines"):
-        detector.fit(demos, bench.demos.skills, bench.context_channels.tolist(), seed=seed)
+        detector.fit(demos, bench.demos.labels, bench.context_channels.tolist(), seed=seed)
         methods.append(Method(detector.name, detector.label, False, detector.expected))
     return methods

@@ -16,8 +16,8 @@ from experiments.varied.run import VariedResult
 def _facts(result: VariedResult) -> dict:
     b = result.bench
     return {"context": b.context, "channels": list(b.channel_names),
-            "episodes": {"demos": len(b.demos.x), "precision": len(b.precision.x), "calibration": len(b.calibration.x),
-                         "test": len(b.test.x), "ood": len(b.ood.x), "faults": len(b.faults.x),
+            "episodes": {"demos": len(b.demos), "precision": len(b.precision), "calibration": len(b.calibration),
+                         "test": len(b.test), "ood": len(b.ood), "faults": len(b.faults),
                          "visible_faults": int(b.visible.sum())},
             "dropped_by_simulation": b.dropped}
 
@@ -38,8 +38,8 @@ def write_markdown(result: VariedResult, path: Path) -> None:
     h = result.headline
     lines = [f"# Varied task, {result.bench.context} context", "",
              f"Conformal episode threshold at {100 * h['episode_fa_target']:.0f} % (calibration split); detection of "
-             f"the {int(result.bench.visible.sum())} visible faults of {len(result.bench.faults.x)}; false alarms on "
-             f"{len(result.bench.test.x)} held-out normal and {len(result.bench.ood.x)} benign out-of-range episodes.", "",
+             f"the {int(result.bench.visible.sum())} visible faults of {len(result.bench.faults)}; false alarms on "
+             f"{len(result.bench.test)} held-out normal and {len(result.bench.ood)} benign out-of-range episodes.", "",
              "| method | held-out error (MSE) | detection (visible) | detection (all) | normal flagged | out-of-range flagged | AUROC | median delay | detection, time-varying threshold | normal flagged, time-varying |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     order = sorted(result.summaries, key=lambda n: -result.summaries[n]["episode"]["detection"])

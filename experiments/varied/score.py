@@ -46,8 +46,8 @@ def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> tuple[
     errors = {}
     for key in SETS:
         arrays = getattr(bench, key)
-        x = norm.normalise(arrays.x)
-        errors[key] = x - method.expected(x, arrays.skills)
+        x = norm.normalise(arrays.data)
+        errors[key] = x - method.expected(x, arrays.labels)
     cal = estimate("varied", 1, errors["precision"], "precision split", "full")
     held_out_mse = float(np.mean(errors["precision"][:, 1:] ** 2))
     return {key: energy(e, cal.error_std, cal.error_precision) for key, e in errors.items()}, held_out_mse

@@ -1,7 +1,7 @@
 """The default Panda model: trained on the simulated demonstrations, calibrated on
 held-out normal episodes, written as a checkpoint the service can host.
 
-The precision split of the held-out normal episodes (experiments/fault_sweep/data.py)
+The precision split of the held-out normal episodes (``pipelines.episodes``)
 chooses the training epoch kept and gives the error spreads; the calibration split gives
 the thresholds; the test split is left for measuring false-positive rates. Both recall
 modes are calibrated, cued from one observation.
@@ -11,27 +11,28 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from experiments.fault_sweep.data import EpisodeArrays, NormalSets, load_normal_sets
 from models import checkpoint
 from models.asm import NeuralASM
 from models.config import FAST, TPCConfig
+from models.sequences import Sequences
+from pipelines.episodes import NormalSets, load_normal_sets
 
 DEFAULT_NAME = "panda"
 
 
 def train_calibrated(
-    demos: EpisodeArrays,
-    precision: EpisodeArrays,
-    calibration: EpisodeArrays,
+    demos: Sequences,
+    precision: Sequences,
+    calibration: Sequences,
     channel_names: tuple[str, ...],
     config: TPCConfig = FAST,
     progress: bool = True,
     provenance: dict | None = None,
 ) -> NeuralASM:
-    model = NeuralASM.fit(demos.x, channel_names, config, progress=progress, provenance=provenance,
-                          validation=precision.x, labels=demos.skills)
+    model = NeuralASM.fit(demos.data, channel_names, config, progress=progress, provenance=provenance,
+                          validation=precision.data, labels=demos.labels)
     for mode in ("offline", "online"):
-        model.calibrate(precision.x, calibration.x, mode, 1, source="held-out normal episodes (simulated Panda)")
+        model.calibrate(precision.data, calibration.data, mode, 1, source="held-out normal episodes (simulated Panda)")
     return model
 
 
@@ -40,7 +41,7 @@ def provenance_of(bench: NormalSets, data_dir: Path) -> dict:
         "source": "simulated Panda pick-and-place (sim/)",
         "data_dir": str(data_dir),
         "demo_seeds": bench.demos.seeds.tolist(),
-        "skills": sorted(set(bench.demos.skills.tolist())),
+        "skills": sorted(set(bench.demos.labels.tolist())),
         "precision_seeds": bench.precision.seeds.tolist(),
         "threshold_seeds": bench.calibration.seeds.tolist(),
     }
