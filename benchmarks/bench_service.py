@@ -51,10 +51,10 @@ def percentiles(ms: list[float]) -> tuple[float, float]:
 
 def build_model(folder: Path) -> np.ndarray:
     data = make_skills(n_skills=2, repetitions=10, channels=25)
-    model = NeuralASM.fit(data.sequences, CHANNELS, FAST.with_(epochs=60), progress=False)
-    model.calibrate(data.sequences, data.sequences, SESSION["mode"], 1)
+    model = NeuralASM.fit(data.data, CHANNELS, FAST.with_(epochs=60), progress=False)
+    model.calibrate(data.data, data.data, SESSION["mode"], 1)
     checkpoint.save(model, folder / "bench.safetensors")
-    return data.sequences
+    return data.data
 
 
 def start_server(folder: Path, port: int, record: bool) -> subprocess.Popen:

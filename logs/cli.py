@@ -14,7 +14,7 @@ from models import checkpoint
 from models.asm import NeuralASM
 from models.sequences import Sequences
 from recordings import DEFAULT_DIR
-from sim.transport import TRANSPORTS, ServiceError, ServiceLost
+from client.transport import TRANSPORTS, ServiceError, ServiceLost
 
 MAPPING_HELP = "channel mapping (.toml or .yaml): which topic or feature becomes which channel"
 
@@ -52,7 +52,7 @@ def replay(
 ) -> None:
     """Stream recorded episodes to a running service exactly as the live robot client does."""
     from logs.replay import replay_episode
-    from sim.client import summary_line
+    from client.summary import summary_line
 
     if mode not in ("offline", "online") or transport not in TRANSPORTS:
         raise typer.BadParameter(f"--mode must be offline or online and --transport ws or http; got {mode!r}, {transport!r}")

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from models.sequences import Sequences
-from sim.client import EpisodeSummary, stream_episode
+from client.stream import stream_episode
+from client.summary import EpisodeSummary
 from sim.episode import Episode
 
 

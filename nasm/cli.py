@@ -17,6 +17,7 @@ from models import checkpoint
 from models.asm import NeuralASM
 from models.config import PRESETS
 from models.recall import RECALL_MODES
+from client.cli import client
 from experiments.contextual.cli import contextual
 from experiments.correction.cli import correction
 from experiments.fault_sweep.cli import faults
@@ -140,7 +141,7 @@ def info(model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"
     typer.echo(json.dumps(summary, indent=2, default=str))
 
 
-for command in (demos, faults, correction, contextual, serve, replay, evaluate):  # each package owns its commands
+for command in (demos, faults, correction, contextual, serve, client, replay, evaluate):  # each package owns its commands
     app.command()(command)
 
 if __name__ == "__main__":

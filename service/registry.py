@@ -2,7 +2,7 @@
 
 Checkpoints are safetensors (no pickle). A model's name is its file stem. When the
 folder holds none, the default Panda model can be built on first run (training on
-simulated demonstrations, with a progress bar); that lives in ``experiments`` and is
+simulated demonstrations, with a progress bar); that lives in ``pipelines`` and is
 imported only then, so the service runs without the simulator installed.
 """
 
@@ -19,7 +19,7 @@ log = logging.getLogger("service.registry")
 def build_default_model(models_dir: Path) -> Path:
     """Train and calibrate the default Panda model into ``models_dir``."""
     try:
-        from experiments.panda_model import ensure_default_model
+        from pipelines.default_model import ensure_default_model
     except ImportError as exc:
         raise RuntimeError(
             f"no checkpoint in {models_dir} and the default Panda model cannot be built here "

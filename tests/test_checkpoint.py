@@ -10,12 +10,12 @@ from models.checkpoint import CheckpointError
 def test_round_trip_gives_identical_predictions(trained, skills, tmp_path):
     _, test = skills
     train, _ = skills
-    trained.calibrate(train.sequences, test.sequences, "online", 1, source="test")
+    trained.calibrate(train.data, test.data, "online", 1, source="test")
     path = checkpoint.save(trained, tmp_path / "m.safetensors")
     loaded = checkpoint.load(path)
     assert loaded.channel_names == trained.channel_names and loaded.config == trained.config
     for mode in ("offline", "online"):
-        a, b = trained.score(test.sequences, mode), loaded.score(test.sequences, mode)
+        a, b = trained.score(test.data, mode), loaded.score(test.data, mode)
         assert np.array_equal(a.energy, b.energy) and np.array_equal(a.expected, b.expected)
     cal_a, cal_b = trained.calibration("online", 1), loaded.calibration("online", 1)
     assert cal_a.thresholds == cal_b.thresholds and cal_b.source == "test"

@@ -20,7 +20,8 @@ from recordings.readers import read_mcap, read_rrd_series
 from service.embedded import start_embedded
 from service.settings import Settings
 from sim.channels import CHANNEL_NAMES, JOINT_NAMES
-from sim.client import run_client, summary_line
+from client import run_client
+from client.summary import summary_line
 from sim.faults import FaultSpec
 from sim.runner import run_episode
 from sim.skills import SKILLS
@@ -72,7 +73,7 @@ def test_normal_episode_streams_every_step_and_records_what_it_printed(server, t
     # the live lines: one per step, with the energies returned
     live = re.findall(r"^step +(\d+) .*energy= *([-0-9.e+]+) +threshold= *([-0-9.e+]+)", printed, re.M)
     assert [int(k) for k, _, _ in live] == list(range(15))
-    np.testing.assert_allclose([float(e) for _, e, _ in live], s.energies, atol=5e-4, rtol=1e-6)
+    np.testing.assert_allclose([float(e) for _, e, _ in live], s.energies, rtol=5e-4)  # printed to 4 digits
 
     # the client's .mcap holds exactly the returned energies, thresholds and flags
     faults = _fault_messages(s.recordings["mcap"])
@@ -119,7 +120,7 @@ def test_service_going_away_mid_episode_leaves_readable_recordings(model_dir, tm
     finally:
         srv.stop()
     assert not s.completed
-    assert s.error is not None and "went away" in s.error
+    assert s.error is not None and "lost the service" in s.error
     assert s.steps_scored == 4
     faults = _fault_messages(s.recordings["mcap"])  # closed properly: read to the end
     assert [m["energy"] for m in faults] == s.energies

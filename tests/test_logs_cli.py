@@ -20,7 +20,7 @@ from nasm.cli import app
 from recordings.readers import read_mcap
 from service.embedded import start_embedded
 from service.settings import Settings
-from sim.client import stream_episode
+from client.stream import stream_episode
 from sim.faults import FaultSpec
 from sim.runner import run_episode
 from sim.skills import SKILLS

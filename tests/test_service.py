@@ -40,11 +40,11 @@ MAX_SESSIONS = 12
 def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("models")
     data = make_skills(n_skills=2, repetitions=8, channels=25, seed=1)
-    model = NeuralASM.fit(data.sequences, CHANNEL_NAMES, FAST.with_(hidden_size=64, epochs=100), progress=False)
+    model = NeuralASM.fit(data.data, CHANNEL_NAMES, FAST.with_(hidden_size=64, epochs=100), progress=False)
     for mode in ("offline", "online"):
-        model.calibrate(data.sequences, data.sequences, mode, 1)
+        model.calibrate(data.data, data.data, mode, 1)
     checkpoint.save(model, folder / "panda.safetensors")
-    np.save(folder / "episodes.npy", data.sequences)
+    np.save(folder / "episodes.npy", data.data)
     return folder
 
 

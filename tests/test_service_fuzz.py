@@ -30,8 +30,8 @@ _folder = tempfile.TemporaryDirectory(prefix="nasm-fuzz-")  # removed at exit
 
 def _app(folder: Path):
     data = make_skills(n_skills=1, repetitions=4, steps=5, channels=25)
-    model = NeuralASM.fit(data.sequences, CHANNEL_NAMES, FAST.with_(hidden_size=16, epochs=5), progress=False)
-    model.calibrate(data.sequences, data.sequences, "online", 1)
+    model = NeuralASM.fit(data.data, CHANNEL_NAMES, FAST.with_(hidden_size=16, epochs=5), progress=False)
+    model.calibrate(data.data, data.data, "online", 1)
     checkpoint.save(model, folder / "models" / "m.safetensors")
     return create_app(Settings(models_dir=folder / "models", recordings_dir=folder / "rec", max_sessions=4,
                                api_key=KEY))

@@ -8,7 +8,6 @@ wrong into two errors: ``ServiceError`` (the service refused: fix the request) a
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import json
 from typing import Any, Callable, Protocol
 from urllib.parse import urlparse
@@ -16,6 +15,8 @@ from urllib.parse import urlparse
 import httpx
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 from websockets.sync.client import connect as ws_connect
+
+from runtime.net import is_loopback
 
 API_KEY_HEADER = "X-API-Key"
 TIMEOUT_S = 30.0
@@ -29,7 +30,6 @@ class ServiceError(RuntimeError):
     """The service answered with an error (a 4xx/5xx or a websocket error message)."""
 
 
-
 class Transport(Protocol):
     def start(self, params: dict[str, Any]) -> dict[str, Any]: ...
     def step(self, observation: list[float]) -> dict[str, Any]: ...
@@ -38,13 +38,15 @@ class Transport(Protocol):
 
 
 def _loopback(url: str) -> bool:
-    host = urlparse(url).hostname or ""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+    return is_loopback(urlparse(url).hostname or "")
+
+
+def check_url(url: str) -> str:
+    """``url`` if it names an http(s) service, else a ValueError saying how to write it."""
+    parsed = urlparse(url)
+    if parsed.scheme not in ("http", "https") or not parsed.hostname:
+        raise ValueError(f"--url {url!r} is not an http(s) URL; write it like http://127.0.0.1:8000")
+    return url
 
 
 def _headers(api_key: str | None) -> dict[str, str]:

@@ -1,0 +1,71 @@
+"""``nasm client`` and ``python sim/client.py``: the command line of the streaming client."""
+
+from __future__ import annotations
+
+import json
+from enum import Enum
+from pathlib import Path
+
+import typer
+
+from client.run import MODES, fault_spec, run_client
+from client.transport import TRANSPORTS, ServiceError, ServiceLost
+from recordings import DEFAULT_DIR
+from sim.config import SIM
+from sim.disturbances import FallingObject
+from sim.skills import SKILLS
+
+Skill = Enum("Skill", {s: s for s in SKILLS}, type=str)
+Mode = Enum("Mode", {m: m for m in MODES}, type=str)
+TransportName = Enum("TransportName", {t: t for t in TRANSPORTS}, type=str)
+
+
+def _fail(message: str, code: int) -> typer.Exit:
+    typer.secho(f"error: {message}", fg="red", err=True)
+    return typer.Exit(code)
+
+
+def client(
+    skill: Skill = typer.Option(SKILLS[0], help="skill to run"),
+    seed: int = typer.Option(SIM.seeds.client, help="episode seed (episode i uses seed + i); the default is in no "
+                             "training or calibration set"),
+    fault_joint: int | None = typer.Option(None, min=1, max=7, help="fault: joint 1..7 (give all three fault options or none)"),
+    fault_time: float | None = typer.Option(None, help="fault: time in s, on the 0.5 s grid"),
+    fault_overshoot: float | None = typer.Option(None, help="fault: overshoot in degrees"),
+    falling_object: bool = typer.Option(False, "--falling-object", help="drop a 5 kg box on the arm at 4 s"),
+    episodes: int = typer.Option(1, min=1, help="number of episodes"),
+    url: str | None = typer.Option(None, help="service URL, e.g. http://127.0.0.1:8000; default: start one "
+                                               "in-process on a free port"),
+    api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
+    mode: Mode = typer.Option(MODES[0], help="recall mode: offline (the paper's setting) or online"),
+    out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
+    reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
+    transport: TransportName = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
+    models_dir: Path = typer.Option(Path("runs/models"), help="models folder of the in-process service"),
+    json_out: Path | None = typer.Option(None, "--json", help="also write the summaries as JSON here"),
+) -> None:
+    """Simulate Panda episodes, stream them to the Neural ASM service and record them."""
+    try:
+        fault = fault_spec(fault_joint, fault_time, fault_overshoot)
+        summaries = run_client(skill.value, seed, fault, FallingObject() if falling_object else None, episodes, url,
+                               api_key, mode.value, out, reconnect, transport.value, models_dir)
+    except ValueError as exc:
+        raise _fail(str(exc), 2) from None
+    except ServiceError as exc:
+        raise _fail(str(exc), 2) from None
+    except ServiceLost as exc:
+        raise _fail(f"{exc}; nothing was recorded for the episode", 3) from None
+    except KeyboardInterrupt:
+        typer.echo("interrupted; recordings closed", err=True)
+        raise typer.Exit(130) from None
+    if json_out is not None:
+        json_out.write_text(json.dumps([s.to_dict() for s in summaries], indent=1))
+    if any(s.error for s in summaries):
+        raise _fail("lost the service; the recordings so far are closed and readable", 3)
+
+
+app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
+app.command(help=client.__doc__)(client)
+
+if __name__ == "__main__":
+    app()
