@@ -76,6 +76,24 @@ def quantile_threshold(energies: np.ndarray, fpr: float) -> float:
     return float(np.quantile(energies, 1.0 - fpr, method="higher"))
 
 
+@dataclass(frozen=True)
+class Thresholds:
+    """The three thresholds at one false-positive rate, from normal energies (N, T): one for
+    every step, one per step, and one for an episode's peak energy."""
+
+    step: float
+    per_step: np.ndarray  # (T,)
+    episode: float
+
+    @classmethod
+    def of(cls, energies: np.ndarray, fpr: float) -> Thresholds:
+        return cls(
+            quantile_threshold(energies, fpr),
+            np.array([quantile_threshold(energies[:, t], fpr) for t in range(energies.shape[1])]),
+            quantile_threshold(energies.max(axis=1), fpr),
+        )
+
+
 def set_thresholds(
     calibration: Calibration,
     errors: np.ndarray,
@@ -84,8 +102,7 @@ def set_thresholds(
     """Thresholds from normalised errors (N, T, D) of normal episodes, weighted energy."""
     e = energy(errors, calibration.error_std, calibration.error_precision)
     for fpr in fprs:
-        calibration.thresholds[fpr] = quantile_threshold(e, fpr)
-        calibration.step_thresholds[fpr] = np.array(
-            [quantile_threshold(e[:, t], fpr) for t in range(e.shape[1])]
-        )
-        calibration.episode_thresholds[fpr] = quantile_threshold(e.max(axis=1), fpr)
+        t = Thresholds.of(e, fpr)
+        calibration.thresholds[fpr] = t.step
+        calibration.step_thresholds[fpr] = t.per_step
+        calibration.episode_thresholds[fpr] = t.episode

@@ -146,8 +146,10 @@ class ScoringConfig:
     # as they normally do (joint angles and the end effector they place) are not counted
     # twice. "diagonal": every channel weighed alone, as if errors were independent.
     error_covariance: Covariance = "full"
-    # False-positive rates (per step) at which thresholds are calibrated.
+    # False-positive rates (per step) at which thresholds are calibrated, and the one a
+    # decision uses unless told otherwise (the service's default, the sweep's headline).
     fprs: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
+    default_fpr: float = 0.01
 
 
 SCORING = ScoringConfig()

@@ -10,7 +10,7 @@ import numpy as np
 
 from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, Weighted, weigh
 from experiments.fault_sweep.run import SweepResult
-from models.calibration import quantile_threshold
+from models.calibration import Thresholds
 from models.fault import joint_channels
 
 BEST = ("nasm_offline", "whitened")  # the paper's setting, errors weighted by a full precision
@@ -45,7 +45,7 @@ def energy_distribution(result: SweepResult, w: Weighted, out: Path) -> None:
     after = w.faults[np.arange(w.faults.shape[1])[None] >= result.bench.fault_step[:, None]]
     ax.hist(after, bins=bins, alpha=0.5, density=True, label="fault episodes, steps from the fault on")
     for fpr in (0.01, 0.05):
-        ax.axvline(quantile_threshold(w.calibration, fpr), color="k", ls=":" if fpr == 0.05 else "-",
+        ax.axvline(Thresholds.of(w.calibration, fpr).step, color="k", ls=":" if fpr == 0.05 else "-",
                    label=f"threshold at {100 * fpr:.0f} % FPR")
     ax.set(xscale="log", xlabel=f"energy ({name}, {weighting})", ylabel="density")
     ax.legend(fontsize=8)
@@ -98,7 +98,7 @@ def worked_examples(result: SweepResult, w: Weighted, out: Path) -> None:
         if not len(pick):
             continue
         i = pick[0]
-        threshold = quantile_threshold(w.calibration, MAIN_FPR)
+        threshold = Thresholds.of(w.calibration, MAIN_FPR).step
         steps = np.arange(w.faults.shape[1])
         fig, axes = plt.subplots(1, 4, figsize=(18, 3.8))
         axes[0].plot(steps * 0.5, w.faults[i], marker="o", label="energy")

@@ -14,12 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from models.calibration import estimate, quantile_threshold
+from models.calibration import Thresholds, estimate
+from models.config import SCORING
 from models.fault import joint_channels
 from models.scoring import energy, step_rows
 
-FPRS = (0.01, 0.02, 0.03, 0.04, 0.05)
-MAIN_FPR = 0.01
+FPRS = SCORING.fprs  # the thresholds a model calibrates
+MAIN_FPR = SCORING.default_fpr  # the one its decisions use
 BOOTSTRAP = 2000  # resamples for the 95 % intervals
 
 
@@ -73,7 +74,7 @@ def weigh(errors: Errors, weighting: str, demo_spread: dict[str, np.ndarray] | N
         return Weighted(e["calibration"], e["normal_test"], e["faults"], errors.faults / spread)
     elif weighting == "demo_std":
         assert demo_spread is not None
-        std = {k: np.maximum(demo_spread[k], 0.05) for k in sets}
+        std = {k: np.maximum(demo_spread[k], SCORING.error_std_floor) for k in sets}
     else:
         raise ValueError(f"unknown weighting {weighting!r}")
     w = {k: getattr(errors, k) / std[k] for k in std}
@@ -98,9 +99,8 @@ def evaluate(w: Weighted, channel_names: tuple[str, ...], fault_step: np.ndarray
     outcome: dict = {}
     for fpr in FPRS:
         key = f"{fpr:.2f}"
-        single = quantile_threshold(w.calibration, fpr)
-        per_step = np.array([quantile_threshold(w.calibration[:, t], fpr) for t in range(steps)])
-        peak = quantile_threshold(w.calibration.max(axis=1), fpr)
+        t = Thresholds.of(w.calibration, fpr)  # as a model calibrates them for the service
+        single, per_step, peak = t.step, t.per_step, t.episode
         first = first_crossing(w.faults, np.full(steps, single), fault_step)
         first_ps = first_crossing(w.faults, per_step, fault_step)
         summary["detection_rate"][key] = float((first >= 0).mean())
