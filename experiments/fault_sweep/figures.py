@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
 import matplotlib.pyplot as plt
 import numpy as np
 
 from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, Weighted, weigh
 from experiments.fault_sweep.run import SweepResult
 from models.calibration import Thresholds
-from models.fault import joint_channels
+from sim.channels import JOINT_CHANNELS, JOINT_NAMES, WRENCH_CHANNELS
+from sim.config import SIM
 
 BEST = ("nasm_offline", "whitened")  # the paper's setting, errors weighted by a full precision
 EXAMPLES = ((5, 3.0, 10.0), (2, 3.0, 10.0))  # (joint, time s, overshoot deg), the paper's two
@@ -54,15 +54,18 @@ def energy_distribution(result: SweepResult, w: Weighted, out: Path) -> None:
 
 def confusion(result: SweepResult, out: Path) -> None:
     o = result.outcomes[BEST]
-    m = np.zeros((7, 7))
+    n = len(JOINT_NAMES)
+    m = np.zeros((n, n))
     for true, got in zip(result.bench.fault_joint, o["isolated_at_fault_step"]):
         m[true - 1, got - 1] += 1
-    fig, ax = plt.subplots(figsize=(5, 4.5))
-    ax.imshow(m / np.maximum(m.sum(axis=1, keepdims=True), 1), cmap="viridis", vmin=0, vmax=1)  # rows may be empty
-    for i in range(7):
-        for j in range(7):
-            ax.text(j, i, int(m[i, j]), ha="center", va="center", color="w" if m[i, j] < 70 else "k", fontsize=7)
-    ax.set(xticks=range(7), yticks=range(7), xticklabels=range(1, 8), yticklabels=range(1, 8),
+    fig, ax = plt.subplots(figsize=(5.6, 4.5))
+    share = m / np.maximum(m.sum(axis=1, keepdims=True), 1)  # rows may be empty
+    image = ax.imshow(share, cmap="viridis", vmin=0, vmax=1)
+    fig.colorbar(image, ax=ax, label="share of the locked joint's faults")
+    for i in range(n):
+        for j in range(n):
+            ax.text(j, i, int(m[i, j]), ha="center", va="center", color="w" if share[i, j] < 0.6 else "k", fontsize=7)
+    ax.set(xticks=range(n), yticks=range(n), xticklabels=range(1, n + 1), yticklabels=range(1, n + 1),
            xlabel="isolated joint", ylabel="locked joint", title=f"isolation at the fault step\n{BEST[0]}, {BEST[1]}")
     _save(fig, out / "isolation_confusion.png")
 
@@ -90,7 +93,9 @@ def breakdown(result: SweepResult, out: Path) -> None:
 def worked_examples(result: SweepResult, w: Weighted, out: Path) -> None:
     b = result.bench
     names = b.normal.channel_names
-    joints = joint_channels(names)
+    joints = list(range(len(names))[JOINT_CHANNELS])
+    wrench = list(range(len(names))[WRENCH_CHANNELS])
+    period = 1.0 / SIM.timing.observation_hz
     skill = b.faults.labels[0]
     for joint, time_s, overshoot in EXAMPLES:
         pick = np.flatnonzero((b.fault_joint == joint) & (b.fault_time == time_s) & (b.overshoot == overshoot)
@@ -100,23 +105,25 @@ def worked_examples(result: SweepResult, w: Weighted, out: Path) -> None:
         i = pick[0]
         threshold = Thresholds.of(w.calibration, MAIN_FPR).step
         steps = np.arange(w.faults.shape[1])
+        span = (-period / 2, (len(steps) - 0.5) * period)
         fig, axes = plt.subplots(1, 4, figsize=(18, 3.8))
-        axes[0].plot(steps * 0.5, w.faults[i], marker="o", label="energy")
+        axes[0].plot(steps * period, w.faults[i], marker="o", label="energy")
         axes[0].axhline(threshold, color="r", ls="--", label=f"threshold ({100 * MAIN_FPR:.0f} % FPR)")
         axes[0].axvline(time_s, color="k", lw=0.8)
         axes[0].set(yscale="log", xlabel="t (s)", title=f"joint {joint} {overshoot:+.0f} deg at t = {time_s} s")
         axes[0].legend(fontsize=7)
         err = np.abs(w.fault_errors[i])
-        axes[1].imshow(err[:, joints].T, aspect="auto", cmap="magma", extent=(-0.25, 7.25, 7.5, 0.5))
+        image = axes[1].imshow(err[:, joints].T, aspect="auto", cmap="magma", extent=(*span, len(joints) + 0.5, 0.5))
+        fig.colorbar(image, ax=axes[1], label="|error| / spread")
         axes[1].set(xlabel="t (s)", ylabel="joint", title="|proprioceptive error|")
-        wrench = list(range(len(names) - 12, len(names)))
-        axes[2].imshow(err[:, wrench].T, aspect="auto", cmap="magma", extent=(-0.25, 7.25, 11.5, -0.5))
-        axes[2].set(yticks=range(12), yticklabels=[names[k] for k in wrench], xlabel="t (s)",
+        image = axes[2].imshow(err[:, wrench].T, aspect="auto", cmap="magma", extent=(*span, len(wrench) - 0.5, -0.5))
+        fig.colorbar(image, ax=axes[2], label="|error| / spread")
+        axes[2].set(yticks=range(len(wrench)), yticklabels=[names[k] for k in wrench], xlabel="t (s)",
                     title="|exteroceptive error| (finger forces/torques)")
         axes[2].tick_params(axis="y", labelsize=6)
         col = joints[joint - 1]
-        axes[3].plot(steps * 0.5, np.degrees(b.faults.data[i, :, col]), marker="o", label="fault")
-        axes[3].plot(steps * 0.5, np.degrees(b.twins.data[i, :, col]), ls="--", label="no-fault twin")
+        axes[3].plot(steps * period, np.degrees(b.faults.data[i, :, col]), marker="o", label="fault")
+        axes[3].plot(steps * period, np.degrees(b.twins.data[i, :, col]), ls="--", label="no-fault twin")
         axes[3].set(xlabel="t (s)", ylabel=f"joint {joint} (deg)")
         axes[3].legend(fontsize=7)
         _save(fig, out / f"example_joint{joint}.png")
