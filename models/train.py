@@ -35,7 +35,7 @@ def make_schedule(
     """Cosine decay of the learning rate to ``lr_final_fraction`` of it at the last epoch.
 
     Per-step Adam updates at a rate high enough to learn quickly keep the weights
-    oscillating between epochs; annealing lets them settle (see models/README.md).
+    oscillating between epochs; annealing lets them settle.
     """
     if config.lr_final_fraction >= 1.0:
         return None

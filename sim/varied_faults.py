@@ -61,14 +61,18 @@ class VariedFault:
         return cls(d["kind"], int(d["step"]), int(d["joint"]), float(d["value"]), tuple(d["direction"]))
 
 
-class SmallOvershoot:
-    """Joint `joint` overshoots by `value` deg on the way to step `step`, then returns to the plan."""
+class FaultEffect:
+    """An effect driven by one ``VariedFault``, with nothing to set up after the reset."""
 
     def __init__(self, fault: VariedFault) -> None:
         self.fault = fault
 
     def initialize(self, physics: mjcf.Physics, scene: SceneHandles) -> None:
         pass
+
+
+class SmallOvershoot(FaultEffect):
+    """Joint `joint` overshoots by `value` deg on the way to step `step`, then returns to the plan."""
 
     def before_tick(self, physics: mjcf.Physics, scene: SceneHandles, tick: Tick) -> None:
         k, j = self.fault.step, self.fault.joint - 1
@@ -80,14 +84,8 @@ class SmallOvershoot:
             tick.target[j] += (1.0 - frac) * offset
 
 
-class Drift:
+class Drift(FaultEffect):
     """Joint `joint`'s command drifts at `value` deg/s from step `step` on."""
-
-    def __init__(self, fault: VariedFault) -> None:
-        self.fault = fault
-
-    def initialize(self, physics: mjcf.Physics, scene: SceneHandles) -> None:
-        pass
 
     def before_tick(self, physics: mjcf.Physics, scene: SceneHandles, tick: Tick) -> None:
         start = SIM.timing.step_time(self.fault.step)
@@ -114,16 +112,10 @@ class RestoreFriction:
         pass
 
 
-class Slip:
+class Slip(FaultEffect):
     """From step `step` on, pads and cube turn slippery (friction `value`): the cube slides out.
 
     MuJoCo takes the larger friction of two touching geoms, so both sides change."""
-
-    def __init__(self, fault: VariedFault) -> None:
-        self.fault = fault
-
-    def initialize(self, physics: mjcf.Physics, scene: SceneHandles) -> None:
-        pass
 
     def before_tick(self, physics: mjcf.Physics, scene: SceneHandles, tick: Tick) -> None:
         if tick.step >= self.fault.step:
@@ -131,14 +123,8 @@ class Slip:
                 physics.bind(geom).friction = [self.fault.value, 0.0, 0.0]
 
 
-class GripperOpen:
+class GripperOpen(FaultEffect):
     """The gripper opens at step `step` and stays open."""
-
-    def __init__(self, fault: VariedFault) -> None:
-        self.fault = fault
-
-    def initialize(self, physics: mjcf.Physics, scene: SceneHandles) -> None:
-        pass
 
     def before_tick(self, physics: mjcf.Physics, scene: SceneHandles, tick: Tick) -> None:
         if tick.step >= self.fault.step:

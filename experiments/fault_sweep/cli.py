@@ -11,17 +11,13 @@ import typer
 
 from models.config import FAITHFUL
 from runtime.parallel import Backend
+from sim.cli import Task
 
 # The paper's batch-1 training over 160 varied demonstrations costs ~3 s per epoch here: the
 # varied benchmark caps the paper-configured network's epochs to stay within minutes.
 VARIED_PAPER_EPOCHS = 40
 
 app = typer.Typer()
-
-
-class Task(str, Enum):
-    paper = "paper"
-    varied = "varied"
 
 
 class Context(str, Enum):
