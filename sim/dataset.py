@@ -166,7 +166,7 @@ def _episode_from(meta: dict, observations: np.ndarray) -> Episode:
                    warnings=list(meta["warnings"]), **hi)
 
 
-def read_mcap(path: Path) -> list[Episode]:
+def read_episode_set(path: Path) -> list[Episode]:
     """Decode an episode set from its MCAP file."""
     metas: dict[int, dict] = {}
     values: dict[int, dict[int, list]] = {}
@@ -221,7 +221,7 @@ def load_episodes(path: str | Path) -> list[Episode]:
             current = np.array_equal(z["stamp"], _stamp(path))
         if current:
             return _read_cache(cache)
-    return read_mcap(path)
+    return read_episode_set(path)
 
 
 def generate(kind: str, out_dir: str | Path = "runs/data", workers: int = 2, n_demos: int = 10,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from mcap.reader import make_reader
 
-from sim.dataset import demonstrations, faults, held_out_normal, load_episodes, read_mcap, twins, write_cache, write_mcap
+from sim.dataset import demonstrations, faults, held_out_normal, load_episodes, read_episode_set, twins, write_cache, write_mcap
 from sim.disturbances import FallingObject
 from sim.faults import FaultSpec
 from sim.runner import run_episode
@@ -32,7 +32,7 @@ def test_round_trip_through_mcap_and_cache(tmp_path):
         summary = make_reader(f).get_summary()
     assert {c.topic for c in summary.channels.values()} == {"/episode", "/observation"}
     assert summary.statistics.message_count == 3 * 16
-    from_mcap = read_mcap(path)
+    from_mcap = read_episode_set(path)
     write_cache(episodes, path)
     from_cache = load_episodes(path)
     for original in (from_mcap, from_cache):
