@@ -48,10 +48,15 @@ class VariedJob:
     seed: int
     fault: VariedFault | None = None
     out_of_range: bool = False
+    # 0: the seed's own noise. k > 0: the same context (cube, goal, speed, post) and fault with
+    # fresh tremor, start posture, sensor and perception noise: a replicate of the episode.
+    replicate: int = 0
 
 
 def _rng(job: VariedJob, stream: int) -> np.random.Generator:
-    return np.random.default_rng((int(job.seed), VARIED_SKILLS.index(job.skill), TASK_TAG, stream))
+    """Stream 0 draws the context, streams 1-3 the plan, execution and perception noise."""
+    key = (int(job.seed), VARIED_SKILLS.index(job.skill), TASK_TAG, stream)
+    return np.random.default_rng(key if stream == 0 or job.replicate == 0 else (*key, job.replicate))
 
 
 def context_of(job: VariedJob) -> Context:

@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from experiments.varied.ceiling import ceiling
 from experiments.varied.data import make_benchmark
 from experiments.varied.methods import Method, neural_asm_methods, train_neural_asm
 from experiments.varied.score import headline, score_all
@@ -102,3 +103,24 @@ def test_ablation_rows_carry_validation_error_and_test_scores(bench):
         assert r["validation_mse"] > 0 and 0.0 <= r["detection"] <= 1.0 and 0.0 <= r["auroc"] <= 1.0
     table = ablation_markdown(rows, "hidden")
     assert table.count("\n| ") == 1 + len(rows)  # header and one line per row
+
+
+def test_a_replicate_keeps_the_context_and_redraws_the_noise():
+    job = VariedJob(VARIED_SKILLS[1], 10_003)
+    original, replicate, other = (run_job(j) for j in (job, replace(job, replicate=1), replace(job, seed=10_004)))
+    assert replicate.task == original.task != other.task
+    assert not np.allclose(replicate.observations, original.observations)
+    joints = slice(0, 7)  # the same context moves the arm nearly the same way: within a few degrees
+    assert np.abs(replicate.observations[:, joints] - original.observations[:, joints]).max() < np.deg2rad(5)
+
+
+def test_ceiling_oracles_see_what_the_context_explains(bench):
+    result = ceiling(bench, workers=2, alpha=0.1)  # 12 calibration episodes: a 1 % threshold would be infinite
+    assert sum(result["replicates_failed"].values()) == 0
+    assert result["explained_variance"]["joints"] > 0.9  # the context decides where the arm goes
+    assert result["explained_variance"]["finger forces and torques"] < result["explained_variance"]["joints"]
+    replay, mean = result["oracles"]["replay"], result["oracles"]["conditional_mean"]
+    assert mean["held_out_mse"] == pytest.approx(replay["held_out_mse"] / 2, rel=1e-5)
+    assert mean["episode"]["auroc"] >= replay["episode"]["auroc"]  # half the noise separates faults no worse
+    wrong_cube = mean["episode"]["per_family"]["wrong_cube"]
+    assert wrong_cube["visible"] > 0 and wrong_cube["detection_visible"] >= 0.5  # a cube 6-10 cm off the reported pose

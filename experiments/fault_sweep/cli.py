@@ -36,11 +36,17 @@ def faults(
     fast_epochs: int | None = typer.Option(None, help="override the default model's epochs"),
     ablation: bool = typer.Option(False, "--ablation", help="varied task: train one Neural ASM per lever "
                                   "(experiments/varied/ablation.py) and write ablation.json and ablation.md"),
+    ceiling: bool = typer.Option(False, "--ceiling", help="varied task: score two oracles that know each episode's "
+                                 "exact context (experiments/varied/ceiling.py); write ceiling.json and ceiling.md"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
     workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
 ) -> None:
     """Run the 980-fault sweep (or the varied-task benchmark) against baselines; write JSON, markdown and figures."""
+    if task == Task.varied and ceiling:
+        _ceiling(context.value, out or Path(f"runs/varied_{context.value}"), data or Path("runs/data_varied"),
+                 workers, backend)
+        return
     if task == Task.varied and ablation:
         _ablation(context.value, out or Path(f"runs/varied_{context.value}"), data or Path("runs/data_varied"),
                   fast_epochs, workers, backend)
@@ -90,6 +96,19 @@ def _ablation(context: str, out: Path, data: Path, epochs: int | None, workers: 
     (out / "ablation.json").write_text(json.dumps(rows, indent=1))
     (out / "ablation.md").write_text(ablation_markdown(rows, context))
     typer.echo((out / "ablation.md").read_text())
+
+
+def _ceiling(context: str, out: Path, data: Path, workers: int, backend: Backend) -> None:
+    from experiments.varied.ceiling import ceiling_markdown, run_ceiling
+
+    start = time.perf_counter()
+    result = run_ceiling(data, context, workers, backend)
+    result["seconds"] = round(time.perf_counter() - start, 1)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "ceiling.json").write_text(json.dumps(result, indent=1))
+    (out / "ceiling.md").write_text(ceiling_markdown(result))
+    typer.echo((out / "ceiling.md").read_text())
+    typer.echo(f"wrote {out} in {result['seconds']:.0f} s")
 
 
 if __name__ == "__main__":
