@@ -209,15 +209,25 @@ class VariedPlan:
     phases: np.ndarray  # (T,)
 
 
-def make_plan(skill: str, ctx: Context, rng: np.random.Generator, wrong_side: bool = False,
+@dataclass(frozen=True)
+class PlanNoise:
+    tremor: np.ndarray  # (T, 3) m, on the free-space waypoints
+    start: np.ndarray  # (7,) rad, the operator's start posture
+
+
+def draw_plan_noise(rng: np.random.Generator) -> PlanNoise:
+    n = SIM.varied.n_steps
+    return PlanNoise(rng.normal(0.0, SIM.noise.waypoint_m, (n, 3)), rng.normal(0.0, SIM.noise.start_joint_rad, 7))
+
+
+def make_plan(skill: str, ctx: Context, noise: PlanNoise, wrong_side: bool = False,
               cube_xy: np.ndarray | None = None) -> VariedPlan:
     """The episode's 2 Hz plan: keyframes time-warped by the speed, tremor, IK."""
     n = SIM.varied.n_steps
     pos, yaws, (close, release) = keyframes(skill, ctx, wrong_side, cube_xy)
     phases = np.minimum(np.arange(n) * ctx.speed, LAST_PHASE)
     nominal = nominal_postures(skill)
-    tremor = rng.normal(0.0, SIM.noise.waypoint_m, (n, 3))
-    start_noise = rng.normal(0.0, SIM.noise.start_joint_rad, 7)
+    tremor, start_noise = noise.tremor, noise.start
     tcp = np.array([_interpolate(pos, p) for p in phases])
     free = (phases > 1.0) & (phases < 2.0) | (phases > 6.0) & (phases < 8.0)  # free-space moves only
     tcp[free] += tremor[free]

@@ -25,7 +25,8 @@ import numpy as np
 from sim.config import SIM
 from sim.episode import Episode
 from runtime.parallel import Backend, parallel_map
-from sim.varied import VARIED_SKILLS, Context, keyframes, make_plan, perceived, post_xy, sample_context, with_context_channels
+from sim.varied import (VARIED_SKILLS, Context, draw_plan_noise, keyframes, make_plan, perceived, post_xy, sample_context,
+                        with_context_channels)
 from sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestoreFriction, VariedFault, apply_sensor_fault,
                                execution_effects)
 
@@ -49,8 +50,10 @@ class VariedJob:
     fault: VariedFault | None = None
     out_of_range: bool = False
     # 0: the seed's own noise. k > 0: the same context (cube, goal, speed, post) and fault with
-    # fresh tremor, start posture, sensor and perception noise: a replicate of the episode.
+    # fresh tremor, start posture, sensor and perception noise: a replicate of the episode;
+    # with `same_start`, the start posture (what the first observation shows) stays the seed's.
     replicate: int = 0
+    same_start: bool = False
 
 
 def _rng(job: VariedJob, stream: int) -> np.random.Generator:
@@ -87,7 +90,10 @@ def run_varied(job: VariedJob) -> Episode:
     wrong_cube = None
     if fault is not None and fault.kind == "wrong_cube":
         wrong_cube = ctx.cube_xy + fault.value * np.asarray(fault.direction)
-    plan = make_plan(job.skill, ctx, _rng(job, 1), wrong_side=fault is not None and fault.kind == "wrong_side",
+    plan_noise = draw_plan_noise(_rng(job, 1))
+    if job.same_start:
+        plan_noise = replace(plan_noise, start=draw_plan_noise(_rng(replace(job, replicate=0), 1)).start)
+    plan = make_plan(job.skill, ctx, plan_noise, wrong_side=fault is not None and fault.kind == "wrong_side",
                      cube_xy=wrong_cube)
     n = len(plan.joints)
     tracker = _CubeYaw(n)

@@ -117,10 +117,11 @@ def test_a_replicate_keeps_the_context_and_redraws_the_noise():
 def test_ceiling_oracles_see_what_the_context_explains(bench):
     result = ceiling(bench, workers=2, alpha=0.1)  # 12 calibration episodes: a 1 % threshold would be infinite
     assert sum(result["replicates_failed"].values()) == 0
-    assert result["explained_variance"]["joints"] > 0.9  # the context decides where the arm goes
-    assert result["explained_variance"]["finger forces and torques"] < result["explained_variance"]["joints"]
-    replay, mean = result["oracles"]["replay"], result["oracles"]["conditional_mean"]
+    replay, mean, start = (result["oracles"][k] for k in ("replay", "conditional_mean", "conditional_mean_given_start"))
     assert mean["held_out_mse"] == pytest.approx(replay["held_out_mse"] / 2, rel=1e-5)
+    assert mean["explained_variance"]["end effector"] > 0.9  # the context decides where the hand goes
+    # the start posture propagates through the arm's null space: knowing it explains more of the joints
+    assert start["explained_variance"]["joints"] > mean["explained_variance"]["joints"]
     assert mean["episode"]["auroc"] >= replay["episode"]["auroc"]  # half the noise separates faults no worse
     wrong_cube = mean["episode"]["per_family"]["wrong_cube"]
     assert wrong_cube["visible"] > 0 and wrong_cube["detection_visible"] >= 0.5  # a cube 6-10 cm off the reported pose

@@ -7,8 +7,9 @@ the free-space waypoints, the operator's start posture, sensor and perception no
 how many visible faults stand out of that remaining noise at the benchmark's own threshold.
 
 Every scored episode (held-out normals, benign out-of-range ones, each fault's twin) is
-simulated again with its context and fault and fresh noise (``VariedJob.replicate``). Two
-oracles follow, scored exactly like the benchmark's methods (``score.outcomes``: whitened
+simulated again with its context and fault and fresh noise (``VariedJob.replicate``), and once
+more keeping its start posture (``same_start``: what its first observation, the network's cue,
+shows). The oracles, scored exactly like the benchmark's methods (``score.outcomes``: whitened
 energies from the precision split, conformal episode threshold at 1 % on the calibration split):
 
 - *replay*: expects an episode to be its replicate (residual ``x - x_rep``). It is realisable
@@ -17,6 +18,8 @@ energies from the precision split, conformal episode threshold at 1 % on the cal
 - *conditional mean*: the residual an exact ``E[x | context]`` would leave: ``(x - x_rep) / sqrt 2``
   for normal episodes and ``(fault - twin) + (twin - twin_rep) / sqrt 2`` for faults (the fault's
   own effect plus noise of the right size; exact in distribution for additive Gaussian noise).
+- *conditional mean given the start*: the same with ``E[x | context, start posture]``, from the
+  same-start replicates: what an expectation cued by the first observation could reach.
 
 Its held-out error (mean squared normalised residual after the first step, the column the
 benchmark reports for every method) is the floor that no expectation of the episode can go below.
@@ -41,36 +44,44 @@ from sim.episode import Episode
 from sim.varied import context_columns
 from sim.varied_sets import VariedJob, run_job
 
-ORACLES = ("replay", "conditional_mean")
+REPLICATES = {"fresh": {"replicate": 1}, "same_start": {"replicate": 2, "same_start": True}}
 GROUPS = {"joints": ("joint",), "end effector": ("ee_",), "fingers": ("finger_",), "gripper": ("gripper",),
           "finger forces and torques": ("left_", "right_"), "perceived context": ("cube_seen", "goal", "post")}
 
 
-def replicate_jobs(bench: VariedBenchmark) -> dict[str, list[VariedJob]]:
-    """One replicate of every scored episode: normals, out-of-range ones, and each fault's twin."""
+def replicate_jobs(bench: VariedBenchmark, kind: str) -> dict[str, list[VariedJob]]:
+    """One replicate (of REPLICATES' ``kind``) of every scored episode: normals, out-of-range
+    ones, and each fault's twin."""
     def jobs(s: Sequences, **kw: bool) -> list[VariedJob]:
-        return [VariedJob(str(skill), int(seed), replicate=1, **kw) for skill, seed in zip(s.labels, s.seeds)]
+        return [VariedJob(str(skill), int(seed), **REPLICATES[kind], **kw) for skill, seed in zip(s.labels, s.seeds)]
 
     return {"precision": jobs(bench.precision), "calibration": jobs(bench.calibration), "test": jobs(bench.test),
             "ood": jobs(bench.ood, out_of_range=True), "faults": jobs(bench.twins)}
 
 
 def simulate_replicates(bench: VariedBenchmark, workers: int = 2, backend: Backend = "processes"
-                        ) -> tuple[dict[str, Sequences], dict[str, np.ndarray]]:
-    """The replicates as Sequences of the benchmark's channels, and which episodes have one
-    (a replicate whose simulation fails drops its episode from the ceiling, and is counted)."""
-    out, kept = {}, {}
-    for key, jobs in replicate_jobs(bench).items():
-        results = parallel_map(run_job, [(job,) for job in jobs], workers, backend, desc=f"replicates {key}",
-                               unit="ep", chunksize=8)
-        kept[key] = np.array([isinstance(r, Episode) for r in results])
-        episodes = [r for r in results if isinstance(r, Episode)]
-        out[key] = as_sequences(episodes, context_columns(tuple(episodes[0].channel_names), bench.context))
-    return out, kept
+                        ) -> tuple[VariedBenchmark, dict[str, dict[str, Sequences]], dict[str, int]]:
+    """Both kinds of replicates as Sequences of the benchmark's channels, with the benchmark
+    restricted to the episodes that have both (a replicate the simulation refuses, at its
+    velocity limits or in IK, drops its episode; the drops are counted per set)."""
+    results = {}
+    for kind in REPLICATES:
+        for key, jobs in replicate_jobs(bench, kind).items():
+            results[kind, key] = parallel_map(run_job, [(job,) for job in jobs], workers, backend,
+                                              desc=f"{kind} replicates, {key}", unit="ep", chunksize=8)
+    kept = {key: np.logical_and.reduce([[isinstance(r, Episode) for r in results[kind, key]] for kind in REPLICATES])
+            for key in SETS}
+    bench = _keep(bench, kept)
+    reps = {}
+    for kind in REPLICATES:
+        reps[kind] = {}
+        for key in SETS:
+            episodes = [r for r, k in zip(results[kind, key], kept[key]) if k]
+            reps[kind][key] = as_sequences(episodes, context_columns(tuple(episodes[0].channel_names), bench.context))
+    return bench, reps, {key: int((~k).sum()) for key, k in kept.items()}
 
 
 def _keep(bench: VariedBenchmark, kept: dict[str, np.ndarray]) -> VariedBenchmark:
-    """The benchmark without the episodes whose replicate failed."""
     f = kept["faults"]
     return replace(bench, precision=bench.precision.take(kept["precision"]),
                    calibration=bench.calibration.take(kept["calibration"]), test=bench.test.take(kept["test"]),
@@ -78,45 +89,52 @@ def _keep(bench: VariedBenchmark, kept: dict[str, np.ndarray]) -> VariedBenchmar
                    kinds=bench.kinds[f], fault_step=bench.fault_step[f], onset=bench.onset[f], visible=bench.visible[f])
 
 
-def oracle_errors(bench: VariedBenchmark, reps: dict[str, Sequences], norm: Normaliser) -> dict[str, dict]:
-    """Normalised residuals (N, T, D) of both oracles on every set."""
+def oracle_errors(bench: VariedBenchmark, reps: dict[str, dict[str, Sequences]], norm: Normaliser
+                  ) -> dict[str, dict[str, np.ndarray]]:
+    """Normalised residuals (N, T, D) of every oracle on every set."""
     x = {key: norm.normalise(getattr(bench, key).data) for key in SETS}
-    r = {key: norm.normalise(reps[key].data) for key in SETS}
     twin = norm.normalise(bench.twins.data)
-    replay = {key: x[key] - r[key] for key in SETS}
-    mean = {key: (x[key] - r[key]) / np.sqrt(2.0) for key in SETS if key != "faults"}
-    mean["faults"] = (x["faults"] - twin) + (twin - r["faults"]) / np.sqrt(2.0)
-    return {"replay": replay, "conditional_mean": mean}
+    out = {}
+    for kind, name in (("fresh", "conditional_mean"), ("same_start", "conditional_mean_given_start")):
+        r = {key: norm.normalise(reps[kind][key].data) for key in SETS}
+        if kind == "fresh":
+            out["replay"] = {key: x[key] - r[key] for key in SETS}
+        mean = {key: (x[key] - r[key]) / np.sqrt(2.0) for key in SETS if key != "faults"}
+        mean["faults"] = (x["faults"] - twin) + (twin - r["faults"]) / np.sqrt(2.0)
+        out[name] = mean
+    return out
 
 
-def explained_variance(bench: VariedBenchmark, reps: dict[str, Sequences], norm: Normaliser) -> dict[str, float]:
-    """Per channel group, the share of held-out normal variance that the exact context explains."""
-    x, r = norm.normalise(bench.precision.data)[:, 1:], norm.normalise(reps["precision"].data)[:, 1:]
-    residual = ((x - r) ** 2).mean(axis=(0, 1)) / 2.0  # noise left given the context, per channel
-    total = x.var(axis=0).mean(axis=0)  # variance across normal episodes, per channel (per step, averaged)
+def explained_variance(bench: VariedBenchmark, residual: np.ndarray) -> dict[str, float]:
+    """Per channel group, the share of the held-out normal variance within each skill (precision
+    split, after the first step) that an oracle's residuals (original units) do not leave."""
+    x = bench.precision.data.astype(np.float64)
+    centred = np.concatenate([x[bench.precision.labels == s] - x[bench.precision.labels == s].mean(axis=0)
+                              for s in np.unique(bench.precision.labels)])
+    total = (centred[:, 1:] ** 2).mean(axis=(0, 1))
+    left = (residual[:, 1:] ** 2).mean(axis=(0, 1))
     shares = {}
     for group, prefixes in GROUPS.items():
         cols = [i for i, n in enumerate(bench.channel_names) if n.startswith(prefixes)]
         if cols:
-            shares[group] = float(1.0 - residual[cols].sum() / total[cols].sum())
+            shares[group] = float(1.0 - left[cols].sum() / total[cols].sum())
     return shares
 
 
 def ceiling(bench: VariedBenchmark, workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA) -> dict:
-    """Both oracles' summaries (the benchmark's keys), their held-out errors, the variance the
-    context explains per channel group, and the episodes dropped."""
-    reps, kept = simulate_replicates(bench, workers, backend)
-    bench = _keep(bench, kept)
+    """Every oracle's summaries (the benchmark's keys), held-out error and explained variance,
+    and the episodes dropped."""
+    bench, reps, dropped = simulate_replicates(bench, workers, backend)
     norm = Normaliser.fit(bench.demos.data)
-    result: dict = {"context": bench.context, "alpha": alpha,
-                    "replicates_failed": {k: int((~v).sum()) for k, v in kept.items()},
-                    "explained_variance": explained_variance(bench, reps, norm), "oracles": {}}
+    result: dict = {"context": bench.context, "alpha": alpha, "replicates_failed": dropped, "oracles": {}}
     for name, errors in oracle_errors(bench, reps, norm).items():
         cal = estimate("ceiling", 1, errors["precision"], "precision split", "full")
         e = {key: energy(err, cal.error_std, cal.error_precision) for key, err in errors.items()}
         rules = outcomes(e, bench.onset, alpha)
-        result["oracles"][name] = {"held_out_mse": float(np.mean(errors["precision"][:, 1:] ** 2)),
-                                   **{rule: summary(o, bench) for rule, o in rules.items()}}
+        result["oracles"][name] = {
+            "held_out_mse": float(np.mean(errors["precision"][:, 1:] ** 2)),
+            "explained_variance": explained_variance(bench, errors["precision"] * norm.std),
+            **{rule: summary(o, bench) for rule, o in rules.items()}}
     return result
 
 
@@ -144,7 +162,10 @@ def ceiling_markdown(result: dict) -> str:
     for name, o in result["oracles"].items():
         fam = o["episode"]["per_family"]
         lines.append(f"| {name.replace('_', ' ')} | " + " | ".join(pct(fam[f]["detection_visible"]) for f in families) + " |")
-    lines += ["", "Share of the held-out normal variance that the exact context explains, per channel group:", "",
-              "| " + " | ".join(result["explained_variance"]) + " |", "|---" * len(result["explained_variance"]) + "|",
-              "| " + " | ".join(f"{100 * v:.1f} %" for v in result["explained_variance"].values()) + " |"]
+    groups = list(next(iter(result["oracles"].values()))["explained_variance"])
+    lines += ["", "Share of the held-out normal variance each oracle's expectation explains, per channel group:", "",
+              "| oracle | " + " | ".join(groups) + " |", "|---" * (len(groups) + 1) + "|"]
+    for name, o in result["oracles"].items():
+        lines.append(f"| {name.replace('_', ' ')} | " + " | ".join(f"{100 * o['explained_variance'][g]:.1f} %"
+                                                                  for g in groups) + " |")
     return "\n".join(lines) + "\n"
