@@ -26,7 +26,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from sim.channels import CHANNEL_NAMES
+from sim.channels import (CHANNEL_NAMES, EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_NAMES,
+                          WRENCH_CHANNELS)
 from sim.config import SIM
 from sim.episode import Episode
 from sim.scene import CUBE_HALF, POST_PARK
@@ -262,6 +263,15 @@ def with_context_channels(episode: Episode, extra: np.ndarray) -> Episode:
     """The episode as the observed variant records it (25 + 7 channels)."""
     return replace(episode, observations=np.concatenate([episode.observations, extra], axis=1),
                    channel_names=(*CHANNEL_NAMES, *CONTEXT_NAMES))
+
+
+def channel_groups(names: tuple[str, ...]) -> dict[str, list[int]]:
+    """The indices of each kind of channel among ``names`` (kinds absent from them are left out)."""
+    kinds = {"joints": JOINT_NAMES, "end effector": CHANNEL_NAMES[EE_CHANNELS], "fingers": CHANNEL_NAMES[FINGER_CHANNELS],
+             "gripper": (CHANNEL_NAMES[GRIPPER_CHANNEL],), "finger forces and torques": CHANNEL_NAMES[WRENCH_CHANNELS],
+             "perceived context": CONTEXT_NAMES}
+    groups = {kind: [i for i, n in enumerate(names) if n in members] for kind, members in kinds.items()}
+    return {kind: cols for kind, cols in groups.items() if cols}
 
 
 def context_columns(channel_names_: tuple[str, ...], context: str) -> np.ndarray:

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.varied.score import ALPHA, SETS, outcomes, summary
+from experiments.varied.score import ALPHA, SETS, held_out_error, outcomes, summary
 from models.calibration import estimate
 from models.normaliser import Normaliser
 from models.scoring import energy
@@ -41,12 +41,10 @@ from models.sequences import Sequences
 from pipelines.episodes import as_sequences
 from runtime.parallel import Backend, parallel_map
 from sim.episode import Episode
-from sim.varied import context_columns
+from sim.varied import channel_groups, context_columns
 from sim.varied_sets import VariedJob, run_job
 
 REPLICATES = {"fresh": {"replicate": 1}, "same_start": {"replicate": 2, "same_start": True}}
-GROUPS = {"joints": ("joint",), "end effector": ("ee_",), "fingers": ("finger_",), "gripper": ("gripper",),
-          "finger forces and torques": ("left_", "right_"), "perceived context": ("cube_seen", "goal", "post")}
 
 
 def replicate_jobs(bench: VariedBenchmark, kind: str) -> dict[str, list[VariedJob]]:
@@ -113,12 +111,8 @@ def explained_variance(bench: VariedBenchmark, residual: np.ndarray) -> dict[str
                               for s in np.unique(bench.precision.labels)])
     total = (centred[:, 1:] ** 2).mean(axis=(0, 1))
     left = (residual[:, 1:] ** 2).mean(axis=(0, 1))
-    shares = {}
-    for group, prefixes in GROUPS.items():
-        cols = [i for i, n in enumerate(bench.channel_names) if n.startswith(prefixes)]
-        if cols:
-            shares[group] = float(1.0 - left[cols].sum() / total[cols].sum())
-    return shares
+    return {group: float(1.0 - left[cols].sum() / total[cols].sum())
+            for group, cols in channel_groups(bench.channel_names).items()}
 
 
 def ceiling(bench: VariedBenchmark, workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA) -> dict:
@@ -132,7 +126,8 @@ def ceiling(bench: VariedBenchmark, workers: int = 2, backend: Backend = "proces
         e = {key: energy(err, cal.error_std, cal.error_precision) for key, err in errors.items()}
         rules = outcomes(e, bench.onset, alpha)
         result["oracles"][name] = {
-            "held_out_mse": float(np.mean(errors["precision"][:, 1:] ** 2)),
+            "held_out_mse": held_out_error(errors["precision"], bench.channel_names)["all"],
+            "held_out_mse_per_group": held_out_error(errors["precision"], bench.channel_names),
             "explained_variance": explained_variance(bench, errors["precision"] * norm.std),
             **{rule: summary(o, bench) for rule, o in rules.items()}}
     return result
@@ -163,6 +158,11 @@ def ceiling_markdown(result: dict) -> str:
         fam = o["episode"]["per_family"]
         lines.append(f"| {name.replace('_', ' ')} | " + " | ".join(pct(fam[f]["detection_visible"]) for f in families) + " |")
     groups = list(next(iter(result["oracles"].values()))["explained_variance"])
+    lines += ["", "Held-out error per kind of channel (compare with each method's in fault_sweep.md):", "",
+              "| oracle | " + " | ".join(groups) + " |", "|---" * (len(groups) + 1) + "|"]
+    for name, o in result["oracles"].items():
+        lines.append(f"| {name.replace('_', ' ')} | " + " | ".join(f"{o['held_out_mse_per_group'][g]:.3f}"
+                                                                  for g in groups) + " |")
     lines += ["", "Share of the held-out normal variance each oracle's expectation explains, per channel group:", "",
               "| oracle | " + " | ".join(groups) + " |", "|---" * (len(groups) + 1) + "|"]
     for name, o in result["oracles"].items():

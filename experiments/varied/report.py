@@ -62,6 +62,12 @@ def write_markdown(result: VariedResult, path: Path) -> None:
     for name in order:
         fam = result.summaries[name]["episode"]["per_family"]
         lines.append(f"| {result.summaries[name]['label']} | " + " | ".join(_pct(f["detection_visible"]) for f in fam.values()) + " |")
+    groups = [g for g in result.summaries[order[0]]["held_out_mse_per_group"] if g != "all"]
+    lines += ["", "Held-out error per kind of channel (where each method's expectation misses):", "",
+              "| method | " + " | ".join(groups) + " |", "|---|" + "---|" * len(groups)]
+    for name in order:
+        err = result.summaries[name]["held_out_mse_per_group"]
+        lines.append(f"| {result.summaries[name]['label']} | " + " | ".join(f"{err[g]:.3f}" for g in groups) + " |")
     path.write_text("\n".join(lines) + "\n")
 
 

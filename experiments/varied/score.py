@@ -22,6 +22,7 @@ from models.calibration import estimate
 from models.conformal import TimeVaryingThreshold, binomial_interval, episode_threshold, mcnemar_exact
 from models.normaliser import Normaliser
 from models.scoring import energy
+from sim.varied import channel_groups
 
 ALPHA = 0.01
 SETS = ("precision", "calibration", "test", "ood", "faults")
@@ -39,18 +40,25 @@ class Outcome:
     normal_score: np.ndarray  # (N_test,)
 
 
-def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> tuple[dict[str, np.ndarray], float]:
+def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> tuple[dict[str, np.ndarray], dict]:
     """Whitened energies (N, T) of every set under the method's own precisions, and the
-    method's mean squared normalised error after the first step on the precision split
-    (how well it expects held-out normal episodes, before any weighting)."""
+    method's held-out error on the precision split (how well it expects held-out normal
+    episodes, before any weighting)."""
     errors = {}
     for key in SETS:
         arrays = getattr(bench, key)
         x = norm.normalise(arrays.data)
         errors[key] = x - method.expected(x, arrays.labels)
     cal = estimate("varied", 1, errors["precision"], "precision split", "full")
-    held_out_mse = float(np.mean(errors["precision"][:, 1:] ** 2))
-    return {key: energy(e, cal.error_std, cal.error_precision) for key, e in errors.items()}, held_out_mse
+    return {key: energy(e, cal.error_std, cal.error_precision) for key, e in errors.items()}, held_out_error(
+        errors["precision"], bench.channel_names)
+
+
+def held_out_error(errors: np.ndarray, channel_names: tuple[str, ...]) -> dict:
+    """Mean squared normalised error after the first step, overall and per kind of channel."""
+    squared = errors[:, 1:].astype(np.float64) ** 2
+    return {"all": float(squared.mean()),
+            **{group: float(squared[..., cols].mean()) for group, cols in channel_groups(channel_names).items()}}
 
 
 def _after_onset(e: np.ndarray, onset: np.ndarray) -> np.ndarray:
@@ -105,10 +113,10 @@ def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, a
     """Summaries {method: {rule: summary}} and outcomes {(method, rule): Outcome}."""
     summaries, results = {}, {}
     for method in tqdm(methods, desc="scoring"):
-        e, held_out_mse = energies(method, bench, norm)
+        e, held_out = energies(method, bench, norm)
         rules = outcomes(e, bench.onset, alpha)
         summaries[method.name] = {"label": method.label, "is_neural_asm": method.is_neural_asm,
-                                  "held_out_mse": held_out_mse,
+                                  "held_out_mse": held_out["all"], "held_out_mse_per_group": held_out,
                                   **{rule: summary(o, bench) for rule, o in rules.items()}}
         results.update({(method.name, rule): o for rule, o in rules.items()})
     return summaries, results
