@@ -27,7 +27,9 @@ from service.cli import serve
 from sim.cli import demos
 
 torch.set_num_threads(1)
-app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
+app = typer.Typer(help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
+                  "models, stream the client and run the experiments.", no_args_is_help=True,
+                  pretty_exceptions_show_locals=False)
 
 
 def _fail(message: str) -> None:
