@@ -12,7 +12,7 @@ import numpy as np
 import orjson
 from fastapi import Response
 
-from service.batching import StepOutcome
+from service.runner import StepOutcome
 from service.schemas import SessionInfo
 from service.sessions import Session
 

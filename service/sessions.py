@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from models.asm import NeuralASM, SkillStream
-from models.calibration import Calibration
 from models.fault import ThresholdKind
 from recordings import EpisodeRecorder
 from service.errors import BadObservation, NotCalibrated, TooManySessions, UnknownSession
@@ -29,37 +28,34 @@ log = logging.getLogger("service.sessions")
 class Session:
     id: str
     model_name: str
-    model: NeuralASM
-    stream: SkillStream
-    calibration: Calibration
-    fpr: float
-    threshold: ThresholdKind
+    stream: SkillStream  # holds the calibration, false-positive rate and threshold kind
     recording_id: str
     recorder: EpisodeRecorder | None = None
     last_used: float = field(default_factory=time.monotonic)
 
     @property
+    def model(self) -> NeuralASM:
+        return self.stream.model
+
+    @property
     def channel_names(self) -> tuple[str, ...]:
-        return self.model.channel_names
+        return self.stream.model.channel_names
+
+    @property
+    def fpr(self) -> float:
+        assert self.stream.fpr is not None
+        return self.stream.fpr
+
+    @property
+    def threshold(self) -> ThresholdKind:
+        return self.stream.threshold
 
     def observation(self, req: Observation) -> np.ndarray:
         """The request's observation as a vector in channel order, or a 422 naming the problem."""
-        names = self.channel_names
-        if req.channels is not None:
-            missing = [n for n in names if n not in req.channels]
-            unknown = sorted(set(req.channels) - set(names))
-            if missing or unknown:
-                raise BadObservation(
-                    f"channels: missing {missing}, unknown {unknown}; model {self.model_name!r} expects {list(names)}"
-                )
-            return np.array([req.channels[n] for n in names], np.float64)
-        assert req.observation is not None
-        if len(req.observation) != len(names):
-            raise BadObservation(
-                f"observation: has {len(req.observation)} values; model {self.model_name!r} expects "
-                f"{len(names)} ({', '.join(names)})"
-            )
-        return np.array(req.observation, np.float64)
+        try:
+            return self.stream.check(req.observation if req.channels is None else req.channels)
+        except ValueError as exc:
+            raise BadObservation(f"model {self.model_name!r}: {exc}") from None
 
     def close(self) -> None:
         if self.recorder is not None:
@@ -71,29 +67,13 @@ def open_session(params: SessionCreate, registry: ModelRegistry, settings: Setti
     """Check the recall setting is calibrated, then start its stream and recording."""
     name, model = registry.get(params.model)
     fpr = settings.default_fpr if params.fpr is None else params.fpr
-    calibration = model.calibration(params.mode, params.cue_steps)
-    if calibration is None:
-        raise NotCalibrated(
-            f"model {name!r} has no calibration for {params.mode} recall cued from {params.cue_steps} step(s); "
-            f"calibrated: {sorted(model.calibrations)}"
-        )
-    if fpr not in calibration.thresholds:
-        raise NotCalibrated(
-            f"fpr: model {name!r} has no threshold at false-positive rate {fpr} for {calibration.key}; "
-            f"calibrated: {sorted(calibration.thresholds)}"
-        )
+    try:
+        stream = model.stream(params.mode, params.cue_steps, weighted=True, fpr=fpr, threshold=params.threshold)
+    except KeyError as exc:
+        raise NotCalibrated(f"model {name!r}: {exc.args[0]}") from None
     session_id = secrets.token_hex(16)
     recording_id = params.recording_id or f"session-{session_id}"
-    session = Session(
-        id=session_id,
-        model_name=name,
-        model=model,
-        stream=model.stream(params.mode, params.cue_steps, weighted=True),
-        calibration=calibration,
-        fpr=fpr,
-        threshold=params.threshold,
-        recording_id=recording_id,
-    )
+    session = Session(id=session_id, model_name=name, stream=stream, recording_id=recording_id)
     if settings.record:
         session.recorder = EpisodeRecorder(
             f"service-{recording_id}-{session_id[:8]}",

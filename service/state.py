@@ -8,9 +8,8 @@ import asyncio
 import logging
 import time
 
-from service.batching import StepOutcome
 from service.registry import ModelRegistry
-from service.runner import Runner
+from service.runner import Runner, StepOutcome
 from service.schemas import Observation, SessionCreate
 from service.sessions import Session, SessionStore, open_session
 from service.settings import Settings
@@ -27,7 +26,6 @@ class ServiceState:
         self.started = time.monotonic()
 
     async def startup(self) -> None:
-        self.runner = Runner()  # a fresh thread: an app may be started again after a shutdown
         self.runner.start()
         await self.runner.call(lambda: self.registry.load(self.settings.build_default_model))
 
