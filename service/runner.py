@@ -21,10 +21,10 @@ from typing import Any, Callable, TypeVar
 import numpy as np
 import torch
 
-from models.asm import step_streams
+from models.asm import StreamStep, step_streams
 from models.fault import FaultDecision
 from models.scoring import StepScore
-from recordings.records import StepRecord
+from recordings.recorder import RecorderProcess, StepBatch
 from service.errors import BadObservation, ShuttingDown
 from service.sessions import Session
 
@@ -70,7 +70,8 @@ def _settle(future: "asyncio.Future[Any]", result: Any, error: BaseException | N
 
 
 class Runner:
-    def __init__(self) -> None:
+    def __init__(self, recorder: RecorderProcess | None = None) -> None:
+        self.recorder = recorder
         self._jobs: "queue.SimpleQueue[Any]" = queue.SimpleQueue()
         self._thread = threading.Thread()  # not started: steps are refused until ``start``
 
@@ -166,19 +167,25 @@ class Runner:
             assert outcome.decision is not None  # sessions always have a false-positive rate
             result = StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs))
             job.loop.call_soon_threadsafe(_settle, job.future, result, None)
-        for job, outcome in zip(jobs, results):  # after answering: recording is not on the latency path
-            if outcome is not None:
-                record(job.session, job.x, outcome.score, outcome.decision)  # type: ignore[arg-type]
+        if self.recorder is not None:  # after answering: recording is not on the latency path
+            recorded = [(j, o) for j, o in zip(jobs, results) if o is not None and j.session.recording is not None]
+            if recorded:
+                self.recorder.write(step_batch(recorded))  # type: ignore[arg-type]
 
 
-def record(session: Session, x: np.ndarray, score: StepScore, decision: FaultDecision) -> None:
-    if session.recorder is None:
-        return
-    try:
-        session.recorder.log_step(
-            StepRecord(score.step, x, score.expected, score.prediction, score.weighted_errors, score.energy,
-                       decision.threshold, decision.fault, decision.isolated_joint)
-        )
-    except Exception:
-        log.exception("recording of session %s failed; it continues unrecorded", session.id)
-        session.recorder = None
+def step_batch(recorded: list[tuple[_Step, StreamStep]]) -> StepBatch:
+    """One message for the recorder process: the batch's steps as stacked arrays."""
+    scores = [o.score for _, o in recorded]
+    decisions = [o.decision for _, o in recorded]
+    return StepBatch(
+        keys=[j.session.recording.key for j, _ in recorded],  # type: ignore[union-attr]
+        steps=[s.step for s in scores],
+        observation=np.stack([j.x for j, _ in recorded]),
+        expected=np.stack([s.expected for s in scores]),
+        prediction=np.stack([s.prediction for s in scores]),
+        errors=np.stack([s.weighted_errors for s in scores]),
+        energy=np.array([s.energy for s in scores]),
+        threshold=np.array([d.threshold for d in decisions]),  # type: ignore[union-attr]
+        fault=np.array([d.fault for d in decisions]),  # type: ignore[union-attr]
+        isolated_joint=[d.isolated_joint for d in decisions],  # type: ignore[union-attr]
+    )

@@ -304,7 +304,7 @@ def test_session_cap(client):
 
 
 def test_idle_sessions_expire():
-    store = SessionStore(cap=2, idle_s=10)
+    store = SessionStore(cap=2, per_client=2, idle_s=10)
     session = Session("a", "m", None, "r")  # type: ignore[arg-type]
     store.add(session)
     assert store.pop_idle(now=session.last_used + 5) == []

@@ -1,6 +1,6 @@
-from fastapi import APIRouter, Depends, Path, status
+from fastapi import APIRouter, Depends, Path, Request, status
 
-from service.auth import require_api_key
+from service.auth import client_of, require_api_key
 from service.deps import get_state
 from service.errors import ERROR_RESPONSES
 from service.payloads import session_info
@@ -19,11 +19,14 @@ router = APIRouter(
     "",
     response_model=SessionInfo,
     status_code=status.HTTP_201_CREATED,
-    responses={429: {"model": Error, "description": "too many open sessions"}},
+    responses={429: {"model": Error, "description": "the client's session quota or the server's cap is reached"}},
 )
-async def create_session(params: SessionCreate, state: ServiceState = Depends(get_state)) -> SessionInfo:
+async def create_session(
+    params: SessionCreate, request: Request, state: ServiceState = Depends(get_state)
+) -> SessionInfo:
     """Open a session for one episode: its first step is the episode's first observation."""
-    session = await state.open(params)
+    client = client_of(state.settings.api_key, request.headers, request.client.host if request.client else None)
+    session = await state.open(params, client)
     return session_info(session, state.settings.session_idle_s)
 
 

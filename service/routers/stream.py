@@ -26,7 +26,7 @@ import orjson
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect, status
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
-from service.auth import HEADER, key_ok
+from service.auth import HEADER, client_of, key_ok
 from service.errors import ServiceError, describe, json_problem, undecodable
 from service.payloads import session_info, step_payload
 from service.schemas import ClientMessage, EndMessage, SessionCreate, StartMessage
@@ -58,7 +58,8 @@ async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session
         if session is not None:
             await state.close(session.id)
             session = None
-        session = await state.open(SessionCreate(**message.model_dump(exclude={"type"})))
+        client = client_of(state.settings.api_key, ws.headers, ws.client.host if ws.client else None)
+        session = await state.open(SessionCreate(**message.model_dump(exclude={"type"})), client)
         await _send(ws, "started", session_info(session, state.settings.session_idle_s))
         return session
     if session is None:
