@@ -59,7 +59,7 @@ def build_model(folder: Path) -> np.ndarray:
 
 def start_server(folder: Path, port: int, record: bool) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--models-dir", str(folder),
-           "--recordings-dir", str(folder / "rec"), "--log-level", "warning", "--max-sessions", "128",
+           "--recordings-dir", str(folder / "rec"), "--log-level", "warning", "--max-sessions", "128", "--max-sessions-per-client", "128",
            "--record" if record else "--no-record"]
     proc = subprocess.Popen(cmd)
     deadline = time.monotonic() + 300  # importing torch on a loaded machine can take a while

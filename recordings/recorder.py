@@ -174,6 +174,9 @@ class RecorderProcess:
             log.error("the recorder process did not stop within %g s; killing it", timeout_s)
             self._process.kill()
         self._process.join()
+        for q in (self._inbox, self._outbox):
+            q.close()
+            q.join_thread()
 
     def _collect(self) -> None:
         """Resolve close futures as the child acknowledges them; restart a child that died."""

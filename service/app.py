@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 from collections.abc import AsyncIterator
 from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
 from fastapi import FastAPI
 
@@ -55,4 +56,24 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (health, models, sessions, inference, stream):
         app.include_router(module.router)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    if not settings.api_key:
+        _openapi_without_key(app)
     return app
+
+
+def _openapi_without_key(app: FastAPI) -> None:
+    """A server without a key accepts every request: its OpenAPI declares no key and no 401."""
+    full = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = full()
+            schema.get("components", {}).pop("securitySchemes", None)
+            for operations in schema["paths"].values():
+                for operation in operations.values():
+                    operation.pop("security", None)
+                    operation.get("responses", {}).pop("401", None)
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]

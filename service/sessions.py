@@ -64,10 +64,15 @@ def open_session(
     """Check the recall setting is calibrated, then start its stream and recording."""
     name, model = registry.get(params.model)
     fpr = settings.default_fpr if params.fpr is None else params.fpr
+    if model.calibration(params.mode, params.cue_steps) is None:
+        raise NotCalibrated(
+            f"model {name!r} has no calibration for {params.mode} recall cued from {params.cue_steps} step(s); "
+            f"calibrated: {sorted(model.calibrations)}"
+        )
     try:
         stream = model.stream(params.mode, params.cue_steps, weighted=True, fpr=fpr, threshold=params.threshold)
-    except KeyError as exc:
-        raise NotCalibrated(f"model {name!r}: {exc.args[0]}") from None
+    except KeyError as exc:  # no threshold at that rate
+        raise NotCalibrated(f"fpr: model {name!r}: {exc.args[0]}") from None
     session_id = secrets.token_hex(16)
     recording_id = params.recording_id or f"session-{session_id}"
     session = Session(id=session_id, model_name=name, stream=stream, recording_id=recording_id, client=client)

@@ -239,6 +239,9 @@ def _post(client: httpx.Client, path: str, body: bytes) -> httpx.Response:
         (lambda sid, x: {"session_id": sid, "observation": x[:5] + [1e7] + x[6:]}, 422, ["observation.5", "1000000"]),
         (lambda sid, x: {"session_id": sid, "observation": x[:5] + [1e39] + x[6:]}, 422, ["observation.5"]),
         (lambda sid, x: {"session_id": sid, "observation": x[:5] + ["a"] + x[6:]}, 422, ["observation.5"]),
+        (lambda sid, x: {"session_id": sid, "observation": x[:5] + ["1.5"] + x[6:]}, 422, ["observation.5"]),
+        (lambda sid, x: {"session_id": sid, "observation": x[:5] + [True] + x[6:]}, 422, ["observation.5"]),
+        (lambda sid, x: {"session_id": sid, "observation": x, "channels": None}, 422, ["channels"]),
         (lambda sid, x: {"session_id": sid, "channels": dict(zip(CHANNEL_NAMES[:-1], x))}, 422, ["missing", "right_tz"]),
         (lambda sid, x: {"session_id": sid, "channels": {**dict(zip(CHANNEL_NAMES, x)), "elbow": 1.0}}, 422, ["unknown", "elbow"]),
         (lambda sid, x: {"session_id": sid, "observation": x, "channels": {}}, 422, ["exactly one"]),
@@ -282,7 +285,10 @@ def test_undecodable_and_oversize_bodies(client, body, status, word):
     [
         ({"model": "nope"}, 404, "nope"),
         ({"fpr": 0.5}, 422, "0.5"),
-        ({"cue_steps": 3}, 422, "cue"),
+        ({"cue_steps": 3}, 409, "cued from 3"),
+        ({"cue_steps": True}, 422, "cue_steps"),
+        ({"fpr": "0.01"}, 422, "fpr"),
+        ({"fpr": True}, 422, "fpr"),
         ({"cue_steps": 0}, 422, "cue_steps"),
         ({"mode": "sideways"}, 422, "mode"),
         ({"recording_id": "../../x"}, 422, "recording_id"),
@@ -328,8 +334,10 @@ def test_api_key_enforced_and_expiry_on_a_keyed_server(model_dir, tmp_path, epis
             async with websockets.connect(srv.url.replace("http", "ws") + "/stream", additional_headers=headers) as w:
                 return json.loads(await w.recv())["type"]
 
-        with pytest.raises(websockets.exceptions.InvalidStatus):
-            asyncio.run(ws({}))
+        for headers in ({}, {HEADER: "wrong"}):  # as the stream's docstring and the AsyncAPI document say
+            with pytest.raises(websockets.exceptions.ConnectionClosedError) as closed:
+                asyncio.run(ws(headers))
+            assert closed.value.rcvd.code == 1008 and HEADER in closed.value.rcvd.reason
         assert asyncio.run(ws(key)) == "metadata"
         time.sleep(1.0)
         assert c.get(f"/sessions/{info['session_id']}", headers=key).status_code == 404
