@@ -10,7 +10,7 @@ type cannot say are in the JSON schema too: exactly one of ``observation`` and
 
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, WithJsonSchema, model_validator
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
 
 from models.config import SCORING
 from models.fault import ThresholdKind
@@ -21,6 +21,16 @@ SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 Value = Annotated[float, Field(strict=True, ge=-BOUND, le=BOUND, allow_inf_nan=False)]
 SessionId = Annotated[str, Field(pattern=SESSION_ID_PATTERN)]
 RecallMode = Literal["offline", "online"]
+
+
+def _json_integer(value: Any) -> Any:
+    """JSON Schema counts 3.0 as an integer, so the service does; true and "3" are not numbers."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+Count = Annotated[int, BeforeValidator(_json_integer)]
 
 
 def _calibrated_rate(fpr: float) -> float:
@@ -80,7 +90,7 @@ class SessionCreate(Strict):
         "offline",
         description="offline (the paper's setting): infer from the cue, then roll forward; online: infer from every observation",
     )
-    cue_steps: int = Field(1, ge=1, le=10_000, description="observations the hidden state is inferred from")
+    cue_steps: Count = Field(1, ge=1, le=10_000, description="observations the hidden state is inferred from")
     fpr: Fpr | None = Field(
         None, description="false-positive rate of the fault threshold; the server's default if omitted"
     )
