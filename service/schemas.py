@@ -75,11 +75,19 @@ class CalibrationInfo(BaseModel):
 
 
 class ModelInfo(BaseModel):
+    """A checkpoint in the model folder: served (status ok) or refused (broken, with the reason)."""
+
     name: str
-    channel_names: list[str]
-    hidden_size: int
-    calibrations: list[CalibrationInfo]
-    provenance: dict[str, Any]
+    status: Literal["ok", "broken"]
+    default: bool = Field(description="used by sessions that name no model")
+    path: str
+    origin: Literal["loaded", "built"] = Field(description="built by this service on first run, or loaded")
+    digest: str | None = Field(description="SHA-256 of the checkpoint's tensors, checked on load")
+    error: str | None = Field(None, description="why a broken checkpoint was refused")
+    channel_names: list[str] = []
+    hidden_size: int | None = None
+    calibrations: list[CalibrationInfo] = []
+    provenance: dict[str, Any] = {}
 
 
 class SessionCreate(Strict):
