@@ -138,11 +138,13 @@ def info(model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"
 from experiments.contextual.cli import contextual  # noqa: E402
 from experiments.correction.cli import correction  # noqa: E402
 from experiments.fault_sweep.cli import faults  # noqa: E402
+from recordings.cli import app as recordings_app  # noqa: E402
 from service.cli import serve  # noqa: E402
 from sim.cli import demos  # noqa: E402
 
 for command in (demos, faults, correction, contextual, serve, replay, evaluate):  # each package owns its commands
     app.command()(command)
+app.add_typer(recordings_app, name="recordings")
 
 if __name__ == "__main__":
     app()

@@ -24,6 +24,7 @@ FORMATS = ("rrd", "mcap")
 class _Writer(Protocol):
     def write_step(self, r: StepRecord) -> None: ...
     def write_world(self, w: WorldRecord) -> None: ...
+    def flush(self) -> None: ...
     def close(self) -> None: ...
 
 
@@ -72,6 +73,11 @@ class EpisodeRecorder:
     def log_world(self, record: WorldRecord) -> None:
         for w in self._writers:
             w.write_world(record)
+
+    def flush(self) -> None:
+        """Push what is buffered to the files, so that a crash cannot lose it."""
+        for w in self._writers:
+            w.flush()
 
     def close(self) -> None:
         """Close every file, even if one fails; idempotent."""

@@ -8,7 +8,9 @@ scored steps (``StepBatch``, one per inference batch), a session closing. Closin
 returns a future that resolves once the child has finalized the session's files, so a
 caller that waits for it can read them at once.
 
-On start the child recovers what a crash left in its folder (``recover_interrupted``).
+The child flushes every open file at least once a second, so a crash loses at most
+about a second of steps (and the MCAP chunk being filled). On start it recovers what a
+crash left in its folder (``recover_interrupted``).
 It writes an open marker beside each session's files while they are open, so that a
 later start knows which episodes were interrupted. If the child dies, the server's
 collector thread notices within a second, logs it and starts a new child (which
@@ -223,12 +225,20 @@ def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
     writers: dict[str, EpisodeRecorder | None] = {}
     errors: dict[str, str] = {}
     parent = mp.parent_process()
+    flushed = time.monotonic()
     while True:
         try:
             message = inbox.get(timeout=POLL_S)
         except queue.Empty:
+            message = None
+        if time.monotonic() - flushed >= POLL_S:  # what a crash may lose: about a second of steps
+            for writer in writers.values():
+                if writer is not None:
+                    writer.flush()
+            flushed = time.monotonic()
             if parent is not None and not parent.is_alive():
                 break  # orphaned: close the files, keep the markers (the episodes were interrupted)
+        if message is None:
             continue
         kind = message[0]
         if kind == "open":

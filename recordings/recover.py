@@ -39,7 +39,7 @@ RECOVERY_METADATA = "neural_asm.recovery"
 @dataclass(frozen=True)
 class Recovered:
     path: str
-    was_complete: bool | None  # an MCAP file already ended with its footer (not told for .rrd)
+    was_indexed: bool | None  # an MCAP file already had its summary: it was closed (not told for .rrd)
     messages: int | None  # MCAP messages kept (not told for .rrd)
 
 
@@ -54,7 +54,7 @@ def recover_mcap(path: Path, note: dict[str, str] | None = None) -> Recovered:
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     body: list[Message | Metadata] = []
-    complete = False
+    indexed = False
     with open(path, "rb") as f:
         try:
             for record in StreamReader(f).records:
@@ -65,7 +65,7 @@ def recover_mcap(path: Path, note: dict[str, str] | None = None) -> Recovered:
                 elif isinstance(record, (Message, Metadata)):
                     body.append(record)
                 elif isinstance(record, Footer):
-                    complete = True
+                    indexed = record.summary_start != 0  # 0: the provisional end of a file cut short
         except (McapError, EOFError, struct.error, ValueError):
             pass  # the torn end: everything before it is whole
     tmp = _temporary(path)
@@ -85,13 +85,13 @@ def recover_mcap(path: Path, note: dict[str, str] | None = None) -> Recovered:
                 out.writer.add_message(channel_ids[record.channel_id], record.log_time, record.data,
                                        record.publish_time, record.sequence)
                 kept += 1
-        out.writer.add_metadata(RECOVERY_METADATA, {"was_complete": str(complete).lower(), "messages": str(kept),
+        out.writer.add_metadata(RECOVERY_METADATA, {"was_indexed": str(indexed).lower(), "messages": str(kept),
                                                     **(note or {})})
         out.close()
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
-    return Recovered(str(path), complete, kept)
+    return Recovered(str(path), indexed, kept)
 
 
 def recover_rrd(path: Path) -> Recovered:

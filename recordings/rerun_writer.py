@@ -105,6 +105,9 @@ class RerunEpisode:
         if w.cube is not None:
             log(bp.CUBE, rr.Boxes3D(centers=[w.cube], half_sizes=[[CUBE_HALF_SIZE] * 3]))
 
+    def flush(self) -> None:
+        self.send_steps()
+
     def close(self) -> None:
         try:
             self.send_steps()
