@@ -39,7 +39,10 @@ class EpisodeRecorder:
         metadata: dict[str, Any] | None = None,
         step_period_s: float = 0.5,
         formats: Iterable[str] = FORMATS,
+        layout: bool = True,
     ) -> None:
+        """``layout=False`` leaves the Rerun layout out of the ``.rrd`` (a file of many that
+        share one, e.g. a service's sessions: see ``recorder``)."""
         names = tuple(channel_names)
         formats = tuple(formats)
         unknown = set(formats) - set(FORMATS)
@@ -52,7 +55,7 @@ class EpisodeRecorder:
         self._writers: list[_Writer] = []
         try:
             if "rrd" in formats:
-                self._writers.append(RerunEpisode(rrd, names, self.recording_id, step_period_s))
+                self._writers.append(RerunEpisode(rrd, names, self.recording_id, step_period_s, layout))
                 self.paths["rrd"] = rrd
             if "mcap" in formats:
                 writer = McapEpisode(mcap, names, step_period_s)

@@ -6,7 +6,9 @@ once, reused by every session) owns the open ``EpisodeRecorder`` objects, and th
 server only puts messages on a multiprocessing queue: a session opening, a batch of
 scored steps (``StepBatch``, one per inference batch), a session closing. Closing
 returns a future that resolves once the child has finalized the session's files, so a
-caller that waits for it can read them at once.
+caller that waits for it can read them at once. The queue is bounded (``BACKLOG``): a
+server that outruns its recorder for long is slowed to the recorder's pace rather than
+growing a backlog in memory.
 
 The child flushes every open file at least once a second, so a crash loses at most
 about a second of steps (and the MCAP chunk being filled). On start it recovers what a
@@ -38,6 +40,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from recordings import rerun_file
 from recordings.episode import EpisodeRecorder
 from recordings.paths import safe_name
 from recordings.records import StepRecord
@@ -46,6 +49,7 @@ from recordings.recover import OPEN_MARKER, recover_interrupted, write_json
 log = logging.getLogger("recordings.recorder")
 _CTX = mp.get_context("spawn")  # no fork: the server has threads (uvicorn, inference, Rerun's)
 POLL_S = 1.0  # how soon a dead child (or, in the child, a dead server) is noticed
+BACKLOG = 256  # messages queued for the child at most: a server faster than its recorder waits for it
 
 
 class RecorderGone(RuntimeError):
@@ -117,7 +121,7 @@ class RecorderProcess:
 
     def _spawn(self, timeout_s: float) -> None:
         self.folder.mkdir(parents=True, exist_ok=True)
-        self._inbox: Any = _CTX.Queue()
+        self._inbox: Any = _CTX.Queue(maxsize=BACKLOG)
         self._outbox: Any = _CTX.Queue()
         process = _CTX.Process(target=_serve, args=(self._inbox, self._outbox, self.folder, self.step_period_s),
                                name="nasm-recorder", daemon=True)
@@ -141,7 +145,15 @@ class RecorderProcess:
             log.warning("recovered an interrupted recording: %s", marker)
 
     def _put(self, message: tuple[Any, ...]) -> None:
-        self._inbox.put(message)
+        """Queue a message, waiting while the child is ``BACKLOG`` behind: a backlog without
+        bound would be memory without bound. A dead child's queue is replaced by the collector."""
+        while True:
+            try:
+                self._inbox.put(message, timeout=POLL_S)
+                return
+            except queue.Full:
+                if self._stopping.is_set() and not self.alive:
+                    return
 
     def open(self, run_id: str, channel_names: Sequence[str], recording_id: str,
              metadata: dict[str, Any]) -> SessionRecording:
@@ -163,7 +175,7 @@ class RecorderProcess:
                 return future
             ticket = next(self._tickets)
             self._pending[ticket] = future
-            self._put(("close", recording.key, ticket))
+        self._put(("close", recording.key, ticket))  # not under the lock: a restart may need it meanwhile
         return future
 
     def stop(self, timeout_s: float = 30.0) -> None:
@@ -225,9 +237,11 @@ class RecorderProcess:
 def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
     """The child: recover the folder, then open, write and close sessions' files as told."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server stops us
+    rerun_file.defer_freeing()  # one sweep a second, not one per closed file
     outbox.put(("ready", [str(p) for p in recover_interrupted(folder)]))
     writers: dict[str, EpisodeRecorder | None] = {}
     errors: dict[str, str] = {}
+    dirty: set[str] = set()  # written to since the last flush
     parent = mp.parent_process()
     flushed = time.monotonic()
     while True:
@@ -236,9 +250,12 @@ def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
         except queue.Empty:
             message = None
         if time.monotonic() - flushed >= POLL_S:  # what a crash may lose: about a second of steps
-            for writer in writers.values():
+            for key in dirty:
+                writer = writers.get(key)
                 if writer is not None:
                     writer.flush()
+            dirty.clear()
+            rerun_file.free_dropped_streams()
             flushed = time.monotonic()
             if parent is not None and not parent.is_alive():
                 break  # orphaned: close the files, keep the markers (the episodes were interrupted)
@@ -248,11 +265,11 @@ def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
         if kind == "open":
             _, key, names, recording_id, metadata = message
             try:
-                write_json(folder / f"{key}{OPEN_MARKER}", {"pid": os.getpid(), "run_id": key, "recording_id": recording_id,
-                                                             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                                                             "metadata": metadata})
+                opened = {"pid": os.getpid(), "run_id": key, "recording_id": recording_id,
+                          "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "metadata": metadata}
+                write_json(folder / f"{key}{OPEN_MARKER}", opened)
                 writers[key] = EpisodeRecorder(key, names, folder=folder, recording_id=recording_id,
-                                               metadata=metadata, step_period_s=step_period_s)
+                                               metadata=metadata, step_period_s=step_period_s, layout=False)
             except Exception as exc:
                 log.exception("cannot open the recording %s; the session continues unrecorded", key)
                 writers[key], errors[key] = None, f"its recording could not be opened: {exc}"
@@ -261,6 +278,7 @@ def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
                 writer = writers.get(key)
                 if writer is None:
                     continue
+                dirty.add(key)
                 try:
                     writer.log_step(record)
                 except Exception as exc:

@@ -2,8 +2,9 @@
 
 Vectors are logged as ONE entity each with their series names logged once, static
 (25 entities would cost ~30x more per step). Steps are buffered and sent as columns
-(``send_columns``) every ``STEP_BATCH`` steps, then flushed to the file: one call per
-entity instead of one per step, and a crash loses at most the steps still buffered.
+(``send_columns``) every ``STEP_BATCH`` steps: one call per entity instead of one per
+step. Rerun's batcher writes them to the file within a fraction of a second, and
+``flush`` waits until it has; a crash loses the steps not yet flushed.
 Two timelines: ``step`` (the model's observation steps) and ``time`` (episode seconds,
 for 40 Hz world traces).
 """
@@ -32,13 +33,14 @@ class RerunEpisode:
         channel_names: tuple[str, ...],
         recording_id: str,
         step_period_s: float,
+        layout: bool = True,
     ) -> None:
         self.channel_names = channel_names
         self.joints = joint_indices(channel_names)
         self.step_period_s = step_period_s
         self.ee_path: list[np.ndarray] = []
         self.pending: list[StepRecord] = []
-        self.rrd = RrdFile(path, recording_id, bp.episode_blueprint())
+        self.rrd = RrdFile(path, recording_id, bp.episode_blueprint() if layout else None)
         self._log_series_names()
 
     def _log_series_names(self) -> None:
@@ -90,8 +92,6 @@ class RerunEpisode:
             indexes = [rr.TimeColumn("step", sequence=(seconds / self.step_period_s + 1e-9).astype(np.int64)),
                        rr.TimeColumn("time", duration=seconds)]
             self.rrd.rec.send_columns(path, indexes=indexes, columns=rr.Scalars.columns(scalars=np.stack(values)))
-        if rows:
-            self.rrd.rec.flush()
 
     def write_world(self, w: WorldRecord) -> None:
         self._set_time(w.time_s)
@@ -106,7 +106,9 @@ class RerunEpisode:
             log(bp.CUBE, rr.Boxes3D(centers=[w.cube], half_sizes=[[CUBE_HALF_SIZE] * 3]))
 
     def flush(self) -> None:
+        """Send the buffered steps and wait until they are in the file."""
         self.send_steps()
+        self.rrd.rec.flush()
 
     def close(self) -> None:
         try:

@@ -2,9 +2,10 @@
 
     app = create_app(Settings(models_dir=Path("runs/models")))
 
-The lifespan starts the inference runner, loads the models (building the default one
-on first run when allowed) and closes idle sessions in the background; on shutdown it
-closes every session's recordings.
+The lifespan starts the recorder process (which first recovers what a crash left in the
+recordings folder), the inference runner, loads the models (building the default one on
+first run when allowed) and closes idle sessions in the background; on shutdown it
+closes every session, waits for its recordings to be finished, and stops both.
 """
 
 import asyncio

@@ -39,7 +39,8 @@ def document(app_version: str, protocol: int, description: str) -> dict[str, Any
             "action": "receive",
             "channel": {"$ref": "#/channels/stream"},
             "messages": [_message_ref(name)],
-            "reply": {"channel": {"$ref": "#/channels/stream"}, "messages": [_message_ref(reply), _message_ref("error")]},
+            "reply": {"channel": {"$ref": "#/channels/stream"},
+                      "messages": [_message_ref(reply), _message_ref("error")]},
         }
         for name, reply in EXCHANGES.items()
     }

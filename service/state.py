@@ -53,23 +53,32 @@ class ServiceState:
             raise
         return session
 
-    async def close(self, session_id: str) -> Session:
-        """Close a session once its files are finalized, so that they can be read at once."""
+    async def close(self, session_id: str, wait: bool = True) -> Session:
+        """Close a session; with ``wait``, once its files are finalized, so that they can be
+        read at once (without, when no one is told: a replaced or abandoned session)."""
         session = self.sessions.pop(session_id)
-        await self._finish(session)
+        await self._finish(session, wait)
         return session
 
-    async def _finish(self, session: Session) -> None:
+    async def _finish(self, session: Session, wait: bool = True) -> None:
         recording, session.recording = session.recording, None
         if recording is None:
             return
         # Through the runner: the close is queued after every step it has sent the recorder.
         done = await self.runner.call(recording.close)
+
+        def report(exc: BaseException | None) -> None:
+            if exc is not None:  # the recorder died or stalled: the session is closed all the same
+                log.error("session %s: its recording did not finish (%r); files: %s", session.id, exc,
+                          ", ".join(map(str, recording.paths.values())))
+
+        if not wait:
+            done.add_done_callback(lambda f: report(f.exception()))
+            return
         try:
             await asyncio.wait_for(asyncio.wrap_future(done), CLOSE_TIMEOUT_S)
-        except Exception as exc:  # the recorder died or stalled: the session is closed all the same
-            log.error("session %s: its recording did not finish (%s); files: %s", session.id, exc,
-                      ", ".join(map(str, recording.paths.values())))
+        except Exception as exc:
+            report(exc)
 
     async def step(self, session_id: str, observation: Observation) -> tuple[Session, StepOutcome]:
         session = self.sessions.get(session_id)
@@ -82,4 +91,4 @@ class ServiceState:
         while True:
             await asyncio.sleep(period)
             for session in self.sessions.pop_idle():
-                await self._finish(session)
+                await self._finish(session, wait=False)

@@ -135,7 +135,8 @@ def test_batched_step_equals_single_steps(reference, episodes):
             rest = [k for k in keys if k not in cue]
             for group in (cue, rest):
                 if group:
-                    results = step_streams([streams[k] for k in group], np.stack([episodes[k[1], t - k[1]] for k in group]))
+                    xs = np.stack([episodes[k[1], t - k[1]] for k in group])
+                    results = step_streams([streams[k] for k in group], xs)
                     for k, result in zip(group, results):
                         alone = singles[k].step(episodes[k[1], t - k[1]])
                         assert result.score.step == alone.step

@@ -66,7 +66,7 @@ async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session
     message = _messages.validate_json(text)
     if isinstance(message, StartMessage):
         if session is not None:
-            await state.close(session.id)
+            await state.close(session.id, wait=False)  # replaced: nobody waits for its files
             session = None
         client = client_of(state.settings.api_key, ws.headers, ws.client.host if ws.client else None)
         session = await state.open(SessionCreate(**message.model_dump(exclude={"type"})), client)
@@ -112,4 +112,4 @@ async def stream(ws: WebSocket) -> None:
         pass
     finally:
         if session is not None and session.id in state.sessions:
-            await state.close(session.id)
+            await state.close(session.id, wait=False)
