@@ -18,6 +18,11 @@ later start knows which episodes were interrupted. If the child dies, the server
 collector thread notices within a second, logs it and starts a new child (which
 recovers the dead one's files); the sessions it was writing are served on, unrecorded.
 If the server dies, the orphaned child closes its files (leaving the markers) and exits.
+
+A session's ``.rrd`` carries no layout of its own (embedding it cost ~3 ms of CPU per
+session, most of what opening a file costs): the child writes it once, as
+``episode.rbl`` in the folder, and a session's file merged with its client's file (same
+recording id) takes the client's.
 """
 
 from __future__ import annotations
@@ -40,15 +45,17 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from recordings import blueprint as bp
 from recordings import rerun_file
 from recordings.episode import EpisodeRecorder
-from recordings.paths import safe_name
+from recordings.paths import APP_ID, safe_name
 from recordings.records import StepRecord
 from recordings.recover import OPEN_MARKER, recover_interrupted, write_json
 
 log = logging.getLogger("recordings.recorder")
 _CTX = mp.get_context("spawn")  # no fork: the server has threads (uvicorn, inference, Rerun's)
 POLL_S = 1.0  # how soon a dead child (or, in the child, a dead server) is noticed
+LAYOUT_FILE = "episode.rbl"  # the layout of every session's .rrd, written beside them
 BACKLOG = 256  # messages queued for the child at most: a server faster than its recorder waits for it
 
 
@@ -238,7 +245,9 @@ def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
     """The child: recover the folder, then open, write and close sessions' files as told."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server stops us
     rerun_file.defer_freeing()  # one sweep a second, not one per closed file
-    outbox.put(("ready", [str(p) for p in recover_interrupted(folder)]))
+    recovered = recover_interrupted(folder)
+    _write_layout(folder)
+    outbox.put(("ready", [str(p) for p in recovered]))
     writers: dict[str, EpisodeRecorder | None] = {}
     errors: dict[str, str] = {}
     dirty: set[str] = set()  # written to since the last flush
@@ -304,6 +313,14 @@ def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
     for writer in writers.values():
         if writer is not None:
             writer.close()
+
+
+def _write_layout(folder: Path) -> None:
+    """The sessions' Rerun layout, once for the folder: ``rerun FILE.rrd LAYOUT_FILE`` (a
+    session's file merged with its client's takes the layout from the client's)."""
+    tmp = folder / f".{LAYOUT_FILE}.tmp"
+    bp.episode_blueprint().save(APP_ID, tmp)
+    os.replace(tmp, folder / LAYOUT_FILE)
 
 
 def _finish(folder: Path, key: str, writer: EpisodeRecorder) -> None:

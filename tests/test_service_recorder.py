@@ -5,6 +5,8 @@ recovers the dead one's files)."""
 import json
 import os
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -17,6 +19,7 @@ from models.asm import NeuralASM
 from models.config import FAST
 from models.synthetic import make_skills
 from recordings.readers import read_mcap
+from recordings.recorder import LAYOUT_FILE
 from recordings.recover import INTERRUPTED_MARKER, OPEN_MARKER
 from service.embedded import start_embedded
 from service.settings import Settings
@@ -55,6 +58,10 @@ def test_closing_returns_once_the_files_are_finished(model_dir, tmp_path):
             assert [m["energy"] for m in read_mcap(mcap)["/fault"]] == energies  # at once, no waiting
             assert not (tmp_path / (mcap.stem + OPEN_MARKER)).exists()
         assert recorder.generation == 0 and recorder.pid != os.getpid()
+    # the sessions' files carry no layout; the one they share is beside them
+    layout = subprocess.run([sys.executable, "-m", "rerun", "rrd", "stats", str(tmp_path / LAYOUT_FILE)],
+                            capture_output=True, text=True)
+    assert layout.returncode == 0 and "blueprint" in layout.stdout.lower(), layout.stderr
 
 
 def test_a_dead_recorder_is_replaced_and_the_service_serves_on(model_dir, tmp_path):
