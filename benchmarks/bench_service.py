@@ -13,7 +13,7 @@ machine may be shared: absolute numbers move, same-run ratios less).
 (its process and the recorder's) over recorded sessions opened, stepped 15 times and
 closed, after a warm-up.
 
-    python benchmarks/bench_service.py [--record] [--steps 400] [--sessions 600]
+    python benchmarks/bench_service.py [--record] [--steps 400] [--sessions 1000]
 """
 
 import os
@@ -38,6 +38,7 @@ from models import checkpoint  # noqa: E402
 from models.asm import NeuralASM  # noqa: E402
 from models.config import FAST  # noqa: E402
 from models.synthetic import make_skills  # noqa: E402
+from recordings.recorder import POLL_S  # noqa: E402
 
 CHANNELS = tuple(f"joint{i}" for i in range(1, 8)) + tuple(f"ch{i}" for i in range(18))
 
@@ -155,11 +156,17 @@ async def recorded_sessions(url: str, episodes: np.ndarray, n: int) -> None:
             assert json.loads(await ws.recv())["type"] == "ended"
 
 
+def settled_rss_mb(pid: int) -> float:
+    """After the recorder's once-a-second sweep has freed the closed sessions' Rerun streams."""
+    time.sleep(3 * POLL_S)
+    return tree_rss_mb(pid)
+
+
 def rss_growth(url: str, pid: int, episodes: np.ndarray, sessions: int) -> float:
     asyncio.run(recorded_sessions(url, episodes, sessions // 4))  # warm-up: pools, caches, lazy imports
-    before = tree_rss_mb(pid)
+    before = settled_rss_mb(pid)
     asyncio.run(recorded_sessions(url, episodes, sessions))
-    return (tree_rss_mb(pid) - before) / sessions * 1000
+    return (settled_rss_mb(pid) - before) / sessions * 1000
 
 
 async def fleet(url: str, episodes: np.ndarray, sessions: int, steps: int) -> tuple[float, float]:
@@ -192,7 +199,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=400, help="steps per latency measurement")
     parser.add_argument("--fleet-steps", type=int, default=60, help="steps per session in the fleet")
-    parser.add_argument("--sessions", type=int, default=600, help="recorded sessions for the memory growth")
+    parser.add_argument("--sessions", type=int, default=1000, help="recorded sessions for the memory growth")
     parser.add_argument("--record", action="store_true", help="let the service record every session")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:

@@ -202,6 +202,9 @@ class RecorderProcess:
         for q in (self._inbox, self._outbox):
             q.close()
             q.join_thread()
+        # Dropped now, their semaphores are released now: uvicorn ends a process stopped by a
+        # signal by raising the signal again, when no exit handler runs to release them.
+        self._inbox = self._outbox = None
 
     def _collect(self) -> None:
         """Resolve close futures as the child acknowledges them; restart a child that died."""
