@@ -11,7 +11,7 @@ With ``--record`` the service is measured twice in the same run, without recordi
 machine may be shared: absolute numbers move, same-run ratios less).
 ``rss_growth_mb_per_1000_sessions`` is the growth of the service's resident memory
 (its process and the recorder's) over recorded sessions opened, stepped 15 times and
-closed, after a warm-up.
+closed, after a warm-up: the slope through five readings.
 
     python benchmarks/bench_service.py [--record] [--steps 400] [--sessions 1000]
 """
@@ -162,11 +162,16 @@ def settled_rss_mb(pid: int) -> float:
     return tree_rss_mb(pid)
 
 
-def rss_growth(url: str, pid: int, episodes: np.ndarray, sessions: int) -> float:
+def rss_growth(url: str, pid: int, episodes: np.ndarray, sessions: int, samples: int = 5) -> float:
+    """MB per 1000 sessions: the slope of a line through the RSS read after each of ``samples``
+    rounds (one reading alone moves by a few MB with the allocator's and Rerun's pools)."""
     asyncio.run(recorded_sessions(url, episodes, sessions // 4))  # warm-up: pools, caches, lazy imports
-    before = settled_rss_mb(pid)
-    asyncio.run(recorded_sessions(url, episodes, sessions))
-    return (settled_rss_mb(pid) - before) / sessions * 1000
+    done, rss = [0], [settled_rss_mb(pid)]
+    for _ in range(samples - 1):
+        asyncio.run(recorded_sessions(url, episodes, sessions // (samples - 1)))
+        done.append(done[-1] + sessions // (samples - 1))
+        rss.append(settled_rss_mb(pid))
+    return float(np.polyfit(done, rss, 1)[0]) * 1000
 
 
 async def fleet(url: str, episodes: np.ndarray, sessions: int, steps: int) -> tuple[float, float]:

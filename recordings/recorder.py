@@ -103,7 +103,6 @@ class RecorderProcess:
         self.folder = Path(folder)
         self.step_period_s = step_period_s
         self.generation = 0
-        self.recovered: list[Path] = []
         self._lock = threading.Lock()
         self._tickets = itertools.count()
         self._pending: dict[int, Future[None]] = {}
@@ -147,7 +146,6 @@ class RecorderProcess:
             process.kill()
             raise RuntimeError(f"the recorder process did not start within {timeout_s:g} s") from None
         assert kind == "ready"
-        self.recovered += [Path(p) for p in recovered]
         for marker in recovered:
             log.warning("recovered an interrupted recording: %s", marker)
 
@@ -159,7 +157,7 @@ class RecorderProcess:
                 self._inbox.put(message, timeout=POLL_S)
                 return
             except queue.Full:
-                if self._stopping.is_set() and not self.alive:
+                if not self.alive:  # nobody will read it: serve on, the collector restarts the child
                     return
 
     def open(self, run_id: str, channel_names: Sequence[str], recording_id: str,
@@ -224,8 +222,10 @@ class RecorderProcess:
                 continue
             with self._lock:
                 future = self._pending.pop(ticket, None)
-            if future is not None:
-                future.set_result(None) if error is None else future.set_exception(RuntimeError(error))
+            if future is not None and error is None:
+                future.set_result(None)
+            elif future is not None:
+                future.set_exception(RuntimeError(error))
 
     def _restart(self) -> None:
         assert self._process is not None
@@ -234,14 +234,18 @@ class RecorderProcess:
         with self._lock:
             self.generation += 1
             pending, self._pending = self._pending, {}
-            old = self._inbox
+            old = (self._inbox, self._outbox)
             for future in pending.values():
                 future.set_exception(RecorderGone("the recorder process died before it closed this session's files"))
             log.error("the recorder process died (exit code %s); starting a new one. Sessions it was recording "
                       "are served on without recording; their files are recovered and marked interrupted", code)
-            self._spawn(timeout_s=300.0)
-        old.cancel_join_thread()
-        old.close()
+            try:
+                self._spawn(timeout_s=300.0)
+            except Exception:  # tried again within a second; meanwhile sessions are served unrecorded
+                log.exception("the recorder process could not be restarted")
+        for q in old:
+            q.cancel_join_thread()
+            q.close()
 
 
 def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:

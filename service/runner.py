@@ -170,7 +170,10 @@ class Runner:
         if self.recorder is not None:  # after answering: recording is not on the latency path
             recorded = [(j, o) for j, o in zip(jobs, results) if o is not None and j.session.recording is not None]
             if recorded:
-                self.recorder.write(step_batch(recorded))  # type: ignore[arg-type]
+                try:
+                    self.recorder.write(step_batch(recorded))  # type: ignore[arg-type]
+                except Exception:  # a recorder in trouble costs these steps' records, never the service
+                    log.exception("recording a batch of %d steps failed", len(recorded))
 
 
 def step_batch(recorded: list[tuple[_Step, StreamStep]]) -> StepBatch:
