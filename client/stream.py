@@ -13,6 +13,7 @@ import numpy as np
 from client.summary import EpisodeSummary, StepLine, say, step_line
 from client.transport import TRANSPORTS, ServiceError, ServiceLost, Transport
 from client.world import world_records
+from models.fault import joint_channels
 from recordings import EpisodeRecorder, new_run_id
 from recordings.records import StepRecord
 from sim.config import SIM
@@ -87,7 +88,7 @@ def stream_episode(
             raise
         conn = _reconnect(open_session, 0, summary, quiet)
     with EpisodeRecorder(run_id, names, folder=out, recording_id=recording_id, metadata=metadata,
-                         step_period_s=period) as rec:
+                         step_period_s=period, joints=joint_channels(names)) as rec:
         summary.recordings = {k: str(p) for k, p in rec.paths.items()}
         try:
             next_row = 0

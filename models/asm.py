@@ -8,13 +8,15 @@ this class; it is what a checkpoint stores.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from models import recall as recall_
 from models.calibration import Calibration, calibration_key, estimate, set_thresholds
 from models.config import FAST, SCORING, Covariance, TPCConfig
+from models.fault import FaultDecision, ThresholdKind, decide, threshold_for
 from models.normaliser import Normaliser
 from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
 from models.tpc import TemporalPC
@@ -193,16 +195,42 @@ class NeuralASM:
         self.calibrations[calibration.key] = calibration
         return calibration
 
-    def stream(self, mode: str = "offline", cue_steps: int = 1, weighted: bool = True) -> "SkillStream":
-        return SkillStream(self, mode, cue_steps, weighted)
+    def stream(
+        self,
+        mode: str = "offline",
+        cue_steps: int = 1,
+        weighted: bool = True,
+        fpr: float | None = None,
+        threshold: ThresholdKind = "episode",
+    ) -> "SkillStream":
+        return SkillStream(self, mode, cue_steps, weighted, fpr, threshold)
 
 
 class SkillStream:
-    """One episode scored step by step, as the service sees it: ``step(x) -> StepScore``."""
+    """One episode scored step by step, as the service sees it: ``step(x) -> StepScore``.
 
-    def __init__(self, model: NeuralASM, mode: str, cue_steps: int, weighted: bool) -> None:
+    A stream given a false-positive rate also decides each step (``step_streams``
+    returns the score and the fault decision together); it holds the calibration that
+    both the weighting and the threshold come from.
+    """
+
+    def __init__(
+        self,
+        model: NeuralASM,
+        mode: str,
+        cue_steps: int,
+        weighted: bool,
+        fpr: float | None = None,
+        threshold: ThresholdKind = "episode",
+    ) -> None:
+        if fpr is not None and not weighted:
+            raise ValueError("a fault threshold needs weighted errors: one calibration sets both")
         self.model = model
         self.calibration = model.weighting(mode, cue_steps, weighted)
+        self.fpr = fpr
+        self.threshold = threshold
+        if fpr is not None:
+            threshold_for(self.calibration, fpr, 0, threshold)  # type: ignore[arg-type]  # KeyError now, not mid-episode
         self.recaller = recall_.Recaller(model.net, 1, mode, cue_steps, model._rng())  # type: ignore[arg-type]
 
     @property
@@ -215,28 +243,45 @@ class SkillStream:
         r = self.recaller
         return id(self.model), r.mode, r.cue_steps, r.t == 0, r.t < r.cue_steps
 
-    def check(self, observation: np.ndarray) -> np.ndarray:
-        """The observation as a float array, or a ValueError naming what is wrong with it."""
+    def check(self, observation: Sequence[float] | np.ndarray | Mapping[str, float]) -> np.ndarray:
+        """The observation as a float vector in channel order, or a ValueError naming what is wrong.
+
+        ``observation`` is a vector in the model's channel order or a mapping of every
+        channel name to its value.
+        """
         names = self.model.channel_names
+        if isinstance(observation, Mapping):
+            missing = [n for n in names if n not in observation]
+            unknown = sorted(set(observation) - set(names))
+            if missing or unknown:
+                raise ValueError(f"channels: missing {missing}, unknown {unknown}; expected {list(names)}")
+            observation = [observation[n] for n in names]
         raw = np.asarray(observation, np.float64)
         if raw.shape != (len(names),):
-            raise ValueError(f"observation must have {len(names)} values, got shape {raw.shape}")
+            got = raw.shape[0] if raw.ndim == 1 else f"shape {raw.shape}"
+            raise ValueError(f"observation: has {got} values, expected {len(names)} values ({', '.join(names)})")
         if not np.isfinite(raw).all():
             bad = [names[i] for i in np.flatnonzero(~np.isfinite(raw))]
-            raise ValueError(f"observation has NaN or inf in channel(s) {bad}")
+            raise ValueError(f"observation: NaN or inf in channel(s) {bad}; values must be finite")
         return raw
 
-    def step(self, observation: np.ndarray) -> StepScore:
-        score = step_streams([self], self.check(observation)[None])[0]
-        if score is None:
+    def step(self, observation: Sequence[float] | np.ndarray | Mapping[str, float]) -> StepScore:
+        result = step_streams([self], self.check(observation)[None])[0]
+        if result is None:
             raise FloatingPointError(f"step {self.t}: the model's outputs are not finite")
-        return score
+        return result.score
 
 
-def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> list[StepScore | None]:
+@dataclass(frozen=True)
+class StreamStep:
+    score: StepScore
+    decision: FaultDecision | None  # None for a stream without a false-positive rate
+
+
+def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> list[StreamStep | None]:
     """Advance streams sharing a ``batch_key`` by one raw observation each (B, D), in one
-    relaxation of their stacked hidden states. A stream whose outputs are not finite
-    keeps its state and gets None."""
+    relaxation of their stacked hidden states, and decide each step of a stream with a
+    false-positive rate. A stream whose outputs are not finite keeps its state and gets None."""
     if len({s.batch_key for s in streams}) != 1:
         raise ValueError("streams stepped together must share model, recall mode, cue length and phase")
     model = streams[0].model
@@ -253,16 +298,21 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     expected_raw = model.normaliser.denormalise(expected)
     prediction = model.normaliser.denormalise(batch.forecast())
     finite = np.isfinite(energies) & np.isfinite(prediction).all(1) & np.isfinite(expected_raw).all(1)
-    scores: list[StepScore | None] = []
-    for i, r in enumerate(recallers):
+    results: list[StreamStep | None] = []
+    for i, (s, r) in enumerate(zip(streams, recallers)):
         if not finite[i]:
-            scores.append(None)
+            results.append(None)
             continue
         r.zhat, r.t = batch.zhat[i : i + 1].copy(), r.t + 1
         if batch.context is not None:
             r.context = batch.context[i : i + 1].copy()
-        scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i]))
-    return scores
+        score = StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i])
+        decision = None
+        if s.fpr is not None:
+            assert s.calibration is not None
+            decision = decide(score, s.calibration, model.channel_names, s.fpr, s.threshold)
+        results.append(StreamStep(score, decision))
+    return results
 
 
 def weigh_step(

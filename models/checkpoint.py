@@ -18,7 +18,6 @@ import hashlib
 import json
 import os
 import tempfile
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +32,7 @@ from models.calibration import Calibration
 from models.config import TPCConfig
 from models.normaliser import Normaliser
 from models.tpc import TemporalPC
+from runtime.version import __version__
 
 # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
 # digest; 5: the inference solver in the config.
@@ -45,13 +45,6 @@ MAX_ABS_WEIGHT = 1e3
 
 class CheckpointError(ValueError):
     """A checkpoint is missing, corrupt, truncated or does not fit its own metadata."""
-
-
-def _package_version() -> str:
-    try:
-        return version("neural-asm")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def _f64(a: np.ndarray) -> torch.Tensor:
@@ -101,7 +94,7 @@ def to_bytes(model: NeuralASM) -> bytes:
         )
     meta = {
         "format_version": FORMAT_VERSION,
-        "package_version": _package_version(),
+        "package_version": __version__,
         "config": model.config.to_dict(),
         "channel_names": list(model.channel_names),
         "context_channels": list(model.context_channels),

@@ -22,6 +22,7 @@ from experiments.contextual.cli import contextual
 from experiments.correction.cli import correction
 from experiments.fault_sweep.cli import faults
 from logs.cli import MAPPING_HELP, evaluate, read_logs, replay
+from recordings.cli import app as recordings_app
 from nasm.data import SYNTHETIC, load_sequences
 from service.cli import serve
 from sim.cli import demos
@@ -145,6 +146,7 @@ def info(model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"
 
 for command in (demos, faults, correction, contextual, serve, client, replay, evaluate):  # each package owns its commands
     app.command()(command)
+app.add_typer(recordings_app, name="recordings")
 
 if __name__ == "__main__":
     app()

@@ -2,18 +2,22 @@
 
 - ``episode.EpisodeRecorder``: one episode or service session, to both formats;
 - ``training.TrainingRecorder``: energy per epoch of a training run;
+- ``recorder.RecorderProcess``: a service's sessions, written by a process of their own;
 - ``readers``: read values back (tests, analysis);
 - ``paths``: run ids and the git-ignored output folder.
 
 Every writer is a context manager that closes its files on normal exit, Ctrl-C and
-errors. After a hard crash (SIGKILL, power loss) what was written stays readable:
+errors. After a kill (SIGKILL) what was written stays readable:
 
-- ``.mcap``: messages go into 4 KiB chunks flushed as they fill, so a kill loses the
-  chunk being filled and the rest reads with ``readers.read_mcap`` or mcap's
-  ``NonSeekingReader`` (both stop at the torn chunk) or is repaired with the MCAP CLI:
-  ``mcap recover broken.mcap -o fixed.mcap``.
-- ``.rrd``: Rerun streams to the file as it goes; ``rerun rrd verify FILE`` checks it
-  and ``rerun rrd merge --continue-on-error FILE -o fixed.rrd`` keeps what decodes.
+- ``.mcap``: messages go into 4 KiB chunks; each flush writes the new chunks followed by
+  a provisional end (data end, footer, magic), so a file cut by a kill is a valid MCAP
+  file without indexes that mcap's ``make_reader`` reads to its last whole chunk.
+- ``.rrd``: steps are sent to Rerun in batches of 16 and flushed (a service's recorder
+  process also flushes every second); a cut file has no footer and fails
+  ``rerun rrd verify`` though its chunks read.
+- ``nasm recordings recover FILE...`` (``recover.recover``) rewrites either kind into a
+  valid, indexed file; a service does this on start for the episodes a crash
+  interrupted (``recorder``, ``recover.recover_interrupted``).
 """
 
 from recordings.episode import EpisodeRecorder

@@ -24,6 +24,7 @@ FORMATS = ("rrd", "mcap")
 class _Writer(Protocol):
     def write_step(self, r: StepRecord) -> None: ...
     def write_world(self, w: WorldRecord) -> None: ...
+    def flush(self) -> None: ...
     def close(self) -> None: ...
 
 
@@ -38,7 +39,12 @@ class EpisodeRecorder:
         metadata: dict[str, Any] | None = None,
         step_period_s: float = 0.5,
         formats: Iterable[str] = FORMATS,
+        layout: bool = True,
+        joints: Iterable[int] = (),
     ) -> None:
+        """``joints``: indices of the joint-angle channels, drawn observed against expected.
+        ``layout=False`` leaves the Rerun layout out of the ``.rrd`` (a file of many that
+        share one, e.g. a service's sessions: see ``recorder``)."""
         names = tuple(channel_names)
         formats = tuple(formats)
         unknown = set(formats) - set(FORMATS)
@@ -51,7 +57,7 @@ class EpisodeRecorder:
         self._writers: list[_Writer] = []
         try:
             if "rrd" in formats:
-                self._writers.append(RerunEpisode(rrd, names, self.recording_id, step_period_s))
+                self._writers.append(RerunEpisode(rrd, names, self.recording_id, step_period_s, layout, tuple(joints)))
                 self.paths["rrd"] = rrd
             if "mcap" in formats:
                 writer = McapEpisode(mcap, names, step_period_s)
@@ -72,6 +78,11 @@ class EpisodeRecorder:
     def log_world(self, record: WorldRecord) -> None:
         for w in self._writers:
             w.write_world(record)
+
+    def flush(self) -> None:
+        """Push what is buffered to the files, so that a crash cannot lose it."""
+        for w in self._writers:
+            w.flush()
 
     def close(self) -> None:
         """Close every file, even if one fails; idempotent."""

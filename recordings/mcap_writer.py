@@ -89,5 +89,8 @@ class McapEpisode:
         self._write("/tf", w.time_s, {"transforms": transforms})
         self.out.flush()
 
+    def flush(self) -> None:
+        self.out.flush()
+
     def close(self) -> None:
         self.out.close()

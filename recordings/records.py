@@ -6,8 +6,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-JOINT_PREFIX = "joint"
-
 
 @dataclass(frozen=True)
 class StepRecord:
@@ -35,6 +33,3 @@ class WorldRecord:
     ee: np.ndarray | None = None  # (3,) tool centre point, appended to the path
     cube: np.ndarray | None = None  # (3,) cube centre
 
-
-def joint_indices(channel_names: tuple[str, ...]) -> list[int]:
-    return [i for i, n in enumerate(channel_names) if n.startswith(JOINT_PREFIX)]

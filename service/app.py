@@ -2,30 +2,25 @@
 
     app = create_app(Settings(models_dir=Path("runs/models")))
 
-The lifespan starts the inference runner, loads the models (building the default one
-on first run when allowed) and closes idle sessions in the background; on shutdown it
-closes every session's recordings.
+The lifespan starts the recorder process (which first recovers what a crash left in the
+recordings folder), the inference runner, loads the models (building the default one on
+first run when allowed) and closes idle sessions in the background; on shutdown it
+closes every session, waits for its recordings to be finished, and stops both.
 """
 
 import asyncio
 import contextlib
 from collections.abc import AsyncIterator
-from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
 from fastapi import FastAPI
 
+from runtime.version import __version__
 from service import errors
 from service.limits import BodyLimit
 from service.routers import health, inference, models, sessions, stream
 from service.settings import Settings
 from service.state import ServiceState
-
-
-def _version() -> str:
-    try:
-        return version("neural-asm")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -45,7 +40,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app = FastAPI(
         title="Neural ASM service",
-        version=_version(),
+        version=__version__,
         description="Hosts trained Neural ASM models and scores streamed robot observations: "
         "next-step predictions, per-channel prediction errors, energy and fault flags.",
         lifespan=lifespan,
@@ -55,4 +50,24 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (health, models, sessions, inference, stream):
         app.include_router(module.router)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    if not settings.api_key:
+        _openapi_without_key(app)
     return app
+
+
+def _openapi_without_key(app: FastAPI) -> None:
+    """A server without a key accepts every request: its OpenAPI declares no key and no 401."""
+    full = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = full()
+            schema.get("components", {}).pop("securitySchemes", None)
+            for operations in schema["paths"].values():
+                for operation in operations.values():
+                    operation.pop("security", None)
+                    operation.get("responses", {}).pop("401", None)
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]

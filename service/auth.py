@@ -4,7 +4,9 @@ A key is mandatory when the service binds beyond loopback (``Settings.check_expo
 ``/healthz`` stays open so that orchestrators can probe liveness without secrets.
 """
 
+import hashlib
 import secrets
+from collections.abc import Mapping
 
 from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader
@@ -22,3 +24,12 @@ def key_ok(expected: str | None, given: str | None) -> bool:
 def require_api_key(request: Request, key: str | None = Security(_header)) -> None:
     if not key_ok(request.app.state.service.settings.api_key, key):
         raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"missing or wrong {HEADER} header")
+
+
+def client_of(expected: str | None, headers: Mapping[str, str], address: str | None) -> str:
+    """Whose session quota a request counts against: its API key when the server has one
+    (a digest, never the key), else its address (on loopback every local process is one client)."""
+    given = headers.get(HEADER)
+    if expected and given:
+        return f"key {hashlib.sha256(given.encode()).hexdigest()[:12]}"
+    return f"address {address or 'unknown'}"

@@ -34,6 +34,7 @@ def serve(
     ),
     api_key: str | None = typer.Option(None, help=_help("api_key") + " (prefer NASM_API_KEY: argv is visible)"),
     max_sessions: int | None = typer.Option(None, help=_help("max_sessions")),
+    max_sessions_per_client: int | None = typer.Option(None, help=_help("max_sessions_per_client")),
     session_idle_s: float | None = typer.Option(None, help=_help("session_idle_s")),
     max_body_bytes: int | None = typer.Option(None, help=_help("max_body_bytes")),
     recordings_dir: Path | None = typer.Option(None, help=_help("recordings_dir")),

@@ -11,6 +11,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from service.schemas import Error
 
@@ -30,7 +31,9 @@ class BadObservation(ServiceError):
 
 
 class NotCalibrated(ServiceError):
-    status = 422
+    """A well-formed request for a recall setting or rate the model was not calibrated for."""
+
+    status = 409
 
 
 class UnknownModel(ServiceError):
@@ -88,8 +91,21 @@ async def _service(request: Request, exc: ServiceError) -> JSONResponse:
     return JSONResponse(error_body(exc.detail), status_code=exc.status)
 
 
+METHODS = ("DELETE", "GET", "HEAD", "OPTIONS", "PATCH", "POST", "PUT")
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method served at the request's path (Starlette's 405 names only the first matching route's)."""
+    routes = request.app.router.routes
+    return [m for m in METHODS
+            if any(r.matches({**request.scope, "method": m})[0] == Match.FULL for r in routes)]
+
+
 async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
-    return JSONResponse(error_body(str(exc.detail)), status_code=exc.status_code, headers=exc.headers)
+    headers = dict(exc.headers or {})
+    if exc.status_code == 405:
+        headers["Allow"] = ", ".join(allowed_methods(request))
+    return JSONResponse(error_body(str(exc.detail)), status_code=exc.status_code, headers=headers)
 
 
 def install(app: FastAPI) -> None:

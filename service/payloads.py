@@ -12,13 +12,13 @@ import numpy as np
 import orjson
 from fastapi import Response
 
-from service.batching import StepOutcome
+from service.runner import StepOutcome
 from service.schemas import SessionInfo
 from service.sessions import Session
 
 
 def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
-    recorder = session.recorder
+    recording = session.recording
     return SessionInfo(
         session_id=session.id,
         model=session.model_name,
@@ -29,7 +29,7 @@ def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
         channel_names=list(session.channel_names),
         steps=session.stream.t,
         recording_id=session.recording_id,
-        recordings={} if recorder is None else {k: str(p) for k, p in recorder.paths.items()},
+        recordings={} if recording is None else {k: str(p) for k, p in recording.paths.items()},
         idle_expiry_s=idle_expiry_s,
     )
 

@@ -2,7 +2,8 @@
 
 Handlers never touch a model: they queue a job and await its future. The runner takes
 whatever is waiting, computes all step jobs of distinct sessions together (one forward
-pass per model and recall setting, see ``batching``) and runs other jobs (opening and
+relaxation per model, recall setting and phase, through ``models.asm.step_streams``,
+which also decides each step) and runs other jobs (opening and
 closing sessions, which touch recordings) in arrival order between them. One thread
 keeps torch and BLAS at one intra-op thread, keeps each session's steps in order and
 gives the non-thread-safe MCAP writers a single owner.
@@ -20,10 +21,10 @@ from typing import Any, Callable, TypeVar
 import numpy as np
 import torch
 
+from models.asm import StreamStep, step_streams
 from models.fault import FaultDecision
 from models.scoring import StepScore
-from recordings.records import StepRecord
-from service.batching import StepOutcome, fault_decision, group_key, step_group
+from recordings.recorder import RecorderProcess, StepBatch
 from service.errors import BadObservation, ShuttingDown
 from service.sessions import Session
 
@@ -48,6 +49,14 @@ class _Step(_Job):
     x: np.ndarray
 
 
+@dataclass(frozen=True)
+class StepOutcome:
+    score: StepScore
+    decision: FaultDecision
+    inference_ms: float
+    batch_size: int
+
+
 _STOP = object()
 
 
@@ -61,12 +70,16 @@ def _settle(future: "asyncio.Future[Any]", result: Any, error: BaseException | N
 
 
 class Runner:
-    def __init__(self) -> None:
+    def __init__(self, recorder: RecorderProcess | None = None) -> None:
+        self.recorder = recorder
         self._jobs: "queue.SimpleQueue[Any]" = queue.SimpleQueue()
-        self._thread = threading.Thread(target=self._serve, name="nasm-runner", daemon=True)
+        self._thread = threading.Thread()  # not started: steps are refused until ``start``
 
     def start(self) -> None:
-        self._thread.start()
+        """Start the thread; again after ``stop`` when an app is started anew."""
+        if not self._thread.is_alive():
+            self._thread = threading.Thread(target=self._serve, name="nasm-runner", daemon=True)
+            self._thread.start()
 
     def stop(self, timeout: float = 10.0) -> None:
         """Finish the queued jobs, then end the thread."""
@@ -129,7 +142,7 @@ class Runner:
                     round_[id(job.session)] = job
             groups: dict[Any, list[_Step]] = defaultdict(list)
             for job in round_.values():
-                groups[group_key(job.session)].append(job)
+                groups[job.session.stream.batch_key].append(job)
             for group in groups.values():
                 self._compute(group)
             steps = later
@@ -137,36 +150,45 @@ class Runner:
     def _compute(self, jobs: list[_Step]) -> None:
         start = time.perf_counter()
         try:
-            scores = step_group([j.session for j in jobs], np.stack([j.x for j in jobs]))
-            outcomes = [None if s is None else (s, fault_decision(j.session, s)) for j, s in zip(jobs, scores)]
+            results = step_streams([j.session.stream for j in jobs], np.stack([j.x for j in jobs]))
         except Exception as exc:  # a bug, not a client mistake: fail these steps, keep serving
             log.exception("step batch failed")
             for j in jobs:
                 j.loop.call_soon_threadsafe(_settle, j.future, None, exc)
             return
         elapsed_ms = (time.perf_counter() - start) * 1e3
-        for job, outcome in zip(jobs, outcomes):
+        for job, outcome in zip(jobs, results):
             if outcome is None:
                 error = BadObservation(
                     "observation: values so far outside the training data that the model's outputs are not finite"
                 )
                 job.loop.call_soon_threadsafe(_settle, job.future, None, error)
                 continue
-            result = StepOutcome(outcome[0], outcome[1], elapsed_ms, len(jobs))
+            assert outcome.decision is not None  # sessions always have a false-positive rate
+            result = StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs))
             job.loop.call_soon_threadsafe(_settle, job.future, result, None)
-        for job, outcome in zip(jobs, outcomes):  # after answering: recording is not on the latency path
-            if outcome is not None:
-                record(job.session, job.x, *outcome)
+        if self.recorder is not None:  # after answering: recording is not on the latency path
+            recorded = [(j, o) for j, o in zip(jobs, results) if o is not None and j.session.recording is not None]
+            if recorded:
+                try:
+                    self.recorder.write(step_batch(recorded))  # type: ignore[arg-type]
+                except Exception:  # a recorder in trouble costs these steps' records, never the service
+                    log.exception("recording a batch of %d steps failed", len(recorded))
 
 
-def record(session: Session, x: np.ndarray, score: StepScore, decision: FaultDecision) -> None:
-    if session.recorder is None:
-        return
-    try:
-        session.recorder.log_step(
-            StepRecord(score.step, x, score.expected, score.prediction, score.weighted_errors, score.energy,
-                       decision.threshold, decision.fault, decision.isolated_joint)
-        )
-    except Exception:
-        log.exception("recording of session %s failed; it continues unrecorded", session.id)
-        session.recorder = None
+def step_batch(recorded: list[tuple[_Step, StreamStep]]) -> StepBatch:
+    """One message for the recorder process: the batch's steps as stacked arrays."""
+    scores = [o.score for _, o in recorded]
+    decisions = [o.decision for _, o in recorded]
+    return StepBatch(
+        keys=[j.session.recording.key for j, _ in recorded],  # type: ignore[union-attr]
+        steps=[s.step for s in scores],
+        observation=np.stack([j.x for j, _ in recorded]),
+        expected=np.stack([s.expected for s in scores]),
+        prediction=np.stack([s.prediction for s in scores]),
+        errors=np.stack([s.weighted_errors for s in scores]),
+        energy=np.array([s.energy for s in scores]),
+        threshold=np.array([d.threshold for d in decisions]),  # type: ignore[union-attr]
+        fault=np.array([d.fault for d in decisions]),  # type: ignore[union-attr]
+        isolated_joint=[d.isolated_joint for d in decisions],  # type: ignore[union-attr]
+    )

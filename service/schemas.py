@@ -1,24 +1,55 @@
 """Request and response bodies of the HTTP and websocket API.
 
-Every number a client sends is finite and bounded (|x| <= 1e6): NaN and inf are refused
-with a 422 naming the field, and 1e39, finite in Python, would be inf in float32.
+Every number a client sends is a JSON number (the string "1.5" and ``true`` are
+refused), finite and bounded (|x| <= 1e6): NaN and inf are refused with a 422 naming
+the field, and 1e39, finite in Python, would be inf in float32. The rules a field's
+type cannot say are in the JSON schema too: exactly one of ``observation`` and
+``channels`` (``oneOf``), and the false-positive rates thresholds are calibrated at
+(``enum``).
 """
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
 
+from models.config import SCORING
 from models.fault import ThresholdKind
 
 BOUND = 1e6
 MAX_CHANNELS = 1024
-Value = Annotated[float, Field(ge=-BOUND, le=BOUND, allow_inf_nan=False)]
-SessionId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")]
+SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+Value = Annotated[float, Field(strict=True, ge=-BOUND, le=BOUND, allow_inf_nan=False)]
+SessionId = Annotated[str, Field(pattern=SESSION_ID_PATTERN)]
 RecallMode = Literal["offline", "online"]
 
 
+def _json_integer(value: Any) -> Any:
+    """JSON Schema counts 3.0 as an integer, so the service does; true and "3" are not numbers."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+Count = Annotated[int, BeforeValidator(_json_integer)]
+
+
+def _calibrated_rate(fpr: float) -> float:
+    if fpr not in SCORING.fprs:
+        raise ValueError(f"must be one of {', '.join(map(str, SCORING.fprs))} (the rates thresholds are calibrated "
+                         f"at), got {fpr}")
+    return fpr
+
+
+Fpr = Annotated[
+    float,
+    Field(strict=True),
+    AfterValidator(_calibrated_rate),
+    WithJsonSchema({"type": "number", "enum": list(SCORING.fprs)}),
+]
+
+
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 class Error(BaseModel):
@@ -44,11 +75,19 @@ class CalibrationInfo(BaseModel):
 
 
 class ModelInfo(BaseModel):
+    """A checkpoint in the model folder: served (status ok) or refused (broken, with the reason)."""
+
     name: str
-    channel_names: list[str]
-    hidden_size: int
-    calibrations: list[CalibrationInfo]
-    provenance: dict[str, Any]
+    status: Literal["ok", "broken"]
+    default: bool = Field(description="used by sessions that name no model")
+    path: str
+    origin: Literal["loaded", "built"] = Field(description="built by this service on first run, or loaded")
+    digest: str | None = Field(description="SHA-256 of the checkpoint's tensors, checked on load")
+    error: str | None = Field(None, description="why a broken checkpoint was refused")
+    channel_names: list[str] = []
+    hidden_size: int | None = None
+    calibrations: list[CalibrationInfo] = []
+    provenance: dict[str, Any] = {}
 
 
 class SessionCreate(Strict):
@@ -59,9 +98,9 @@ class SessionCreate(Strict):
         "offline",
         description="offline (the paper's setting): infer from the cue, then roll forward; online: infer from every observation",
     )
-    cue_steps: int = Field(1, ge=1, le=10_000, description="observations the hidden state is inferred from")
-    fpr: float | None = Field(
-        None, gt=0, lt=1, description="false-positive rate of the fault threshold (one of the calibrated rates)"
+    cue_steps: Count = Field(1, ge=1, le=10_000, description="observations the hidden state is inferred from")
+    fpr: Fpr | None = Field(
+        None, description="false-positive rate of the fault threshold; the server's default if omitted"
     )
     threshold: ThresholdKind = Field(
         "episode",
@@ -90,14 +129,21 @@ class SessionInfo(BaseModel):
 
 
 class Observation(Strict):
-    """One observation: a vector in the model's channel order, or values by channel name."""
+    """One observation: a vector in the model's channel order, or values by channel name (exactly one)."""
 
-    observation: list[Value] | None = Field(None, max_length=MAX_CHANNELS)
-    channels: dict[Annotated[str, Field(max_length=64)], Value] | None = Field(None, max_length=MAX_CHANNELS)
+    model_config = ConfigDict(
+        json_schema_extra={"oneOf": [{"required": ["observation"]}, {"required": ["channels"]}]}
+    )
+
+    # Neither may be null: the schema's oneOf counts a present key, null or not.
+    observation: list[Value] = Field(None, max_length=MAX_CHANNELS)  # type: ignore[assignment]
+    channels: dict[Annotated[str, Field(max_length=64)], Value] = Field(  # type: ignore[assignment]
+        None, max_length=MAX_CHANNELS
+    )
 
     @model_validator(mode="after")
     def one_form(self) -> "Observation":
-        if (self.observation is None) == (self.channels is None):
+        if ("observation" in self.model_fields_set) == ("channels" in self.model_fields_set):
             raise ValueError("give exactly one of 'observation' (a vector) or 'channels' (values by name)")
         return self
 
@@ -153,3 +199,33 @@ class EndMessage(Strict):
 
 
 ClientMessage = Annotated[StartMessage | StepMessage | EndMessage, Field(discriminator="type")]
+
+
+class MetadataMessage(BaseModel):
+    """The server's first message on a connection."""
+
+    type: Literal["metadata"] = "metadata"
+    server: Literal["neural-asm"] = "neural-asm"
+    protocol: int
+    models: list[str]
+    default_model: str | None
+
+
+class StartedMessage(SessionInfo):
+    type: Literal["started"]
+
+
+class StepReply(StepResult):
+    type: Literal["step"]
+
+
+class EndedMessage(SessionInfo):
+    type: Literal["ended"]
+
+
+class ErrorMessage(BaseModel):
+    """A mistake in a client message; the connection stays usable."""
+
+    type: Literal["error"]
+    status: int = Field(description="the HTTP status the same mistake gets over HTTP")
+    detail: str

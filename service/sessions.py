@@ -2,8 +2,8 @@
 
 A session fixes the model, the recall mode (offline or online), the cue length, the
 false-positive rate and whether the threshold varies per step. Sessions idle longer
-than the configured time are closed; the number open at once is capped so one client
-cannot exhaust the server's memory.
+than the configured time are closed; the number open at once is capped, in all and per
+client, so that one client can neither exhaust the server's memory nor lock others out.
 """
 
 import logging
@@ -14,9 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from models.asm import NeuralASM, SkillStream
-from models.calibration import Calibration
-from models.fault import ThresholdKind
-from recordings import EpisodeRecorder
+from models.fault import ThresholdKind, joint_channels
+from recordings.recorder import RecorderProcess, SessionRecording
 from service.errors import BadObservation, NotCalibrated, TooManySessions, UnknownSession
 from service.registry import ModelRegistry
 from service.schemas import Observation, SessionCreate
@@ -29,86 +28,70 @@ log = logging.getLogger("service.sessions")
 class Session:
     id: str
     model_name: str
-    model: NeuralASM
-    stream: SkillStream
-    calibration: Calibration
-    fpr: float
-    threshold: ThresholdKind
+    stream: SkillStream  # holds the calibration, false-positive rate and threshold kind
     recording_id: str
-    recorder: EpisodeRecorder | None = None
+    client: str = ""  # whose quota the session counts against (service.auth.client_of)
+    recording: SessionRecording | None = None  # None: not recorded
     last_used: float = field(default_factory=time.monotonic)
 
     @property
+    def model(self) -> NeuralASM:
+        return self.stream.model
+
+    @property
     def channel_names(self) -> tuple[str, ...]:
-        return self.model.channel_names
+        return self.stream.model.channel_names
+
+    @property
+    def fpr(self) -> float:
+        assert self.stream.fpr is not None
+        return self.stream.fpr
+
+    @property
+    def threshold(self) -> ThresholdKind:
+        return self.stream.threshold
 
     def observation(self, req: Observation) -> np.ndarray:
         """The request's observation as a vector in channel order, or a 422 naming the problem."""
-        names = self.channel_names
-        if req.channels is not None:
-            missing = [n for n in names if n not in req.channels]
-            unknown = sorted(set(req.channels) - set(names))
-            if missing or unknown:
-                raise BadObservation(
-                    f"channels: missing {missing}, unknown {unknown}; model {self.model_name!r} expects {list(names)}"
-                )
-            return np.array([req.channels[n] for n in names], np.float64)
-        assert req.observation is not None
-        if len(req.observation) != len(names):
-            raise BadObservation(
-                f"observation: has {len(req.observation)} values; model {self.model_name!r} expects "
-                f"{len(names)} ({', '.join(names)})"
-            )
-        return np.array(req.observation, np.float64)
+        try:
+            return self.stream.check(req.observation if req.channels is None else req.channels)
+        except ValueError as exc:
+            raise BadObservation(f"model {self.model_name!r}: {exc}") from None
 
-    def close(self) -> None:
-        if self.recorder is not None:
-            recorder, self.recorder = self.recorder, None
-            recorder.close()
-
-
-def open_session(params: SessionCreate, registry: ModelRegistry, settings: Settings) -> Session:
+def open_session(
+    params: SessionCreate, client: str, registry: ModelRegistry, settings: Settings, recorder: RecorderProcess | None
+) -> Session:
     """Check the recall setting is calibrated, then start its stream and recording."""
     name, model = registry.get(params.model)
     fpr = settings.default_fpr if params.fpr is None else params.fpr
-    calibration = model.calibration(params.mode, params.cue_steps)
-    if calibration is None:
+    if model.calibration(params.mode, params.cue_steps) is None:
         raise NotCalibrated(
             f"model {name!r} has no calibration for {params.mode} recall cued from {params.cue_steps} step(s); "
             f"calibrated: {sorted(model.calibrations)}"
         )
-    if fpr not in calibration.thresholds:
-        raise NotCalibrated(
-            f"fpr: model {name!r} has no threshold at false-positive rate {fpr} for {calibration.key}; "
-            f"calibrated: {sorted(calibration.thresholds)}"
-        )
+    try:
+        stream = model.stream(params.mode, params.cue_steps, weighted=True, fpr=fpr, threshold=params.threshold)
+    except KeyError as exc:  # no threshold at that rate
+        raise NotCalibrated(f"fpr: model {name!r}: {exc.args[0]}") from None
     session_id = secrets.token_hex(16)
     recording_id = params.recording_id or f"session-{session_id}"
-    session = Session(
-        id=session_id,
-        model_name=name,
-        model=model,
-        stream=model.stream(params.mode, params.cue_steps, weighted=True),
-        calibration=calibration,
-        fpr=fpr,
-        threshold=params.threshold,
-        recording_id=recording_id,
-    )
-    if settings.record:
-        session.recorder = EpisodeRecorder(
+    session = Session(id=session_id, model_name=name, stream=stream, recording_id=recording_id, client=client)
+    if recorder is not None:
+        session.recording = recorder.open(
             f"service-{recording_id}-{session_id[:8]}",
             model.channel_names,
-            folder=settings.recordings_dir,
-            recording_id=recording_id,
-            metadata={"source": "service", "session_id": session_id, "model": name, "mode": params.mode,
-                      "cue_steps": params.cue_steps, "fpr": fpr, "threshold": params.threshold},
+            recording_id,
+            {"source": "service", "session_id": session_id, "model": name, "mode": params.mode,
+             "cue_steps": params.cue_steps, "fpr": fpr, "threshold": params.threshold},
+            joint_channels(model.channel_names),
         )
     return session
 
 
 class SessionStore:
-    def __init__(self, cap: int, idle_s: float) -> None:
+    def __init__(self, cap: int, per_client: int, idle_s: float) -> None:
         self.cap = cap
+        self.per_client = per_client
         self.idle_s = idle_s
         self._sessions: dict[str, Session] = {}
 
@@ -118,15 +101,18 @@ class SessionStore:
     def __contains__(self, session_id: object) -> bool:
         return session_id in self._sessions
 
-    def check_room(self) -> None:
+    def check_room(self, client: str) -> None:
+        """A 429 naming the cap reached: the client's own quota, or the server's total."""
+        wait = (f"delete finished sessions (DELETE /sessions/{{id}}) or wait for idle ones to expire "
+                f"after {self.idle_s:g} s")
+        mine = sum(s.client == client for s in self._sessions.values())
+        if mine >= self.per_client:
+            raise TooManySessions(f"client {client} has {mine} sessions open, its quota is {self.per_client}: {wait}")
         if len(self._sessions) >= self.cap:
-            raise TooManySessions(
-                f"{len(self._sessions)} sessions open, the cap is {self.cap}: delete finished sessions "
-                f"(DELETE /sessions/{{id}}) or wait for idle ones to expire after {self.idle_s:g} s"
-            )
+            raise TooManySessions(f"{len(self._sessions)} sessions open, the cap is {self.cap}: {wait}")
 
     def add(self, session: Session) -> None:
-        self.check_room()
+        self.check_room(session.client)
         self._sessions[session.id] = session
 
     def get(self, session_id: str) -> Session:

@@ -2,21 +2,13 @@
 
 from __future__ import annotations
 
-import ipaddress
 from pathlib import Path
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-
-def is_loopback(host: str) -> bool:
-    """True for 127.0.0.0/8, ::1 and 'localhost'; anything else is reachable from outside."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+from models.config import SCORING
+from runtime.net import is_loopback
 
 
 class Settings(BaseSettings):
@@ -25,17 +17,22 @@ class Settings(BaseSettings):
     host: str = Field("127.0.0.1", description="address to bind; non-loopback requires an API key")
     port: int = Field(8000, ge=0, le=65535, description="TCP port (0: any free port)")
     models_dir: Path = Field(Path("runs/models"), description="folder of *.safetensors checkpoints")
-    default_model: str | None = Field(None, description="model used when a session names none")
+    default_model: str | None = Field(
+        None, description="model used when a session names none; unset: the newest valid checkpoint"
+    )
     build_default_model: bool = Field(
         True, description="train the default Panda model on first run when models_dir has none"
     )
     api_key: str | None = Field(None, description="required in the X-API-Key header when set")
     max_sessions: int = Field(256, ge=1, description="cap on open sessions")
+    max_sessions_per_client: int = Field(
+        64, ge=1, description="cap on one client's open sessions (by API key, else by client address)"
+    )
     session_idle_s: float = Field(300.0, gt=0, description="sessions idle this long are closed")
     max_body_bytes: int = Field(64 * 1024, ge=1024, description="larger request bodies get 413")
     recordings_dir: Path = Field(Path("runs/recordings"), description="where session recordings go")
     record: bool = Field(True, description="write an .rrd and an .mcap for every session")
-    default_fpr: float = Field(0.01, gt=0, lt=1, description="per-step false-positive rate of /fault")
+    default_fpr: float = Field(SCORING.default_fpr, gt=0, lt=1, description="per-step false-positive rate of /fault")
 
     def check_exposure(self) -> None:
         """Refuse to serve beyond this machine without an API key."""

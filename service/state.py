@@ -1,4 +1,4 @@
-"""What the routes share: settings, hosted models, open sessions and the runner.
+"""What the routes share: settings, hosted models, open sessions, the runner and the recorder.
 
 HTTP handlers and the websocket both go through these few methods, so a step means
 the same thing whichever way it arrives.
@@ -8,48 +8,77 @@ import asyncio
 import logging
 import time
 
-from service.batching import StepOutcome
+from recordings.recorder import RecorderProcess
 from service.registry import ModelRegistry
-from service.runner import Runner
+from service.runner import Runner, StepOutcome
 from service.schemas import Observation, SessionCreate
 from service.sessions import Session, SessionStore, open_session
 from service.settings import Settings
 
 log = logging.getLogger("service")
+CLOSE_TIMEOUT_S = 60.0  # a recorder this slow to finish a session's files is stuck: answer anyway
 
 
 class ServiceState:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.registry = ModelRegistry(settings.models_dir, settings.default_model)
-        self.sessions = SessionStore(settings.max_sessions, settings.session_idle_s)
-        self.runner = Runner()
+        self.sessions = SessionStore(settings.max_sessions, settings.max_sessions_per_client, settings.session_idle_s)
+        self.recorder = RecorderProcess(settings.recordings_dir) if settings.record else None
+        self.runner = Runner(self.recorder)
         self.started = time.monotonic()
 
     async def startup(self) -> None:
-        self.runner = Runner()  # a fresh thread: an app may be started again after a shutdown
+        """Recover what a crash left (in the recorder), start the runner, load the models."""
+        if self.recorder is not None:
+            await asyncio.to_thread(self.recorder.start)
         self.runner.start()
         await self.runner.call(lambda: self.registry.load(self.settings.build_default_model))
 
     async def shutdown(self) -> None:
         for session in self.sessions.pop_idle(now=float("inf")):
-            await self.runner.call(session.close)
+            await self._finish(session)
         self.runner.stop()
+        if self.recorder is not None:
+            await asyncio.to_thread(self.recorder.stop)
 
-    async def open(self, params: SessionCreate) -> Session:
-        self.sessions.check_room()
-        session = await self.runner.call(lambda: open_session(params, self.registry, self.settings))
+    async def open(self, params: SessionCreate, client: str) -> Session:
+        self.sessions.check_room(client)
+        session = await self.runner.call(
+            lambda: open_session(params, client, self.registry, self.settings, self.recorder))
         try:
             self.sessions.add(session)
         except Exception:  # the cap was reached while the session was being opened
-            await self.runner.call(session.close)
+            await self._finish(session)
             raise
         return session
 
-    async def close(self, session_id: str) -> Session:
+    async def close(self, session_id: str, wait: bool = True) -> Session:
+        """Close a session; with ``wait``, once its files are finalized, so that they can be
+        read at once (without, when no one is told: a replaced or abandoned session)."""
         session = self.sessions.pop(session_id)
-        await self.runner.call(session.close)
+        await self._finish(session, wait)
         return session
+
+    async def _finish(self, session: Session, wait: bool = True) -> None:
+        recording, session.recording = session.recording, None
+        if recording is None:
+            return
+        # Through the runner: the close is queued after every step it has sent the recorder.
+        done = await self.runner.call(recording.close)
+
+        def report(exc: BaseException | None) -> None:
+            if exc is not None:  # the recorder died or stalled: the session is closed all the same
+                log.error("session %s: its recording did not finish (%r); files: %s", session.id, exc,
+                          ", ".join(map(str, recording.paths.values())))
+
+        if not wait:
+            done.add_done_callback(lambda f: report(f.exception()))
+            return
+        try:
+            await asyncio.wait_for(asyncio.wrap_future(done), CLOSE_TIMEOUT_S)
+        except Exception as exc:
+            report(exc)
 
     async def step(self, session_id: str, observation: Observation) -> tuple[Session, StepOutcome]:
         session = self.sessions.get(session_id)
@@ -62,4 +91,4 @@ class ServiceState:
         while True:
             await asyncio.sleep(period)
             for session in self.sessions.pop_idle():
-                await self.runner.call(session.close)
+                await self._finish(session, wait=False)

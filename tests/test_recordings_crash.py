@@ -1,4 +1,9 @@
-"""An MCAP recording cut short by a crash reads with mcap's own reader, up to its last whole chunk."""
+"""An MCAP recording cut short by a crash reads with mcap's own reader, up to its last whole chunk.
+
+Cut at any byte, a file gives mcap's linear reader every chunk before the cut; killed
+while writing (where whole chunks are followed by a provisional end), it is a valid
+MCAP file that ``make_reader`` reads without an error.
+"""
 
 import io
 import subprocess
@@ -7,7 +12,7 @@ from collections import Counter
 from itertools import accumulate
 
 from mcap.exceptions import McapError
-from mcap.reader import NonSeekingReader, SeekingReader
+from mcap.reader import NonSeekingReader, SeekingReader, make_reader
 from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 
@@ -87,3 +92,6 @@ def test_a_killed_writer_loses_at_most_the_chunk_it_was_filling(tmp_path):
     assert STEPS - CHUNK_SIZE // step_bytes - 1 <= len(faults) <= STEPS
     energies = [r["energy"] for r in read_mcap(tmp_path / "killed.mcap")["/fault"]]
     assert energies == [float(k) for k in range(len(faults))]
+    reader = make_reader(io.BytesIO(data))
+    assert reader.get_summary() is None  # no indexes yet: read linearly, to the provisional end
+    assert [m.data for _, _, m in reader.iter_messages(log_time_order=False)] == [m.data for _, m in messages]

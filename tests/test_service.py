@@ -19,14 +19,13 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from models import checkpoint
-from models.asm import NeuralASM
+from models.asm import NeuralASM, step_streams
 from models.config import FAST
 from models.synthetic import make_skills
 from recordings.blueprint import ENERGY
 from recordings.readers import read_mcap, read_rrd_series
 from service.app import create_app
 from service.auth import HEADER
-from service.batching import step_group
 from service.cli import app as cli_app
 from service.embedded import start_embedded
 from service.sessions import Session, SessionStore
@@ -125,26 +124,27 @@ def test_predict_and_fault_match_the_model(client, episodes, reference):
 
 
 def test_batched_step_equals_single_steps(reference, episodes):
-    """Sessions at different steps and modes, stepped together, score as if alone."""
-    streams = {(m, i): reference.stream(m, 1) for m in ("offline", "online") for i in range(3)}
+    """Streams at different steps and modes, stepped together as the runner does, score and decide as if alone."""
+    streams = {(m, i): reference.stream(m, 1, fpr=0.01) for m in ("offline", "online") for i in range(3)}
     singles = {key: reference.stream(key[0], 1) for key in streams}
-    cal = {m: reference.calibration(m, 1) for m in ("offline", "online")}
-    sessions = {key: Session(str(key), "panda", reference, s, cal[key[0]], 0.01, False, "r") for key, s in streams.items()}
     for t in range(6):
         for mode in ("offline", "online"):
-            # episode i joins at step i, so a batch mixes cue and post-cue sessions
+            # episode i joins at step i, so a batch mixes cue and post-cue streams
             keys = [(mode, i) for i in range(3) if t >= i]
-            xs = np.stack([episodes[i, t - i] for _, i in keys])
-            cue = [k for k in keys if sessions[k].stream.t == 0]
+            cue = [k for k in keys if streams[k].t == 0]
             rest = [k for k in keys if k not in cue]
             for group in (cue, rest):
                 if group:
-                    scores = step_group([sessions[k] for k in group], np.stack([xs[keys.index(k)] for k in group]))
-                    for k, score in zip(group, scores):
+                    xs = np.stack([episodes[k[1], t - k[1]] for k in group])
+                    results = step_streams([streams[k] for k in group], xs)
+                    for k, result in zip(group, results):
                         alone = singles[k].step(episodes[k[1], t - k[1]])
-                        assert score.step == alone.step
-                        np.testing.assert_allclose(score.energy, alone.energy, rtol=1e-4)
-                        np.testing.assert_allclose(score.prediction, alone.prediction, rtol=1e-4, atol=1e-5)
+                        assert result.score.step == alone.step
+                        np.testing.assert_allclose(result.score.energy, alone.energy, rtol=1e-4)
+                        np.testing.assert_allclose(result.score.prediction, alone.prediction, rtol=1e-4, atol=1e-5)
+                        threshold = reference.calibration(mode, 1).episode_thresholds[0.01]
+                        assert result.decision.threshold == threshold
+                        assert result.decision.fault == (result.score.energy > threshold)
 
 
 def test_websocket_episode_and_its_recordings(server, episodes):
@@ -240,6 +240,9 @@ def _post(client: httpx.Client, path: str, body: bytes) -> httpx.Response:
         (lambda sid, x: {"session_id": sid, "observation": x[:5] + [1e7] + x[6:]}, 422, ["observation.5", "1000000"]),
         (lambda sid, x: {"session_id": sid, "observation": x[:5] + [1e39] + x[6:]}, 422, ["observation.5"]),
         (lambda sid, x: {"session_id": sid, "observation": x[:5] + ["a"] + x[6:]}, 422, ["observation.5"]),
+        (lambda sid, x: {"session_id": sid, "observation": x[:5] + ["1.5"] + x[6:]}, 422, ["observation.5"]),
+        (lambda sid, x: {"session_id": sid, "observation": x[:5] + [True] + x[6:]}, 422, ["observation.5"]),
+        (lambda sid, x: {"session_id": sid, "observation": x, "channels": None}, 422, ["channels"]),
         (lambda sid, x: {"session_id": sid, "channels": dict(zip(CHANNEL_NAMES[:-1], x))}, 422, ["missing", "right_tz"]),
         (lambda sid, x: {"session_id": sid, "channels": {**dict(zip(CHANNEL_NAMES, x)), "elbow": 1.0}}, 422, ["unknown", "elbow"]),
         (lambda sid, x: {"session_id": sid, "observation": x, "channels": {}}, 422, ["exactly one"]),
@@ -283,7 +286,10 @@ def test_undecodable_and_oversize_bodies(client, body, status, word):
     [
         ({"model": "nope"}, 404, "nope"),
         ({"fpr": 0.5}, 422, "0.5"),
-        ({"cue_steps": 3}, 422, "cue"),
+        ({"cue_steps": 3}, 409, "cued from 3"),
+        ({"cue_steps": True}, 422, "cue_steps"),
+        ({"fpr": "0.01"}, 422, "fpr"),
+        ({"fpr": True}, 422, "fpr"),
         ({"cue_steps": 0}, 422, "cue_steps"),
         ({"mode": "sideways"}, 422, "mode"),
         ({"recording_id": "../../x"}, 422, "recording_id"),
@@ -305,8 +311,8 @@ def test_session_cap(client):
 
 
 def test_idle_sessions_expire():
-    store = SessionStore(cap=2, idle_s=10)
-    session = Session("a", "m", None, None, None, 0.01, False, "r")  # type: ignore[arg-type]
+    store = SessionStore(cap=2, per_client=2, idle_s=10)
+    session = Session("a", "m", None, "r")  # type: ignore[arg-type]
     store.add(session)
     assert store.pop_idle(now=session.last_used + 5) == []
     assert store.pop_idle(now=session.last_used + 11) == [session] and "a" not in store
@@ -329,8 +335,10 @@ def test_api_key_enforced_and_expiry_on_a_keyed_server(model_dir, tmp_path, epis
             async with websockets.connect(srv.url.replace("http", "ws") + "/stream", additional_headers=headers) as w:
                 return json.loads(await w.recv())["type"]
 
-        with pytest.raises(websockets.exceptions.InvalidStatus):
-            asyncio.run(ws({}))
+        for headers in ({}, {HEADER: "wrong"}):  # as the stream's docstring and the AsyncAPI document say
+            with pytest.raises(websockets.exceptions.ConnectionClosedError) as closed:
+                asyncio.run(ws(headers))
+            assert closed.value.rcvd.code == 1008 and HEADER in closed.value.rcvd.reason
         assert asyncio.run(ws(key)) == "metadata"
         time.sleep(1.0)
         assert c.get(f"/sessions/{info['session_id']}", headers=key).status_code == 404

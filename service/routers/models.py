@@ -1,26 +1,34 @@
 from fastapi import APIRouter, Depends
 
-from models.asm import NeuralASM
 from service.auth import require_api_key
 from service.deps import get_state
 from service.errors import ERROR_RESPONSES
+from service.registry import Hosted
 from service.schemas import CalibrationInfo, ModelInfo
 from service.state import ServiceState
 
 router = APIRouter(tags=["models"], dependencies=[Depends(require_api_key)], responses=ERROR_RESPONSES)
 
 
-def model_info(name: str, model: NeuralASM) -> ModelInfo:
-    calibrations = [
+def model_info(hosted: Hosted, default: str | None) -> ModelInfo:
+    info = ModelInfo(name=hosted.name, status="ok" if hosted.model else "broken", default=hosted.name == default,
+                     path=str(hosted.path), origin=hosted.origin, digest=hosted.digest, error=hosted.error)
+    model = hosted.model
+    if model is None:
+        return info
+    info.calibrations = [
         CalibrationInfo(mode=c.mode, cue_steps=c.cue_steps, fprs=sorted(c.thresholds),  # type: ignore[arg-type]
                         whitened=c.error_precision is not None, source=c.source)
         for c in model.calibrations.values()
     ]
-    return ModelInfo(name=name, channel_names=list(model.channel_names), hidden_size=model.config.hidden_size,
-                     calibrations=calibrations, provenance=model.provenance)
+    info.channel_names, info.hidden_size = list(model.channel_names), model.config.hidden_size
+    info.provenance = model.provenance
+    return info
 
 
 @router.get("/models", response_model=list[ModelInfo])
 async def list_models(state: ServiceState = Depends(get_state)) -> list[ModelInfo]:
-    """The hosted models, their channels and the recall settings they are calibrated for."""
-    return [model_info(name, model) for name, model in state.registry.models.items()]
+    """Every checkpoint of the model folder: where it came from, its digest, its channels and calibrations,
+    and which one is the default; refused (broken) ones with the reason."""
+    default = state.registry.default_name
+    return [model_info(h, default) for h in state.registry.hosted.values()]

@@ -3,7 +3,8 @@
 Protocol (JSON text frames, in the spirit of openpi's policy server):
 
 1. The client connects, with the ``X-API-Key`` header when the server has a key (a
-   wrong key closes the handshake with code 1008).
+   missing or wrong key: the server accepts, then closes with code 1008, policy
+   violation, its reason naming the header).
 2. The server sends ``{"type": "metadata", "server": "neural-asm", "protocol": 1,
    "models": [...], "default_model": ...}``.
 3. The client sends ``{"type": "start", ...}`` with the fields of ``POST /sessions``
@@ -18,18 +19,21 @@ Protocol (JSON text frames, in the spirit of openpi's policy server):
 
 A mistake is answered ``{"type": "error", "status": <4xx>, "detail": "..."}`` and the
 connection stays usable. Messages larger than the body limit close it (code 1009).
+``GET /asyncapi.json`` describes these messages as an AsyncAPI 3 document.
 """
 
 from typing import Any
 
 import orjson
-from fastapi import APIRouter, WebSocket, WebSocketDisconnect, status
+from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect, status
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
-from service.auth import HEADER, key_ok
+from service import asyncapi
+
+from service.auth import HEADER, client_of, key_ok
 from service.errors import ServiceError, describe, json_problem, undecodable
 from service.payloads import session_info, step_payload
-from service.schemas import ClientMessage, EndMessage, SessionCreate, StartMessage
+from service.schemas import ClientMessage, EndMessage, MetadataMessage, SessionCreate, StartMessage
 from service.sessions import Session
 from service.state import ServiceState
 
@@ -43,8 +47,14 @@ class _NoSession(ServiceError):
 
 
 def metadata(state: ServiceState) -> dict[str, Any]:
-    return {"type": "metadata", "server": "neural-asm", "protocol": PROTOCOL,
-            "models": sorted(state.registry.models), "default_model": state.registry.default_name}
+    return MetadataMessage(protocol=PROTOCOL, models=sorted(state.registry.models),
+                           default_model=state.registry.default_name).model_dump()
+
+
+@router.get("/asyncapi.json", tags=["stream"], response_model=dict[str, Any])
+async def asyncapi_document(request: Request) -> dict[str, Any]:
+    """The websocket protocol of ``/stream`` as an AsyncAPI 3 document (no API key needed, like /openapi.json)."""
+    return asyncapi.document(request.app.version, PROTOCOL, __doc__ or "")
 
 
 async def _send(ws: WebSocket, kind: str, body: BaseModel) -> None:
@@ -56,9 +66,10 @@ async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session
     message = _messages.validate_json(text)
     if isinstance(message, StartMessage):
         if session is not None:
-            await state.close(session.id)
+            await state.close(session.id, wait=False)  # replaced: nobody waits for its files
             session = None
-        session = await state.open(SessionCreate(**message.model_dump(exclude={"type"})))
+        client = client_of(state.settings.api_key, ws.headers, ws.client.host if ws.client else None)
+        session = await state.open(SessionCreate(**message.model_dump(exclude={"type"})), client)
         await _send(ws, "started", session_info(session, state.settings.session_idle_s))
         return session
     if session is None:
@@ -75,10 +86,10 @@ async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session
 @router.websocket("/stream")
 async def stream(ws: WebSocket) -> None:
     state: ServiceState = ws.app.state.service
+    await ws.accept()  # closing before accepting would be an HTTP 403, with no code or reason
     if not key_ok(state.settings.api_key, ws.headers.get(HEADER)):
         await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=f"missing or wrong {HEADER} header")
         return
-    await ws.accept()
     await ws.send_json(metadata(state))
     session: Session | None = None
     try:
@@ -101,4 +112,4 @@ async def stream(ws: WebSocket) -> None:
         pass
     finally:
         if session is not None and session.id in state.sessions:
-            await state.close(session.id)
+            await state.close(session.id, wait=False)

@@ -1,0 +1,40 @@
+"""``nasm recordings``: tools for recording files.
+
+``recover FILE...`` rewrites each ``.mcap`` or ``.rrd`` cut short by a crash into a
+valid, indexed file in place (like the official ``mcap recover``); a whole file keeps
+its content. A file that cannot be recovered is named with the reason, and the others
+are still done.
+"""
+
+from pathlib import Path
+
+import typer
+
+from recordings.recover import recover as recover_file
+
+app = typer.Typer(help="Tools for the .rrd and .mcap recordings.", no_args_is_help=True,
+                  pretty_exceptions_show_locals=False)
+
+
+@app.command()
+def recover(files: list[Path] = typer.Argument(..., help=".mcap or .rrd files, rewritten in place")) -> None:
+    """Rewrite recordings cut short by a crash into valid, indexed files (in place)."""
+    failed = 0
+    for path in files:
+        try:
+            result = recover_file(path, {"by": "nasm recordings recover"})
+        except Exception as exc:  # report it, and go on with the other files
+            typer.secho(f"{path}: not recovered: {exc}", fg="red", err=True)
+            failed += 1
+            continue
+        if result.messages is None:
+            typer.echo(f"{path}: recovered (every chunk that decodes, with a footer)")
+        else:
+            state = "was closed properly" if result.was_indexed else "was cut short (no indexes)"
+            typer.echo(f"{path}: recovered, {state}; {result.messages} messages kept")
+    if failed:
+        raise typer.Exit(1)
+
+
+if __name__ == "__main__":
+    app()

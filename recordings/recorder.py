@@ -1,0 +1,336 @@
+"""A recorder process: a server's session recordings written outside the process that serves.
+
+Writing an episode's ``.rrd`` and ``.mcap`` is Python work that holds the GIL; in the
+serving process it competed with inference for it. Here one child process (spawned
+once, reused by every session) owns the open ``EpisodeRecorder`` objects, and the
+server only puts messages on a multiprocessing queue: a session opening, a batch of
+scored steps (``StepBatch``, one per inference batch), a session closing. Closing
+returns a future that resolves once the child has finalized the session's files, so a
+caller that waits for it can read them at once. The queue is bounded (``BACKLOG``): a
+server that outruns its recorder for long is slowed to the recorder's pace rather than
+growing a backlog in memory.
+
+The child flushes every open file at least once a second, so a crash loses at most
+about a second of steps (and the MCAP chunk being filled). On start it recovers what a
+crash left in its folder (``recover_interrupted``).
+It writes an open marker beside each session's files while they are open, so that a
+later start knows which episodes were interrupted. If the child dies, the server's
+collector thread notices within a second, logs it and starts a new child (which
+recovers the dead one's files); the sessions it was writing are served on, unrecorded.
+If the server dies, the orphaned child closes its files (leaving the markers) and exits.
+
+A session's ``.rrd`` carries no layout of its own (embedding it cost ~3 ms of CPU per
+session, most of what opening a file costs): the child writes it once, as
+``episode.rbl`` in the folder, and a session's file merged with its client's file (same
+recording id) takes the client's.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import multiprocessing as mp
+import os
+import queue
+import signal
+import sys
+import threading
+import time
+import types
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from multiprocessing.process import BaseProcess
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+
+from recordings import blueprint as bp
+from recordings import rerun_file
+from recordings.episode import EpisodeRecorder
+from recordings.paths import APP_ID, safe_name
+from recordings.records import StepRecord
+from recordings.recover import OPEN_MARKER, recover_interrupted, write_json
+
+log = logging.getLogger("recordings.recorder")
+_CTX = mp.get_context("spawn")  # no fork: the server has threads (uvicorn, inference, Rerun's)
+POLL_S = 1.0  # how soon a dead child (or, in the child, a dead server) is noticed
+LAYOUT_FILE = "episode.rbl"  # the layout of every session's .rrd, written beside them
+BACKLOG = 256  # messages queued for the child at most: a server faster than its recorder waits for it
+
+
+class RecorderGone(RuntimeError):
+    """The recorder process died; a session's recording ended with it."""
+
+
+@dataclass(frozen=True)
+class StepBatch:
+    """Scored steps of several sessions: row i belongs to the session recorded as ``keys[i]``."""
+
+    keys: list[str]
+    steps: list[int]
+    observation: np.ndarray  # (B, D), and likewise expected, prediction, errors
+    expected: np.ndarray
+    prediction: np.ndarray
+    errors: np.ndarray
+    energy: np.ndarray  # (B,), and likewise threshold, fault
+    threshold: np.ndarray
+    fault: np.ndarray
+    isolated_joint: list[str | None]
+
+    def records(self) -> Iterator[tuple[str, StepRecord]]:
+        for i, key in enumerate(self.keys):
+            yield key, StepRecord(self.steps[i], self.observation[i], self.expected[i], self.prediction[i],
+                                  self.errors[i], float(self.energy[i]), float(self.threshold[i]),
+                                  bool(self.fault[i]), self.isolated_joint[i])
+
+
+@dataclass
+class SessionRecording:
+    """A session's files, written by the recorder process that was running when it opened."""
+
+    key: str
+    paths: dict[str, Path]
+    generation: int
+    recorder: "RecorderProcess" = field(repr=False)
+
+    def close(self) -> "Future[None]":
+        return self.recorder.close(self)
+
+
+class RecorderProcess:
+    def __init__(self, folder: Path, step_period_s: float = 0.5) -> None:
+        self.folder = Path(folder)
+        self.step_period_s = step_period_s
+        self.generation = 0
+        self._lock = threading.Lock()
+        self._tickets = itertools.count()
+        self._pending: dict[int, Future[None]] = {}
+        self._stopping = threading.Event()
+        self._process: BaseProcess | None = None
+        self._collector: threading.Thread | None = None
+
+    @property
+    def pid(self) -> int | None:
+        return None if self._process is None else self._process.pid
+
+    @property
+    def alive(self) -> bool:
+        return self._process is not None and self._process.is_alive()
+
+    def start(self, timeout_s: float = 300.0) -> None:
+        """Spawn the child and wait until it has recovered what a crash left in the folder."""
+        self._stopping.clear()
+        self._spawn(timeout_s)
+        self._collector = threading.Thread(target=self._collect, name="nasm-recorder-acks", daemon=True)
+        self._collector.start()
+
+    def _spawn(self, timeout_s: float) -> None:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self._inbox: Any = _CTX.Queue(maxsize=BACKLOG)
+        self._outbox: Any = _CTX.Queue()
+        process = _CTX.Process(target=_serve, args=(self._inbox, self._outbox, self.folder, self.step_period_s),
+                               name="nasm-recorder", daemon=True)
+        # Spawning re-imports the parent's __main__ in the child; under `nasm serve` that is every
+        # command's imports (torch, the simulator), which the child never uses.
+        main = sys.modules["__main__"]
+        sys.modules["__main__"] = types.ModuleType("__main__")
+        try:
+            process.start()
+        finally:
+            sys.modules["__main__"] = main
+        self._process = process
+        try:
+            kind, recovered = self._outbox.get(timeout=timeout_s)
+        except queue.Empty:
+            process.kill()
+            raise RuntimeError(f"the recorder process did not start within {timeout_s:g} s") from None
+        assert kind == "ready"
+        for marker in recovered:
+            log.warning("recovered an interrupted recording: %s", marker)
+
+    def _put(self, message: tuple[Any, ...]) -> None:
+        """Queue a message, waiting while the child is ``BACKLOG`` behind: a backlog without
+        bound would be memory without bound. A dead child's queue is replaced by the collector."""
+        while True:
+            try:
+                self._inbox.put(message, timeout=POLL_S)
+                return
+            except queue.Full:
+                if not self.alive:  # nobody will read it: serve on, the collector restarts the child
+                    return
+
+    def open(self, run_id: str, channel_names: Sequence[str], recording_id: str,
+             metadata: dict[str, Any], joints: Sequence[int] = ()) -> SessionRecording:
+        """Start a session's files (in the child; this only queues the request)."""
+        key = safe_name(run_id)
+        paths = {"rrd": self.folder / f"{key}.rrd", "mcap": self.folder / f"{key}.mcap"}
+        self._put(("open", key, tuple(channel_names), recording_id, metadata, tuple(joints)))
+        return SessionRecording(key, paths, self.generation, self)
+
+    def write(self, batch: StepBatch) -> None:
+        self._put(("steps", batch))
+
+    def close(self, recording: SessionRecording) -> "Future[None]":
+        """A future resolved once the child has finalized the session's files."""
+        future: Future[None] = Future()
+        with self._lock:
+            if recording.generation != self.generation:
+                future.set_exception(RecorderGone("the recorder process died while this session was recorded"))
+                return future
+            ticket = next(self._tickets)
+            self._pending[ticket] = future
+        self._put(("close", recording.key, ticket))  # not under the lock: a restart may need it meanwhile
+        return future
+
+    def stop(self, timeout_s: float = 30.0) -> None:
+        """Finish every open file and end the child."""
+        if self._process is None:
+            return
+        self._stopping.set()
+        if self._process.is_alive():
+            self._put(("stop",))
+            self._process.join(timeout_s)
+        if self._collector is not None:
+            self._collector.join(timeout_s)
+        if self._process.is_alive():
+            log.error("the recorder process did not stop within %g s; killing it", timeout_s)
+            self._process.kill()
+        self._process.join()
+        for q in (self._inbox, self._outbox):
+            q.close()
+            q.join_thread()
+        # Dropped now, their semaphores are released now: uvicorn ends a process stopped by a
+        # signal by raising the signal again, when no exit handler runs to release them.
+        self._inbox = self._outbox = None
+
+    def _collect(self) -> None:
+        """Resolve close futures as the child acknowledges them; restart a child that died."""
+        while True:
+            try:
+                kind, ticket, error = self._outbox.get(timeout=POLL_S)
+            except queue.Empty:
+                if self._stopping.is_set() and not self.alive:
+                    return
+                if not self._stopping.is_set() and not self.alive:
+                    self._restart()
+                continue
+            except (EOFError, OSError):  # the queue's pipe broke with the child
+                if self._stopping.is_set():
+                    return
+                self._restart()
+                continue
+            with self._lock:
+                future = self._pending.pop(ticket, None)
+            if future is not None and error is None:
+                future.set_result(None)
+            elif future is not None:
+                future.set_exception(RuntimeError(error))
+
+    def _restart(self) -> None:
+        assert self._process is not None
+        code = self._process.exitcode
+        self._process.join()
+        with self._lock:
+            self.generation += 1
+            pending, self._pending = self._pending, {}
+            old = (self._inbox, self._outbox)
+            for future in pending.values():
+                future.set_exception(RecorderGone("the recorder process died before it closed this session's files"))
+            log.error("the recorder process died (exit code %s); starting a new one. Sessions it was recording "
+                      "are served on without recording; their files are recovered and marked interrupted", code)
+            try:
+                self._spawn(timeout_s=300.0)
+            except Exception:  # tried again within a second; meanwhile sessions are served unrecorded
+                log.exception("the recorder process could not be restarted")
+        for q in old:
+            q.cancel_join_thread()
+            q.close()
+
+
+def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
+    """The child: recover the folder, then open, write and close sessions' files as told."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server stops us
+    rerun_file.defer_freeing()  # one sweep a second, not one per closed file
+    recovered = recover_interrupted(folder)
+    _write_layout(folder)
+    outbox.put(("ready", [str(p) for p in recovered]))
+    writers: dict[str, EpisodeRecorder | None] = {}
+    errors: dict[str, str] = {}
+    dirty: set[str] = set()  # written to since the last flush
+    parent = mp.parent_process()
+    flushed = time.monotonic()
+    while True:
+        try:
+            message = inbox.get(timeout=POLL_S)
+        except queue.Empty:
+            message = None
+        if time.monotonic() - flushed >= POLL_S:  # what a crash may lose: about a second of steps
+            for key in dirty:
+                writer = writers.get(key)
+                if writer is not None:
+                    writer.flush()
+            dirty.clear()
+            rerun_file.free_dropped_streams()
+            flushed = time.monotonic()
+            if parent is not None and not parent.is_alive():
+                break  # orphaned: close the files, keep the markers (the episodes were interrupted)
+        if message is None:
+            continue
+        kind = message[0]
+        if kind == "open":
+            _, key, names, recording_id, metadata, joints = message
+            try:
+                opened = {"pid": os.getpid(), "run_id": key, "recording_id": recording_id,
+                          "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "metadata": metadata}
+                write_json(folder / f"{key}{OPEN_MARKER}", opened)
+                writers[key] = EpisodeRecorder(key, names, folder=folder, recording_id=recording_id,
+                                               metadata=metadata, step_period_s=step_period_s, layout=False,
+                                               joints=joints)
+            except Exception as exc:
+                log.exception("cannot open the recording %s; the session continues unrecorded", key)
+                writers[key], errors[key] = None, f"its recording could not be opened: {exc}"
+        elif kind == "steps":
+            for key, record in message[1].records():
+                writer = writers.get(key)
+                if writer is None:
+                    continue
+                dirty.add(key)
+                try:
+                    writer.log_step(record)
+                except Exception as exc:
+                    log.exception("recording %s failed; the session continues unrecorded", key)
+                    errors[key] = f"its recording failed: {exc}"
+                    _finish(folder, key, writer)
+                    writers[key] = None
+        elif kind == "close":
+            _, key, ticket = message
+            writer = writers.pop(key, None)
+            error = errors.pop(key, None)
+            if writer is not None:
+                try:
+                    _finish(folder, key, writer)
+                except Exception as exc:
+                    error = f"its recording could not be finished: {exc}"
+            outbox.put(("closed", ticket, error))
+        elif kind == "stop":
+            for key, writer in writers.items():
+                if writer is not None:
+                    _finish(folder, key, writer)
+            return
+    for writer in writers.values():
+        if writer is not None:
+            writer.close()
+
+
+def _write_layout(folder: Path) -> None:
+    """The sessions' Rerun layout, once for the folder: ``rerun FILE.rrd LAYOUT_FILE`` (a
+    session's file merged with its client's takes the layout from the client's)."""
+    tmp = folder / f".{LAYOUT_FILE}.tmp"
+    bp.episode_blueprint().save(APP_ID, tmp)
+    os.replace(tmp, folder / LAYOUT_FILE)
+
+
+def _finish(folder: Path, key: str, writer: EpisodeRecorder) -> None:
+    writer.close()
+    (folder / f"{key}{OPEN_MARKER}").unlink(missing_ok=True)

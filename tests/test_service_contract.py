@@ -1,0 +1,140 @@
+"""The API contract: what the OpenAPI and AsyncAPI documents promise is what the service does.
+
+In-process (TestClient, no recording): quotas per client, 405 Allow headers, path
+parameter patterns, the security scheme declared only with a key, the JSON schema's
+oneOf and enum, and every websocket message checked against ``/asyncapi.json``.
+"""
+
+from pathlib import Path
+
+import jsonschema
+import pytest
+from fastapi.testclient import TestClient
+
+from models import checkpoint
+from models.asm import NeuralASM
+from models.config import FAST, SCORING
+from models.synthetic import make_skills
+from service.app import create_app
+from service.auth import HEADER
+from service.settings import Settings
+from sim.channels import CHANNEL_NAMES
+
+
+@pytest.fixture(scope="module")
+def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("models")
+    data = make_skills(n_skills=1, repetitions=4, steps=5, channels=25)
+    model = NeuralASM.fit(data.data, CHANNEL_NAMES, FAST.with_(hidden_size=16, epochs=5), progress=False)
+    model.calibrate(data.data, data.data, "offline", 1)
+    checkpoint.save(model, folder / "m.safetensors")
+    return folder
+
+
+def _app(model_dir: Path, **settings):
+    return create_app(Settings(models_dir=model_dir, record=False, build_default_model=False, **settings))
+
+
+def test_quota_per_client_address(model_dir):
+    app = _app(model_dir, max_sessions=10, max_sessions_per_client=2)
+    with TestClient(app, client=("10.0.0.1", 5000)) as a, TestClient(app, client=("10.0.0.2", 5000)) as b:
+        opened = [a.post("/sessions", json={}).json()["session_id"] for _ in range(2)]
+        r = a.post("/sessions", json={})
+        assert r.status_code == 429 and "10.0.0.1" in r.json()["detail"] and "quota is 2" in r.json()["detail"]
+        assert b.post("/sessions", json={}).status_code == 201  # another client is not locked out
+        a.delete(f"/sessions/{opened[0]}")
+        assert a.post("/sessions", json={}).status_code == 201
+
+
+def test_quota_per_api_key_counts_websocket_sessions_too(model_dir):
+    app = _app(model_dir, api_key="k", max_sessions_per_client=1)
+    with TestClient(app) as c:
+        assert c.post("/sessions", json={}, headers={HEADER: "k"}).status_code == 201
+        with c.websocket_connect("/stream", headers={HEADER: "k"}) as ws:
+            ws.receive_json()
+            ws.send_json({"type": "start"})
+            answer = ws.receive_json()
+        assert answer["type"] == "error" and answer["status"] == 429 and "quota is 1" in answer["detail"]
+
+
+def test_405_lists_every_method_of_the_path(model_dir):
+    with TestClient(_app(model_dir)) as c:
+        sid = c.post("/sessions", json={}).json()["session_id"]
+        for method in ("PUT", "PATCH", "OPTIONS", "POST"):
+            r = c.request(method, f"/sessions/{sid}")
+            assert r.status_code == 405 and r.headers["allow"] == "DELETE, GET", (method, r.headers)
+        assert c.request("PUT", "/predict").headers["allow"] == "POST"
+
+
+@pytest.mark.parametrize("sid", ["a!b", "a" * 65, "a.b", "%20"])
+def test_path_session_id_follows_the_pattern(model_dir, sid):
+    with TestClient(_app(model_dir)) as c:
+        for method in ("GET", "DELETE"):
+            r = c.request(method, f"/sessions/{sid}")
+            assert r.status_code == 422 and "session_id" in r.json()["detail"], r.text
+
+
+def test_openapi_declares_the_key_only_when_there_is_one(model_dir):
+    with TestClient(_app(model_dir)) as c:
+        open_spec = c.get("/openapi.json").json()
+    with TestClient(_app(model_dir, api_key="k")) as c:
+        keyed = c.get("/openapi.json").json()
+    assert "securitySchemes" not in open_spec.get("components", {})
+    assert all("security" not in op and "401" not in op["responses"]
+               for ops in open_spec["paths"].values() for op in ops.values())
+    assert keyed["components"]["securitySchemes"]["APIKeyHeader"]["name"] == HEADER
+    assert keyed["paths"]["/models"]["get"]["security"] == [{"APIKeyHeader": []}]
+    assert "security" not in keyed["paths"]["/healthz"]["get"]
+
+
+def test_schema_states_the_rules(model_dir):
+    with TestClient(_app(model_dir)) as c:
+        spec = c.get("/openapi.json").json()
+    schemas = spec["components"]["schemas"]
+    assert schemas["StepRequest"]["oneOf"] == [{"required": ["observation"]}, {"required": ["channels"]}]
+    fpr = schemas["SessionCreate"]["properties"]["fpr"]
+    assert {"type": "number", "enum": list(SCORING.fprs)} in fpr["anyOf"]
+    validator = jsonschema.Draft202012Validator({**schemas["StepRequest"], "components": spec["components"]})
+    assert validator.is_valid({"session_id": "a", "observation": [1.0]})
+    for body in ({"session_id": "a"}, {"session_id": "a", "observation": [1.0], "channels": {"x": 1.0}},
+                 {"session_id": "a", "observation": None}):
+        assert not validator.is_valid(body), body
+
+
+def _validator(document: dict, message: str) -> jsonschema.Draft202012Validator:
+    """The payload schema of one AsyncAPI message; its refs resolve inside the document."""
+    ref = document["channels"]["stream"]["messages"][message]["$ref"]
+    name = ref.rsplit("/", 1)[1]
+    payload = document["components"]["messages"][name]["payload"]
+    return jsonschema.Draft202012Validator({**payload, "components": document["components"]})
+
+
+def test_asyncapi_document_describes_the_stream(model_dir):
+    with TestClient(_app(model_dir)) as c:
+        document = c.get("/asyncapi.json").json()
+        x = [0.1] * len(CHANNEL_NAMES)
+        sent = [{"type": "start", "mode": "offline"}, {"type": "step", "observation": x},
+                {"type": "step", "channels": dict(zip(CHANNEL_NAMES, x))}, {"type": "step", "observation": [1.0]},
+                {"type": "end"}]
+        with c.websocket_connect("/stream") as ws:
+            received = [ws.receive_json()]
+            for message in sent:
+                ws.send_json(message)
+                received.append(ws.receive_json())
+    assert document["asyncapi"].startswith("3.") and document["channels"]["stream"]["address"] == "/stream"
+    operations = document["operations"]
+    assert {op["action"] for op in operations.values()} == {"send", "receive"}
+    for op in operations.values():  # every reference resolves to a message of the channel
+        for ref in op["messages"] + op.get("reply", {}).get("messages", []):
+            assert ref["$ref"].rsplit("/", 1)[1] in document["channels"]["stream"]["messages"]
+    names = {"start": "start", "step": "step", "end": "end"}
+    for message in sent:
+        _validator(document, names[message["type"]]).validate(message)
+    replies = {"metadata": "metadata", "started": "started", "step": "stepResult", "ended": "ended", "error": "error"}
+    assert [r["type"] for r in received] == ["metadata", "started", "step", "step", "error", "ended"]
+    for reply in received:
+        _validator(document, replies[reply["type"]]).validate(reply)
+    for wrong in ({"type": "step"}, {"type": "start", "fpr": 0.5}, {"type": "start", "cue_steps": "1"},
+                  {"type": "launch"}):
+        kind = wrong["type"] if wrong["type"] in names else "start"
+        assert not _validator(document, kind).is_valid(wrong), wrong
