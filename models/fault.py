@@ -53,12 +53,21 @@ def threshold_for(calibration: Calibration, fpr: float, step: int, kind: Thresho
     return float(table[fpr])
 
 
+def isolated_joint(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> np.ndarray:
+    """Position (0-based, among the joint channels) of the joint with the largest |error|, for
+    errors (..., D) of any leading shape: the served decision and the fault sweep use this."""
+    joints = joint_channels(channel_names)
+    if not joints:
+        raise ValueError("no joint channels (named joint...) to isolate a fault in")
+    return np.abs(weighted_errors[..., joints]).argmax(axis=-1)
+
+
 def isolate(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> tuple[str | None, list[tuple[str, float]]]:
     magnitude = np.abs(weighted_errors)
     order = np.argsort(-magnitude, kind="stable")
     ranked = [(channel_names[i], float(magnitude[i])) for i in order]
     joints = joint_channels(channel_names)
-    isolated = channel_names[joints[int(magnitude[joints].argmax())]] if joints else None
+    isolated = channel_names[joints[int(isolated_joint(weighted_errors, channel_names))]] if joints else None
     return isolated, ranked
 
 

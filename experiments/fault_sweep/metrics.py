@@ -16,7 +16,7 @@ from sklearn.metrics import roc_auc_score
 
 from models.calibration import Thresholds, estimate
 from models.config import SCORING
-from models.fault import joint_channels
+from models.fault import isolated_joint, joint_channels
 from models.scoring import energy, step_rows
 
 FPRS = SCORING.fprs  # the thresholds a model calibrates
@@ -90,7 +90,6 @@ def first_crossing(energies: np.ndarray, thresholds: np.ndarray, from_step: np.n
 
 def evaluate(w: Weighted, channel_names: tuple[str, ...], fault_step: np.ndarray, fault_joint: np.ndarray) -> tuple[dict, dict]:
     """Summary metrics and per-episode outcomes (at the 1 % per-step threshold)."""
-    joints = np.array(joint_channels(channel_names))
     steps = w.faults.shape[1]
     rows = np.arange(len(fault_step))
     summary: dict = {"detection_rate": {}, "measured_fpr": {}, "episode_false_alarm_rate": {},
@@ -119,11 +118,11 @@ def evaluate(w: Weighted, channel_names: tuple[str, ...], fault_step: np.ndarray
                 "measured_fpr": interval95((w.normal_test > single).mean(axis=1)),
                 "episode_false_alarm_rate": interval95((w.normal_test > single).any(axis=1).astype(float)),
             }
-    joint_err = np.abs(w.fault_errors[:, :, joints])  # (F, T, 7)
-    at_fault = joints_isolated(joint_err, rows, fault_step)
+    isolated = isolated_joint(w.fault_errors, channel_names) + 1  # (F, T): joint number, as the service isolates
+    at_fault = isolated[rows, fault_step]
     first = outcome["first_detection_step"]
     detected = first >= 0
-    at_detection = joints_isolated(joint_err, rows, np.where(detected, first, 0))
+    at_detection = isolated[rows, np.where(detected, first, 0)]
     summary["isolation_accuracy_at_fault_step"] = float((at_fault == fault_joint).mean())
     summary["isolation_accuracy_at_detection"] = (
         float((at_detection[detected] == fault_joint[detected]).mean()) if detected.any() else 0.0
@@ -138,11 +137,6 @@ def evaluate(w: Weighted, channel_names: tuple[str, ...], fault_step: np.ndarray
     outcome.update(isolated_at_fault_step=at_fault, isolated_at_detection=np.where(detected, at_detection, 0),
                    peak_energy=w.faults.max(axis=1))
     return summary, outcome
-
-
-def joints_isolated(joint_err: np.ndarray, rows: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """Joint number (1..7) with the largest |error| at the given step of each episode."""
-    return joint_err[rows, step].argmax(axis=1) + 1
 
 
 def ceilings(faults: np.ndarray, twins: np.ndarray, normal: np.ndarray, fault_skills: np.ndarray,
