@@ -132,3 +132,22 @@ def test_fault_grid_is_the_papers_980():
     grid = fault_grid()
     assert len(grid) == 980 and len(set(grid)) == 980
     assert {f.time_s for _, f in grid} == {1.0 + 0.5 * i for i in range(10)}
+
+
+def test_compliant_controller_tracks_the_plan_softer_than_the_stiff_servos(demo):
+    from sim.config import SIM, SimConfig
+
+    compliant = run_episode(SKILLS[0], 3, controller="compliant")
+    assert compliant.success
+    assert np.degrees(np.abs(compliant.qpos_hi - demo.qpos_hi)).max() < 2.0  # same skill, another controller
+    assert not np.array_equal(compliant.qpos_hi, demo.qpos_hi)
+    stiff_k, _ = SIM.joint_gains("stiff")
+    soft_k, soft_d = SIM.joint_gains("compliant")
+    assert (soft_k < stiff_k).all() and (soft_d > 0).all()
+    with pytest.raises(ValueError, match="controller"):
+        SimConfig(controller="floppy")
+
+
+def test_controller_gains_do_not_leak_into_the_next_episode(demo):
+    run_episode(SKILLS[0], 3, controller="compliant")
+    assert np.array_equal(run_episode(SKILLS[0], 3).observations, demo.observations)
