@@ -1,5 +1,5 @@
 """Reactive correction: the compliant arm, a hit that deflects it, the correction law, the
-grasp adaptation of a recalled plan and the experiment's JSON contract."""
+anchoring of a recalled plan to its scene and the experiment's JSON contract."""
 
 from __future__ import annotations
 
@@ -12,15 +12,15 @@ from experiments.correction.config import CORRECTION
 from experiments.correction.metrics import deviation_deg, detection, first_hit_step
 from sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS
 from sim.config import CorrectionGains
-from sim.control import PlanCorrection, adapt_grasp, plan_from_recall
-from sim.disturbances import FallingObject
+from sim.control import PlanCorrection, anchor_plan, plan_from_recall
+from sim.disturbances import elbow_hit
 from sim.panda import dh_forward
 from sim.runner import ControlState, execute_plan, seed_variation
-from sim.skills import SKILLS, make_plan, nominal_plan, skill_spec
+from sim.skills import PRECISE_STEPS, SKILLS, make_plan, nominal_plan, skill_spec, waypoints
 
 SEED = CORRECTION.selection_seeds[0]  # a selection seed: where the hit family was chosen
 # A 20 kg box dropped onto the elbow during the carry at 2 m/s: on this seed it comes to rest on the arm.
-RESTING_BOX = FallingObject(release_s=4.0, drop_height_m=0.05, speed_m_s=2.0, mass_kg=20.0, target_link=4)
+RESTING_BOX = elbow_hit(40.0)
 
 
 @pytest.fixture(scope="module")
@@ -76,18 +76,25 @@ def test_correction_is_bounded_and_leaks():
     assert (out - 1.0 < np.radians(0.1)).all()
 
 
-def test_adapt_grasp_moves_the_grasp_to_the_cube_and_leaves_the_place_alone():
+def test_anchor_plan_puts_grasp_and_place_on_the_scene_and_keeps_the_start():
     skill = SKILLS[1]
     nominal = nominal_plan(skill)
+    recalled = nominal + np.radians(1.0)  # a recall about a degree off everywhere: ~1 cm at the tool
     cube = np.asarray(skill_spec(skill).cube_xy) + [0.008, -0.006]
-    adapted = adapt_grasp(nominal, skill, cube)
-    grasp = dh_forward(adapted[4])[:3, 3] - dh_forward(nominal[4])[:3, 3]
-    np.testing.assert_allclose(grasp, [0.008, -0.006, 0.0], atol=1e-3)
-    np.testing.assert_array_equal(adapted[[0, *range(9, 15)]], nominal[[0, *range(9, 15)]])
+    anchored = anchor_plan(recalled, skill, cube)
+    scene = waypoints(skill, cube)
+    for k in PRECISE_STEPS:
+        np.testing.assert_allclose(dh_forward(anchored[k])[:3, 3], scene[k], atol=1e-3)
+    assert np.linalg.norm(dh_forward(recalled[11])[:3, 3] - scene[11]) > 5e-3  # it was off before
+    np.testing.assert_array_equal(anchored[0], recalled[0])
+    assert np.degrees(np.abs(anchored - recalled)).max() < 5.0  # still the recalled posture
+
+
+def test_plan_from_recall_reads_the_joint_and_gripper_channels():
     recalled = np.zeros((15, N_CHANNELS))
-    recalled[:, JOINT_CHANNELS], recalled[5:12, GRIPPER_CHANNEL] = nominal, 0.93
+    recalled[:, JOINT_CHANNELS], recalled[5:12, GRIPPER_CHANNEL] = nominal_plan(SKILLS[0]), 0.93
     joints, gripper = plan_from_recall(recalled)
-    np.testing.assert_array_equal(joints, nominal)
+    np.testing.assert_array_equal(joints, nominal_plan(SKILLS[0]))
     np.testing.assert_array_equal(gripper, [0] * 5 + [1] * 7 + [0] * 3)
 
 

@@ -1,7 +1,7 @@
 """What one run of the correction experiment measured: deviation, recovery, detection.
 
 Deviation is max over joints of |q - q_plan| at 40 Hz (degrees), q_plan the executed plan
-(the recalled plan with its grasp adapted to the cube) interpolated as the controller does.
+(the recalled plan anchored to the scene by `sim.control.anchor_plan`) interpolated as the controller does.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 1. Fit a Neural ASM (FAST preset) on the 20 demonstrations (seeds 0..9 per skill), keeping the
    epoch that recalls 20 held-out normal episodes best.
 2. Per test seed, recall the skill from the episode's first observation (offline recall);
-   `sim.control.execute_recalled` adapts the grasp to the perceived cube and executes it.
+   `sim.control.execute_recalled` anchors its grasp and place to the scene and executes it.
 3. Per controller, calibrate the monitor (offline recall, precision-weighted energy, the
    whole-episode threshold at `fpr`) on undisturbed executions of recalled plans under that
    controller: precisions on one split of seeds, thresholds on another.
@@ -28,8 +28,8 @@ from models.fault import threshold_for
 from models.scoring import energy
 from sim.channels import CHANNEL_NAMES
 from sim.config import SIM
-from sim.control import execute_recalled
-from sim.disturbances import FallingObject
+from sim.control import Detector, execute_recalled
+from sim.disturbances import FallingObject, elbow_hit
 from sim.episode import Episode
 from sim.runner import SimulationError, run_episode
 from sim.skills import SKILLS
@@ -84,14 +84,19 @@ def energies(model: NeuralASM, calibration: Calibration, observations: np.ndarra
 
 
 def hit(config: CorrectionConfig, momentum: float) -> FallingObject:
-    return FallingObject(release_s=config.release_s, drop_height_m=config.drop_height_m, speed_m_s=config.speed_m_s,
-                         mass_kg=momentum / config.speed_m_s, target_link=config.target_link)
+    return elbow_hit(momentum, config.speed_m_s, config.release_s, config.drop_height_m)
+
+
+def monitor(model: NeuralASM, calibration: Calibration, threshold: float) -> Detector:
+    """The memory's fault monitor as the correction's gate: the latest step's energy above the threshold."""
+    return lambda observations: bool(energies(model, calibration, observations)[-1] > threshold)
 
 
 def _run(recalled: np.ndarray, skill: str, seed: int, controller: str, correction: str,
-         disturbance: FallingObject | None) -> Episode | str:
+         disturbance: FallingObject | None, config: CorrectionConfig, detector: Detector) -> Episode | str:
     try:
-        return execute_recalled(recalled, skill, seed, correction == "corrected", controller, disturbance)
+        return execute_recalled(recalled, skill, seed, correction == "corrected", controller, disturbance,
+                                config.gains, detector if config.gated else None)
     except SimulationError as exc:
         return repr(exc)
 
@@ -113,13 +118,14 @@ def run_correction(model: NeuralASM, config: CorrectionConfig, progress: bool = 
         recalled = recall(model, skill, seed)
         for controller in config.controllers:
             cal, threshold = calibrations[controller], result.monitor[controller]["threshold"]
+            detector = monitor(model, cal, threshold)
             demo = run_episode(skill, seed, controller=controller)
             result.twins.append({"seed": seed, "skill": skill, "controller": controller, "plan": "demonstration",
                                  "correction": "none", "placed": bool(demo.success), "cube_error_m": demo.cube_error_m})
             bar.update(1)
             for correction in CORRECTIONS:
                 key = {"seed": seed, "skill": skill, "controller": controller, "correction": correction}
-                twin = _run(recalled, skill, seed, controller, correction, None)
+                twin = _run(recalled, skill, seed, controller, correction, None, config, detector)
                 if isinstance(twin, Episode):
                     flags = detection(energies(model, cal, twin.observations), threshold, config)
                     result.twins.append(key | {"plan": "recalled"} | run_metrics(twin, config)
@@ -128,7 +134,7 @@ def run_correction(model: NeuralASM, config: CorrectionConfig, progress: bool = 
                     result.twins.append(key | {"plan": "recalled", "placed": False, "recovered": False, "error": twin})
                 bar.update(1)
                 for momentum in config.momenta:
-                    ep = _run(recalled, skill, seed, controller, correction, hit(config, momentum))
+                    ep = _run(recalled, skill, seed, controller, correction, hit(config, momentum), config, detector)
                     row = key | {"momentum": momentum, "mass_kg": momentum / config.speed_m_s, "error": None}
                     if isinstance(ep, Episode):
                         row |= run_metrics(ep, config) | detection(energies(model, cal, ep.observations), threshold,

@@ -67,7 +67,7 @@ def write_json(result: Result, path: Path) -> None:
         "results": summarise(result),
         "undisturbed": undisturbed(result),
         "config": asdict(result.config) | {"test_seeds": result.config.test_seeds,
-                                           "correction_gains": asdict(SIM.correction),
+                                           "correction_gains": asdict(result.config.gains),
                                            "impedance": asdict(SIM.impedance), "servo": asdict(SIM.servo)},
         "monitor": result.monitor,
         "model": result.model,
@@ -79,7 +79,7 @@ def write_json(result: Result, path: Path) -> None:
 
 
 def _pct(x: float) -> str:
-    return "-" if x != x else f"{100 * x:.0f} %"
+    return "-" if np.isnan(x) else f"{100 * x:.0f} %"
 
 
 def table(result: Result) -> str:
@@ -97,7 +97,7 @@ def table(result: Result) -> str:
 
 
 def write_markdown(result: Result, path: Path) -> None:
-    cfg, g = result.config, SIM.correction
+    cfg, g = result.config, result.config.gains
     seeds = cfg.test_seeds
     undist = "\n".join(
         f"| {u['controller']} | {_pct(u['demonstration_placed_rate'])} | {_pct(u['recalled_none_placed_rate'])} | "
@@ -106,11 +106,11 @@ def write_markdown(result: Result, path: Path) -> None:
     path.write_text(f"""# Reactive correction: a box falls on the arm carrying the cube
 
 {cfg.n_seeds} test seeds ({seeds[0]}..{seeds[-1]}, skills alternating) per hit; a box dropped
-{cfg.drop_height_m * 100:g} cm above link {cfg.target_link} at {cfg.speed_m_s:g} m/s at t = {cfg.release_s:g} s (the carry),
+{cfg.drop_height_m * 100:g} cm above the elbow (link 4) at {cfg.speed_m_s:g} m/s at t = {cfg.release_s:g} s (the carry),
 its mass setting the momentum. Plan: the Neural ASM's offline recall from the first observation,
-grasp adapted to the perceived cube. Correction: q* = q_rec + K_i I, I the leaky ({g.leak:g}/s)
+grasp and place anchored to the perceived cube and goal (`sim.control.anchor_plan`). Correction: q* = q_rec + K_i I, I the leaky ({g.leak:g}/s)
 integral of q_rec - q, K_i = {g.ki:g}/s, |K_i I| <= {g.i_max_deg:g} deg (chosen on seeds
-{cfg.selection_seeds[0]}..{cfg.selection_seeds[1] - 1}). Recovered: cube within 1 cm of its target and every joint within
+{cfg.selection_seeds[0]}..{cfg.selection_seeds[1] - 1}), {"engaged when the monitor first flags" if cfg.gated else "on from the start"}. Recovered: cube within 1 cm of its target and every joint within
 {cfg.band_deg:g} deg of the plan from t = {cfg.deadline_s:g} s on. Detected: the monitor's precision-weighted offline
 energy exceeds its whole-episode threshold at {cfg.fpr:.0%} false-positive rate at a step after the hit.
 
