@@ -100,12 +100,18 @@ class CorrectionGains:
     (experiments/correction)."""
 
     ki: float = 4.0  # 1/s
-    leak: float = 1.0  # 1/s
+    leak: float = 0.25  # 1/s
     i_max_deg: float = 10.0  # bound on K_i I per joint
+    # A joint held at its torque limit this long is pushing against a load the arm cannot
+    # move (or a person): the correction lets go for the rest of the episode, and the arm
+    # yields as the compliant controller alone would. None: never.
+    yield_s: float | None = 0.5
 
     def __post_init__(self) -> None:
         if not (self.ki > 0 and self.leak >= 0 and self.i_max_deg > 0):
             raise ValueError(f"correction gains need ki > 0, leak >= 0, i_max_deg > 0, got {self}")
+        if self.yield_s is not None and not self.yield_s > 0:
+            raise ValueError(f"yield_s must be > 0 or None, got {self.yield_s}")
 
 
 @dataclass(frozen=True)

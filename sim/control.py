@@ -18,7 +18,10 @@ recalled plan plus an integral of the proprioceptive prediction error e = q_reca
 so the arm is driven back onto what the memory expects rather than onto wherever a load holds
 it. With a `detector` (the memory's monitor: does the energy of the observations so far say
 something is wrong?) the correction stays off until the monitor first flags, and the arm is a
-plain compliant arm until then. There is no proportional term on e: it would stiffen the compliant arm during the impact
+plain compliant arm until then. A joint held at its torque limit for `yield_s` is pushing
+against a load the arm cannot move, which on a collaborative arm may be a person: the
+correction lets go for the rest of the episode, and the arm yields as the compliant controller
+alone would. There is no proportional term on e: it would stiffen the compliant arm during the impact
 itself (the hook runs at 40 Hz, the impact lasts milliseconds), which is what a compliant
 controller is there to avoid; the integral only grows while the error persists (a box resting
 on the arm, a load the gravity compensation does not know). The leak and the clip are
@@ -35,7 +38,7 @@ from sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS
 from sim.config import SIM, ControllerKind, CorrectionGains
 from sim.disturbances import FallingObject
 from sim.episode import Episode
-from sim.panda import dh_forward
+from sim.panda import TAU_MAX, dh_forward
 from sim.runner import ControlState, execute_plan, seed_variation
 from sim.skills import DOWN, PRECISE_STEPS, shared_ik, skill_spec, waypoints
 
@@ -79,6 +82,8 @@ class PlanCorrection:
         self.previous: np.ndarray | None = None
         self.engaged_step: int | None = None if detector is not None else 0
         self.seen = 0
+        self.saturated_s = 0.0
+        self.yielded_step: int | None = None
 
     def __call__(self, state: ControlState) -> np.ndarray:
         g, dt = self.gains, 1.0 / SIM.timing.control_hz
@@ -90,11 +95,15 @@ class PlanCorrection:
             self.seen = len(state.observations)
             if self.detector(state.observations):
                 self.engaged_step = state.step
-        if self.engaged_step is None:
+        if self.engaged_step is None or self.yielded_step is not None:
             return state.target
         self.integral = self.integral * (1.0 - g.leak * dt) + (reference - state.q) * dt
         bound = np.radians(g.i_max_deg) / g.ki
         self.integral = np.clip(self.integral, -bound, bound)
+        self.saturated_s = self.saturated_s + dt if (np.abs(state.torque) >= 0.98 * TAU_MAX).any() else 0.0
+        if g.yield_s is not None and self.saturated_s >= g.yield_s:
+            self.yielded_step = state.step
+            return state.target
         return state.target + g.ki * self.integral
 
 

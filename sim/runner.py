@@ -51,6 +51,7 @@ class ControlState:
     qd: np.ndarray  # (7,) measured joint velocities
     ee: np.ndarray  # (3,) tool centre point
     target: np.ndarray  # (7,) the plan's target for the end of this tick
+    torque: np.ndarray  # (7,) joint torques the controller applied at the last physics step (N m)
     observations: np.ndarray  # (k + 1, 25) observations so far (a new one arrives when the tick starts a block)
 
 
@@ -190,7 +191,8 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
                     (nxt - joints[k]) * timing.observation_hz, bool(gripper[k]))
         if hook is not None:
             state = ControlState(index, tick.time_s, k, w.qpos, data.qvel[w.arm_dof].copy(),
-                                 data.site_xpos[w.tcp_site].copy(), tick.target.copy(), np.array(obs))
+                                 data.site_xpos[w.tcp_site].copy(), tick.target.copy(),
+                                 data.actuator_force[w.arm_act].copy(), np.array(obs))
             corrected = hook(state)
             if corrected is not None:
                 tick.target = np.asarray(corrected, dtype=float).reshape(N_JOINTS)
@@ -235,6 +237,18 @@ def run_episode(skill: str, seed: int, fault: FaultSpec | None = None,
     noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
     return execute(skill, seed, plan.joints, plan.gripper, variation.cube_xy, variation.cube_yaw, noise,
                     _effects(fault, disturbance), None, fault, disturbance, controller=controller)
+
+
+def first_observation(skill: str, seed: int) -> np.ndarray:
+    """(25,) the observation `run_episode(skill, seed)` starts with, taken before any motion:
+    the cue a memory recalls the skill from, at a fifteenth of an episode's cost."""
+    skill_spec(skill)
+    rng = _rng(skill, seed)
+    variation = sample_variation(skill, rng)
+    plan = make_plan(skill, variation)
+    noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
+    return execute(skill, seed, plan.joints[:1], plan.gripper[:1], variation.cube_xy, variation.cube_yaw, noise,
+                   [], None, None, None).observations[0]
 
 
 def execute_plan(joint_plan: np.ndarray, gripper_plan: np.ndarray, seed: int,

@@ -14,7 +14,7 @@ from sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS
 from sim.config import CorrectionGains
 from sim.control import PlanCorrection, anchor_plan, plan_from_recall
 from sim.disturbances import elbow_hit
-from sim.panda import dh_forward
+from sim.panda import TAU_MAX, dh_forward
 from sim.runner import ControlState, execute_plan, seed_variation
 from sim.skills import PRECISE_STEPS, SKILLS, make_plan, nominal_plan, skill_spec, waypoints
 
@@ -33,8 +33,9 @@ def _run(plan, controller, hook=None, disturbance=None):
                         skill=SKILLS[0], controller=controller)
 
 
-def _state(q, target, tick=0):
-    return ControlState(tick, tick / 40, 0, q, np.zeros(7), np.zeros(3), target, np.zeros((1, N_CHANNELS)))
+def _state(q, target, tick=0, torque=None):
+    torque = np.zeros(7) if torque is None else torque
+    return ControlState(tick, tick / 40, 0, q, np.zeros(7), np.zeros(3), target, torque, np.zeros((1, N_CHANNELS)))
 
 
 def test_compliant_arm_tracks_the_plan_undisturbed(plan):
@@ -67,13 +68,29 @@ def test_correction_moves_the_set_point_towards_the_recalled_plan():
 
 
 def test_correction_is_bounded_and_leaks():
-    hook = PlanCorrection(CorrectionGains(ki=4.0, leak=1.0, i_max_deg=3.0))
+    hook = PlanCorrection(CorrectionGains(ki=4.0, leak=1.0, i_max_deg=3.0, yield_s=None))
     for tick in range(2000):
         out = hook(_state(np.zeros(7), np.ones(7), tick))
     np.testing.assert_allclose(out - 1.0, np.radians(3.0))
     for tick in range(2000, 2400):  # back on the plan: the integral decays
         out = hook(_state(np.ones(7), np.ones(7), tick))
     assert (out - 1.0 < np.radians(0.1)).all()
+
+
+def test_correction_waits_for_the_monitor_and_lets_go_of_a_load_it_cannot_move():
+    flags = iter([False, False, True])
+    hook = PlanCorrection(CorrectionGains(ki=4.0, leak=0.0, i_max_deg=3.0, yield_s=0.5), lambda obs: next(flags))
+    target, pinned = np.ones(7), np.zeros(7)  # a load holds the arm 57 deg off its plan
+    at_limit = TAU_MAX * [1, 0, 0, 0, 0, 0, 0]  # ... and joint 1 pushes at its torque limit
+    outputs = []
+    for tick in range(80):
+        state = _state(pinned, target, tick, at_limit if tick >= 50 else None)
+        state.observations = np.zeros((1 + min(tick // 20, 2), N_CHANNELS))  # one observation per 20 ticks
+        outputs.append(hook(state))
+    assert hook.engaged_step is not None and all(np.array_equal(o, target) for o in outputs[:40])  # until flagged
+    assert (outputs[45] > target).all()  # engaged, pushing towards the plan
+    assert (outputs[65] > target).all()  # at the torque limit for less than 0.5 s: still pushing
+    assert hook.yielded_step is not None and np.array_equal(outputs[-1], target)  # 0.5 s: lets go
 
 
 def test_anchor_plan_puts_grasp_and_place_on_the_scene_and_keeps_the_start():

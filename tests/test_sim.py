@@ -12,7 +12,7 @@ from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS, WRENCH_CHANNELS
 from sim.disturbances import FallingObject
 from sim.faults import FaultSpec, fault_grid
 from sim.panda import Q_MAX, Q_MIN, build_panda, dh_forward
-from sim.runner import execute_plan, run_episode
+from sim.runner import execute_plan, first_observation, run_episode
 from sim.skills import SKILLS
 
 Q_READY = np.array([0, -np.pi / 4, 0, -3 * np.pi / 4, 0, np.pi / 2, np.pi / 4])
@@ -151,3 +151,7 @@ def test_compliant_controller_tracks_the_plan_softer_than_the_stiff_servos(demo)
 def test_controller_gains_do_not_leak_into_the_next_episode(demo):
     run_episode(SKILLS[0], 3, controller="compliant")
     assert np.array_equal(run_episode(SKILLS[0], 3).observations, demo.observations)
+
+
+def test_first_observation_is_the_episodes_first(demo):
+    assert np.array_equal(first_observation(SKILLS[0], 3), demo.observations[0])

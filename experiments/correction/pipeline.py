@@ -31,7 +31,7 @@ from sim.config import SIM
 from sim.control import Detector, execute_recalled
 from sim.disturbances import FallingObject, elbow_hit
 from sim.episode import Episode
-from sim.runner import SimulationError, run_episode
+from sim.runner import SimulationError, first_observation, run_episode
 from sim.skills import SKILLS
 
 CORRECTIONS: tuple[str, ...] = ("none", "corrected")
@@ -63,8 +63,7 @@ def fit_model(config: CorrectionConfig, progress: bool = False) -> NeuralASM:
 
 def recall(model: NeuralASM, skill: str, seed: int) -> np.ndarray:
     """The memory's (15, 25) sequence cued from the episode's first observation (before any motion)."""
-    cue = run_episode(skill, seed).observations[None, :1]
-    return model.recall(cue, SIM.timing.n_steps)[0]
+    return model.recall(first_observation(skill, seed)[None, None], SIM.timing.n_steps)[0]
 
 
 def calibrate_monitor(model: NeuralASM, config: CorrectionConfig, controller: str) -> Calibration:
