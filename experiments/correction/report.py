@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.correction.metrics import first_hit_step
 from experiments.correction.pipeline import CORRECTIONS, Result
 from sim.config import SIM
 
@@ -40,7 +41,7 @@ def summarise(result: Result) -> list[dict]:
                 "detected_rate_unrecovered": _mean([r["detected"] for r in unrecovered]),
                 "n_unrecovered": len(unrecovered),
                 "median_detect_step": float(np.median(steps)) if steps else None,
-                "median_peak_energy": float(np.median([r["peak_energy"] for r in ok["none"]])) if ok["none"] else None,
+                "median_peak_energy": float(np.median([r["peak_energy"] for r in ok["none"]])) if ok["none"] else float("nan"),
                 "sim_errors": {c: len(sel[c]) - len(ok[c]) for c in CORRECTIONS},
             })
     return rows
@@ -84,14 +85,17 @@ def _pct(x: float) -> str:
 
 def table(result: Result) -> str:
     lines = ["| controller | momentum (kg m/s) | box (kg) | recovered, none | recovered, corrected | "
-             "peak dev none / corrected (deg) | detected (all hits) | detected (unrecovered, n) | "
-             "median detection step | sim errors |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "cube placed none / corrected | peak dev none / corrected (deg) | late dev none / corrected (deg) | "
+             "detected (all hits) | detected (unrecovered, n) | median detection step | median peak energy | sim errors |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in summarise(result):
-        rec, peak = r["recovery_rate"], r["mean_peak_dev_deg"]
+        rec, placed, peak, late = r["recovery_rate"], r["placed_rate"], r["mean_peak_dev_deg"], r["mean_late_dev_deg"]
         lines.append(f"| {r['controller']} | {r['momentum']:g} | {r['mass_kg']:g} | {_pct(rec['none'])} | "
-                     f"{_pct(rec['corrected'])} | {peak['none']:.1f} / {peak['corrected']:.1f} | "
+                     f"{_pct(rec['corrected'])} | {_pct(placed['none'])} / {_pct(placed['corrected'])} | "
+                     f"{peak['none']:.1f} / {peak['corrected']:.1f} | {late['none']:.1f} / {late['corrected']:.1f} | "
                      f"{_pct(r['detected_rate'])} | {_pct(r['detected_rate_unrecovered'])} ({r['n_unrecovered']}) | "
                      f"{r['median_detect_step'] if r['median_detect_step'] is not None else '-'} | "
+                     f"{r['median_peak_energy']:.3g} | "
                      f"{sum(r['sim_errors'].values())} |")
     return "\n".join(lines)
 
@@ -112,7 +116,9 @@ grasp and place anchored to the perceived cube and goal (`sim.control.anchor_pla
 integral of q_rec - q, K_i = {g.ki:g}/s, |K_i I| <= {g.i_max_deg:g} deg (chosen on seeds
 {cfg.selection_seeds[0]}..{cfg.selection_seeds[1] - 1}), {"engaged when the monitor first flags" if cfg.gated else "on from the start"}. Recovered: cube within 1 cm of its target and every joint within
 {cfg.band_deg:g} deg of the plan from t = {cfg.deadline_s:g} s on. Detected: the monitor's precision-weighted offline
-energy exceeds its whole-episode threshold at {cfg.fpr:.0%} false-positive rate at a step after the hit.
+energy exceeds its whole-episode threshold at {cfg.fpr:.0%} false-positive rate at a step after the hit
+(thresholds: {", ".join(f"{c} {m['threshold']:.3g}" for c, m in result.monitor.items())}; the hit is released
+just after observation {first_hit_step(cfg) - 1}).
 
 {table(result)}
 
