@@ -39,7 +39,7 @@ from sim.config import SIM, ControllerKind, CorrectionGains
 from sim.disturbances import FallingObject
 from sim.episode import Episode
 from sim.panda import TAU_MAX, dh_forward
-from sim.runner import ControlState, execute_plan, seed_variation
+from sim.runner import N_JOINTS, ControlState, execute_plan, seed_variation
 from sim.skills import DOWN, PRECISE_STEPS, shared_ik, skill_spec, waypoints
 
 Detector = Callable[[np.ndarray], bool]  # observations so far (k + 1, 25) -> fault at step k?
@@ -78,7 +78,7 @@ class PlanCorrection:
 
     def __init__(self, gains: CorrectionGains = SIM.correction, detector: Detector | None = None) -> None:
         self.gains, self.detector = gains, detector
-        self.integral = np.zeros(7)
+        self.integral = np.zeros(N_JOINTS)
         self.previous: np.ndarray | None = None
         self.engaged_step: int | None = None if detector is not None else 0
         self.seen = 0
