@@ -62,7 +62,7 @@ def skills_task(seed: int, n_skills: int, cfg: ContextualConfig, tpc: TPCConfig)
     same units and only the number of distinct skills differs. Trained without the preset's
     training noise: noise redrawn every epoch puts a floor of its own into the energy this
     compares, which hid the difference between skill counts (1 skill 0.71 +- 0.16 vs 4 skills
-    0.53 with noise 0.35, six seeds).
+    0.53 with noise 0.35, three seeds).
     """
     init_worker()
     data = lambda n: conditions_data(seed, cfg, False, n, cfg.max_skills)["plan_and_execute"]  # noqa: E731
