@@ -9,7 +9,7 @@ import pytest
 from dm_control import mjcf
 
 from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS, WRENCH_CHANNELS
-from sim.disturbances import FallingObject
+from sim.disturbances import FallingObject, elbow_hit
 from sim.faults import FaultSpec, fault_grid
 from sim.panda import Q_MAX, Q_MIN, build_panda, dh_forward
 from sim.runner import execute_plan, first_observation, run_episode
@@ -124,6 +124,9 @@ def test_bad_disturbance_and_plan_rejected():
         FallingObject(mass_kg=float("nan"))
     with pytest.raises(ValueError, match="release_s"):
         FallingObject(release_s=9.0)
+    with pytest.raises(ValueError, match="speed_m_s"):
+        elbow_hit(40.0, speed_m_s=0.0)
+    assert elbow_hit(40.0).mass_kg == 20.0 and elbow_hit(40.0).target_link == 4
     with pytest.raises(ValueError, match="joint_plan"):
         execute_plan(np.zeros((14, 7)), np.zeros(15), seed=0)
 
