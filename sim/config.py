@@ -8,8 +8,12 @@ Timing follows the paper's "Robot simulation details": a 40 Hz position controll
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
+
+ControllerKind = Literal["stiff", "compliant"]
+CONTROLLERS: tuple[str, ...] = ("stiff", "compliant")
 
 
 @dataclass(frozen=True)
@@ -73,6 +77,44 @@ class Servo:
 
 
 @dataclass(frozen=True)
+class Impedance:
+    """Compliant joint impedance: torque = K (q* - q) + D (qd* - qd), gravity compensated.
+
+    The stiffness and damping are the joint impedance Franka ships as its example for
+    interacting with people (libfranka's `joint_impedance_control` and franka_ros's
+    `joint_impedance_example_controller`: K = 600 Nm/rad on the four big joints down to 50 on
+    the wrist). That is 2-2.5x softer than `Servo` on the big joints: a hit pushes the arm
+    away instead of being absorbed by a stiff servo, which is the point of compliant control
+    near people, and loads the gravity compensation does not know about (a box resting on the
+    arm, the carried cube) leave a standing error of load / K.
+    """
+
+    stiffness: tuple[float, ...] = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)  # Nm/rad
+    damping: tuple[float, ...] = (50.0, 50.0, 50.0, 50.0, 30.0, 25.0, 15.0)  # Nm s/rad
+
+
+@dataclass(frozen=True)
+class CorrectionGains:
+    """The memory's reactive correction (sim/control.py): q* = q_rec + K_i I, I the leaky
+    integral of q_rec - q. Chosen on selection seeds, never on an experiment's test seeds
+    (experiments/correction)."""
+
+    ki: float = 4.0  # 1/s
+    leak: float = 0.25  # 1/s
+    i_max_deg: float = 10.0  # bound on K_i I per joint
+    # A joint held at its torque limit this long is pushing against a load the arm cannot
+    # move (or a person): the correction lets go for the rest of the episode, and the arm
+    # yields as the compliant controller alone would. None: never.
+    yield_s: float | None = 0.5
+
+    def __post_init__(self) -> None:
+        if not (self.ki > 0 and self.leak >= 0 and self.i_max_deg > 0):
+            raise ValueError(f"correction gains need ki > 0, leak >= 0, i_max_deg > 0, got {self}")
+        if self.yield_s is not None and not self.yield_s > 0:
+            raise ValueError(f"yield_s must be > 0 or None, got {self.yield_s}")
+
+
+@dataclass(frozen=True)
 class Seeds:
     """Disjoint seed ranges, so no fault episode ever reuses a demonstration's variation."""
 
@@ -107,9 +149,27 @@ class SimConfig:
     timing: Timing = field(default_factory=Timing)
     noise: Noise = field(default_factory=Noise)
     servo: Servo = field(default_factory=Servo)
+    impedance: Impedance = field(default_factory=Impedance)
+    # Which joint controller tracks the plan: the stiff position servos (`servo`, the default
+    # every data set was generated with) or the compliant joint impedance (`impedance`).
+    controller: ControllerKind = "stiff"
+    correction: CorrectionGains = field(default_factory=CorrectionGains)
     seeds: Seeds = field(default_factory=Seeds)
     varied: VariedTask = field(default_factory=VariedTask)
     success_tolerance_m: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
+
+    def joint_gains(self, controller: ControllerKind | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(stiffness, damping) per joint of `controller` (default: this config's)."""
+        kind = self.controller if controller is None else controller
+        if kind not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {CONTROLLERS}, got {kind!r}")
+        if kind == "stiff":
+            return np.asarray(self.servo.kp, float), np.asarray(self.servo.kv, float)
+        return np.asarray(self.impedance.stiffness, float), np.asarray(self.impedance.damping, float)
 
 
 SIM = SimConfig()

@@ -75,3 +75,16 @@ class FallingObjectEffect:
 def make_effect(spec: FallingObject | None) -> list[FallingObjectEffect]:
     """Effects for an optional disturbance spec."""
     return [] if spec is None else [FallingObjectEffect(spec)]
+
+
+def elbow_hit(momentum_kg_m_s: float, speed_m_s: float = 2.0, release_s: float = 4.0,
+              drop_height_m: float = 0.05) -> FallingObject:
+    """A box dropped just above the elbow (link 4) during the carry, its mass setting the momentum.
+
+    The reactive-correction experiment's hit family: from about 30 kg m/s the box comes to rest
+    on the forearm on some skills, which a compliant arm gives way to (load / stiffness).
+    """
+    if not speed_m_s > 0:
+        raise ValueError(f"speed_m_s must be > 0, got {speed_m_s}")
+    return FallingObject(release_s=release_s, drop_height_m=drop_height_m, speed_m_s=speed_m_s,
+                         mass_kg=momentum_kg_m_s / speed_m_s, target_link=4)

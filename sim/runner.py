@@ -4,7 +4,9 @@
 (e.g. one recalled by a model). The loop per 40 Hz tick is: the controller interpolates the plan
 linearly between observation steps (target plus velocity feed-forward); an optional
 `correction_hook` may replace the target; then every effect (fault, disturbance) acts; then
-10 physics steps of 2.5 ms. MuJoCo warnings or a diverging state raise `SimulationError`: an
+10 physics steps of 2.5 ms. The joint controller (`SimConfig.controller`: stiff servos or
+compliant impedance, both gravity compensated) acts at every physics step, as a robot's 1 kHz
+torque loop does under its slower set-point stream. MuJoCo warnings or a diverging state raise `SimulationError`: an
 unstable episode is never returned as data.
 """
 
@@ -18,16 +20,20 @@ import mujoco
 import numpy as np
 from dm_control import mjcf
 
-from sim.config import SIM
+from sim.channels import EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS, WRENCH_CHANNELS
+from sim.config import SIM, ControllerKind
 from sim.disturbances import FallingObject, make_effect
 from sim.effects import Effect, Tick
 from sim.episode import Episode
 from sim.faults import FaultSpec, JointLock
 from sim.panda import Q_MAX, Q_MIN
 from sim.scene import BOX_PARK, CUBE_HALF, SceneHandles, build_scene
-from sim.skills import SKILLS, make_plan, sample_variation, skill_spec, target_position
+from sim.skills import SKILLS, Variation, make_plan, sample_variation, skill_spec, target_position
 
-N_NOISY = 14  # 12 wrench + 2 finger channels get sensor noise
+_CHANNELS = np.arange(N_CHANNELS)
+N_JOINTS, N_EE = len(_CHANNELS[JOINT_CHANNELS]), len(_CHANNELS[EE_CHANNELS])
+N_WRENCH, N_FINGER = len(_CHANNELS[WRENCH_CHANNELS]), len(_CHANNELS[FINGER_CHANNELS])
+N_NOISY = N_WRENCH + N_FINGER  # the wrench and finger channels get sensor noise, drawn in this order
 
 
 class SimulationError(RuntimeError):
@@ -45,7 +51,8 @@ class ControlState:
     qd: np.ndarray  # (7,) measured joint velocities
     ee: np.ndarray  # (3,) tool centre point
     target: np.ndarray  # (7,) the plan's target for the end of this tick
-    observations: np.ndarray  # (k + 1, 25) observations so far
+    torque: np.ndarray  # (7,) joint torques the controller applied at the last physics step (N m)
+    observations: np.ndarray  # (k + 1, 25) observations so far (a new one arrives when the tick starts a block)
 
 
 CorrectionHook = Callable[[ControlState], "np.ndarray | None"]
@@ -93,6 +100,21 @@ def _rng(skill: str, seed: int) -> np.random.Generator:
     return np.random.default_rng((int(seed), SKILLS.index(skill)))
 
 
+def set_joint_gains(w: World, controller: ControllerKind) -> np.ndarray:
+    """Give the arm's joint actuators `controller`'s stiffness and damping; return damping / stiffness.
+
+    The actuators are MuJoCo position actuators, torque = K (ctrl - q) - D qd, so one actuator
+    serves both controllers: only its gains change (no recompilation). The returned ratio turns
+    a velocity feed-forward into the ctrl offset that yields K (q* - q) + D (qd* - qd).
+    """
+    stiffness, damping = SIM.joint_gains(controller)
+    model = w.physics.model
+    model.actuator_gainprm[w.arm_act, 0] = stiffness
+    model.actuator_biasprm[w.arm_act, 1] = -stiffness
+    model.actuator_biasprm[w.arm_act, 2] = -damping
+    return damping / stiffness
+
+
 def _reset(w: World, plan0: np.ndarray, cube_xy: np.ndarray, cube_yaw: float) -> np.ndarray:
     """Put the arm at the plan's start, the cube on the table; return the sensors' tare."""
     physics, scene = w.physics, w.scene
@@ -119,31 +141,37 @@ def _observe(w: World, gripper: float, tare: np.ndarray, noise: np.ndarray) -> n
     physics = w.physics
     data = physics.data
     mujoco.mj_forward(physics.model.ptr, data.ptr)
-    fingers = data.qpos[w.finger_qpos] + noise[12:] * SIM.noise.finger_m
-    scale = np.tile(np.r_[[SIM.noise.force_n] * 3, [SIM.noise.torque_nm] * 3], 2)
-    wrench = data.sensordata[w.wrench_adr] - tare + noise[:12] * scale
-    return np.concatenate([w.qpos, data.site_xpos[w.tcp_site], fingers, [gripper], wrench])
+    scale = np.tile(np.r_[[SIM.noise.force_n] * 3, [SIM.noise.torque_nm] * 3], N_WRENCH // 6)
+    obs = np.empty(N_CHANNELS)
+    obs[JOINT_CHANNELS] = w.qpos
+    obs[EE_CHANNELS] = data.site_xpos[w.tcp_site]
+    obs[FINGER_CHANNELS] = data.qpos[w.finger_qpos] + noise[N_WRENCH:] * SIM.noise.finger_m
+    obs[GRIPPER_CHANNEL] = gripper
+    obs[WRENCH_CHANNELS] = data.sensordata[w.wrench_adr] - tare + noise[:N_WRENCH] * scale
+    return obs
 
 
 def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube_xy: np.ndarray,
              cube_yaw: float, noise: np.ndarray, effects: list[Effect], hook: CorrectionHook | None,
-             fault: FaultSpec | None, disturbance: FallingObject | None, cube_goal: np.ndarray | None = None) -> Episode:
+             fault: FaultSpec | None, disturbance: FallingObject | None, cube_goal: np.ndarray | None = None,
+             controller: ControllerKind | None = None) -> Episode:
     """Execute a joint plan (T, 7) and gripper toggles (T,) given at the observation rate.
 
     The low-level loop every task shares: T observation blocks of 20 control ticks each;
-    `cube_goal` (where the cube should end up) defaults to the paper's skill's target.
+    `cube_goal` (where the cube should end up) defaults to the paper's skill's target;
+    `controller` defaults to `SIM.controller`.
     """
     timing, w = SIM.timing, world()
     physics, scene = w.physics, w.scene
     model, data = physics.model.ptr, physics.data.ptr
+    kv_over_kp = set_joint_gains(w, SIM.controller if controller is None else controller)
     tare = _reset(w, joints[0], cube_xy, cube_yaw)
     for effect in effects:
         effect.initialize(physics, scene)
     warnings = physics.data.warning.number  # a live view of MuJoCo's warning counters
-    kv_over_kp = np.asarray(SIM.servo.kv) / np.asarray(SIM.servo.kp)
     block, n = timing.ticks_per_step, len(joints)
     hi = {key: np.empty((n * block + 1, width)) for key, width in
-          (("q", 7), ("cmd", 7), ("ee", 3), ("cube", 3), ("box", 3))}
+          (("q", N_JOINTS), ("cmd", N_JOINTS), ("ee", N_EE), ("cube", 3), ("box", 3))}
 
     def record(row: int, command: np.ndarray) -> None:
         hi["q"][row] = data.qpos[w.arm_qpos]
@@ -163,10 +191,11 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
                     (nxt - joints[k]) * timing.observation_hz, bool(gripper[k]))
         if hook is not None:
             state = ControlState(index, tick.time_s, k, w.qpos, data.qvel[w.arm_dof].copy(),
-                                 data.site_xpos[w.tcp_site].copy(), tick.target.copy(), np.array(obs))
+                                 data.site_xpos[w.tcp_site].copy(), tick.target.copy(),
+                                 data.actuator_force[w.arm_act].copy(), np.array(obs))
             corrected = hook(state)
             if corrected is not None:
-                tick.target = np.asarray(corrected, dtype=float).reshape(7)
+                tick.target = np.asarray(corrected, dtype=float).reshape(N_JOINTS)
         for effect in effects:
             effect.before_tick(physics, scene, tick)
         target = np.minimum(np.maximum(tick.target, Q_MIN), Q_MAX)
@@ -190,39 +219,61 @@ def _effects(fault: FaultSpec | None, disturbance: FallingObject | None) -> list
     return ([] if fault is None else [JointLock(fault)]) + make_effect(disturbance)
 
 
+def seed_variation(skill: str, seed: int) -> Variation:
+    """What `seed` changes in `skill`'s scene (cube pose, start posture, tremor): what a
+    perception of the workcell would report before the episode starts."""
+    skill_spec(skill)
+    return sample_variation(skill, _rng(skill, seed))
+
+
 def run_episode(skill: str, seed: int, fault: FaultSpec | None = None,
-                disturbance: FallingObject | None = None) -> Episode:
-    """Plan `skill` for `seed` by IK and execute it, optionally with a fault and/or a disturbance."""
+                disturbance: FallingObject | None = None, controller: ControllerKind | None = None) -> Episode:
+    """Plan `skill` for `seed` by IK and execute it, optionally with a fault and/or a disturbance,
+    under `controller` (default `SIM.controller`)."""
     skill_spec(skill)
     rng = _rng(skill, seed)
     variation = sample_variation(skill, rng)
     plan = make_plan(skill, variation)
     noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
     return execute(skill, seed, plan.joints, plan.gripper, variation.cube_xy, variation.cube_yaw, noise,
-                    _effects(fault, disturbance), None, fault, disturbance)
+                    _effects(fault, disturbance), None, fault, disturbance, controller=controller)
+
+
+def first_observation(skill: str, seed: int) -> np.ndarray:
+    """(25,) the observation `run_episode(skill, seed)` starts with, taken before any motion:
+    the cue a memory recalls the skill from, at a fifteenth of an episode's cost."""
+    skill_spec(skill)
+    rng = _rng(skill, seed)
+    variation = sample_variation(skill, rng)
+    plan = make_plan(skill, variation)
+    noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
+    return execute(skill, seed, plan.joints[:1], plan.gripper[:1], variation.cube_xy, variation.cube_yaw, noise,
+                   [], None, None, None).observations[0]
 
 
 def execute_plan(joint_plan: np.ndarray, gripper_plan: np.ndarray, seed: int,
                  correction_hook: CorrectionHook | None = None, disturbance: FallingObject | None = None,
-                 skill: str = SKILLS[0], fault: FaultSpec | None = None) -> Episode:
+                 skill: str = SKILLS[0], fault: FaultSpec | None = None,
+                 controller: ControllerKind | None = None) -> Episode:
     """Execute a (15, 7) joint plan (rad) and (15,) gripper toggles given at 2 Hz.
 
     The scene (cube pose, sensor noise) is the one `run_episode(skill, seed)` would see, so a
     recalled plan can be compared with the demonstration of the same seed. `correction_hook`,
     if given, is called before every 40 Hz tick with a `ControlState` and may return a (7,)
     joint target replacing the plan's for that tick (None keeps it); faults and disturbances
-    still act after it. Targets are clipped to the joint limits.
+    still act after it. Targets are clipped to the joint limits. `controller` (default
+    `SIM.controller`) tracks the targets: the stiff servos or the compliant impedance.
     """
     skill_spec(skill)
     joints = np.asarray(joint_plan, dtype=float)
     gripper = np.asarray(gripper_plan, dtype=float)
     n = SIM.timing.n_steps
-    if joints.shape != (n, 7) or not np.isfinite(joints).all():
-        raise ValueError(f"joint_plan must be a finite ({n}, 7) array, got shape {joints.shape}")
+    if joints.shape != (n, N_JOINTS) or not np.isfinite(joints).all():
+        raise ValueError(f"joint_plan must be a finite ({n}, {N_JOINTS}) array, got shape {joints.shape}")
     if gripper.shape != (n,) or not np.isin(gripper, (0.0, 1.0)).all():
         raise ValueError(f"gripper_plan must be a ({n},) array of 0/1, got {gripper!r}")
     rng = _rng(skill, seed)
     variation = sample_variation(skill, rng)
     noise = rng.standard_normal((n, N_NOISY))
     return execute(skill, seed, joints, gripper, variation.cube_xy, variation.cube_yaw, noise,
-                    _effects(fault, disturbance), correction_hook, fault, disturbance)
+                    _effects(fault, disturbance), correction_hook, fault, disturbance, controller=controller)

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 import torch
 
-from experiments.contextual.config import CONTEXTUAL, SKILLS
-from experiments.contextual.dataset import conditions_data
+from experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, SKILLS
+from experiments.contextual.dataset import MOTOR_CHANNELS, conditions_data, hand, motor_index, sensory_index
 from experiments.contextual.metrics import pead
 from experiments.contextual.protocol import run_protocol
-from experiments.contextual.report import PLANNING, expressed
-from models.config import FAST
+from experiments.contextual.report import PLANNING, expressed, expressed_per_seed, separates_every_seed
+from models.config import PRESETS
 from models.rnn import SensorimotorRNN, SensoryToMotorRNN
 
 REDUCED = CONTEXTUAL.with_(seeds=1, skill_seeds=1, demos=12, test_trials=8, epochs=250,
@@ -27,21 +27,47 @@ MODELS = ("neural_asm", "s_to_m", "sm_to_sm")
 
 @pytest.fixture(scope="module")
 def summary():
-    return run_protocol(REDUCED, FAST.with_(hidden_size=128), workers=1, progress=False)
+    return run_protocol(REDUCED, PRESETS[DEFAULT_PRESET].with_(hidden_size=128), workers=1, progress=False)
 
 
 def test_dataset_conditions_differ_only_where_the_paper_says():
     data = conditions_data(0, REDUCED, False)
     both, plan_only, execute_only = (data[c] for c in ("plan_and_execute", "plan_only", "execute_only"))
     reach = REDUCED.reach_steps
-    assert np.allclose(both.sequences[:, :reach], plan_only.sequences[:, :reach])
-    assert np.allclose(plan_only.hand[:, reach:], plan_only.hand[:, reach - 1 : reach])  # stays at T
-    assert not np.allclose(both.hand[:, reach:], both.hand[:, reach - 1 : reach])  # follows through
-    assert (execute_only.sequences[:, : REDUCED.cue_onset, execute_only.sensory] == 0).all()
-    assert (execute_only.sequences[:, REDUCED.cue_onset :, execute_only.sensory].sum(-1) == 1).all()
-    demo = pead(both.hand, REDUCED)
+    cue = sensory_index(execute_only.channel_names)
+    assert np.allclose(both.data[:, :reach], plan_only.data[:, :reach])
+    assert np.allclose(hand(plan_only)[:, reach:], hand(plan_only)[:, reach - 1 : reach])  # stays at T
+    assert not np.allclose(hand(both)[:, reach:], hand(both)[:, reach - 1 : reach])  # follows through
+    assert (execute_only.data[:, : REDUCED.cue_onset, cue] == 0).all()
+    assert (execute_only.data[:, REDUCED.cue_onset :, cue].sum(-1) == 1).all()
+    demo = pead(hand(both), REDUCED)
     for k, skill in enumerate(SKILLS[:2]):  # the demonstrated plans bow by about the skill's bow
-        assert np.allclose(demo[both.skills == k], skill.bow_m, rtol=0.5)
+        assert np.allclose(demo[both.labels == k], skill.bow_m, rtol=0.5)
+
+
+def test_channel_roles_come_from_the_channel_names():
+    data = conditions_data(0, REDUCED, False)["plan_only"]
+    names = data.channel_names
+    assert [names[i] for i in motor_index(names)] == list(MOTOR_CHANNELS)
+    assert [names[i] for i in sensory_index(names)] == ["cue_CW", "cue_CCW"]
+    shuffled = names[::-1]  # roles follow the names, not the positions
+    assert [shuffled[i] for i in sensory_index(shuffled)] == ["cue_CCW", "cue_CW"]
+
+
+def test_per_seed_separation_catches_the_one_seed_that_fails():
+    stats = lambda values: {"mean": float(np.mean(values)), "sd": 0.0, "per_seed": values}  # noqa: E731
+    demo = {"CW": stats([0.03, 0.03, 0.03]), "CCW": stats([-0.03, -0.03, -0.03])}
+    model = {"CW": stats([0.03, 0.028, -0.002]), "CCW": stats([-0.03, -0.029, -0.028])}  # seed 2: CW bows the wrong way
+    summary = {"pead": {"plan_and_execute": {"demonstrations": demo, "neural_asm": model}},
+               "separation": {"plan_and_execute": {"neural_asm": stats([0.06, 0.057, 0.026])}}}
+    assert expressed(summary, "plan_and_execute", "neural_asm") > 0.5  # the mean hides it
+    np.testing.assert_allclose(expressed_per_seed(summary, "plan_and_execute", "neural_asm"), [1.0, 0.95, 0.4333],
+                               atol=1e-3)
+    assert not separates_every_seed(summary, "plan_and_execute", "neural_asm")
+    model["CW"], model["CCW"] = stats([0.03, 0.028, 0.005]), stats([-0.03, -0.029, -0.01])  # right signs, 25 %
+    assert not separates_every_seed(summary, "plan_and_execute", "neural_asm")
+    model["CW"], model["CCW"] = stats([0.03, 0.028, 0.02]), stats([-0.03, -0.029, -0.028])
+    assert separates_every_seed(summary, "plan_and_execute", "neural_asm")
 
 
 def test_baselines_see_only_the_first_step():

@@ -9,10 +9,10 @@ import pytest
 from dm_control import mjcf
 
 from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS, WRENCH_CHANNELS
-from sim.disturbances import FallingObject
+from sim.disturbances import FallingObject, elbow_hit
 from sim.faults import FaultSpec, fault_grid
 from sim.panda import Q_MAX, Q_MIN, build_panda, dh_forward
-from sim.runner import execute_plan, run_episode
+from sim.runner import execute_plan, first_observation, run_episode
 from sim.skills import SKILLS
 
 Q_READY = np.array([0, -np.pi / 4, 0, -3 * np.pi / 4, 0, np.pi / 2, np.pi / 4])
@@ -124,6 +124,9 @@ def test_bad_disturbance_and_plan_rejected():
         FallingObject(mass_kg=float("nan"))
     with pytest.raises(ValueError, match="release_s"):
         FallingObject(release_s=9.0)
+    with pytest.raises(ValueError, match="speed_m_s"):
+        elbow_hit(40.0, speed_m_s=0.0)
+    assert elbow_hit(40.0).mass_kg == 20.0 and elbow_hit(40.0).target_link == 4
     with pytest.raises(ValueError, match="joint_plan"):
         execute_plan(np.zeros((14, 7)), np.zeros(15), seed=0)
 
@@ -132,3 +135,26 @@ def test_fault_grid_is_the_papers_980():
     grid = fault_grid()
     assert len(grid) == 980 and len(set(grid)) == 980
     assert {f.time_s for _, f in grid} == {1.0 + 0.5 * i for i in range(10)}
+
+
+def test_compliant_controller_tracks_the_plan_softer_than_the_stiff_servos(demo):
+    from sim.config import SIM, SimConfig
+
+    compliant = run_episode(SKILLS[0], 3, controller="compliant")
+    assert compliant.success
+    assert np.degrees(np.abs(compliant.qpos_hi - demo.qpos_hi)).max() < 2.0  # same skill, another controller
+    assert not np.array_equal(compliant.qpos_hi, demo.qpos_hi)
+    stiff_k, _ = SIM.joint_gains("stiff")
+    soft_k, soft_d = SIM.joint_gains("compliant")
+    assert (soft_k < stiff_k).all() and (soft_d > 0).all()
+    with pytest.raises(ValueError, match="controller"):
+        SimConfig(controller="floppy")
+
+
+def test_controller_gains_do_not_leak_into_the_next_episode(demo):
+    run_episode(SKILLS[0], 3, controller="compliant")
+    assert np.array_equal(run_episode(SKILLS[0], 3).observations, demo.observations)
+
+
+def test_first_observation_is_the_episodes_first(demo):
+    assert np.array_equal(first_observation(SKILLS[0], 3), demo.observations[0])

@@ -10,7 +10,7 @@ import torch
 import typer
 
 from experiments.contextual import figures, report
-from experiments.contextual.config import CONTEXTUAL, QUICK
+from experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, QUICK
 from experiments.contextual.dataset import conditions_data
 from experiments.contextual.protocol import run_protocol
 from models.config import PRESETS
@@ -26,7 +26,8 @@ def contextual(
     epochs: int | None = typer.Option(None, help="learning epochs of every model; default 1200, 300 with --quick"),
     workers: int = typer.Option(2, min=1, help="worker processes (1: run in this process; CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
-    preset: str = typer.Option("fast", help=f"tPC hyper-parameters, shared by the RNNs: {', '.join(PRESETS)}"),
+    preset: str = typer.Option(DEFAULT_PRESET, help=f"tPC hyper-parameters, shared by the RNNs (but for the "
+                               f"training noise): {', '.join(PRESETS)}"),
     quick: bool = typer.Option(False, help="reduced protocol: 1 seed, 300 epochs, short K sweep"),
 ) -> None:
     """Neural ASM vs S-to-M and SM-to-SM RNNs on plan & execute / plan only / execute only:

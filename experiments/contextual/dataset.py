@@ -16,14 +16,13 @@ same hand paths and differ only in what the data shows:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import lru_cache
 from typing import Sequence
-
 
 import numpy as np
 
 from experiments.contextual.config import CONDITIONS, SKILLS, ContextualConfig, Skill
+from models.sequences import Sequences
 
 HAND_CHANNELS = ("ee_x", "ee_y")
 JOINT_CHANNELS = tuple(f"q{i}" for i in range(1, 8))
@@ -32,25 +31,19 @@ MOTOR_CHANNELS = HAND_CHANNELS + JOINT_CHANNELS
 HOME_POSTURE = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 1.9, np.pi / 4])
 
 
-@dataclass(frozen=True)
-class ContextualData:
-    sequences: np.ndarray  # (N, T, D) raw: hand (m), joints (rad), cue (0/1)
-    skills: np.ndarray  # (N,) index into the skills the data was made from
-    channel_names: tuple[str, ...]
+def motor_index(names: Sequence[str]) -> np.ndarray:
+    """Indices of the motor channels (hand position and joint angles) among `names`."""
+    return np.array([i for i, n in enumerate(names) if n in MOTOR_CHANNELS])
 
-    @property
-    def motor(self) -> np.ndarray:
-        """Indices of the motor channels (hand position and joint angles)."""
-        return np.arange(len(MOTOR_CHANNELS))
 
-    @property
-    def sensory(self) -> np.ndarray:
-        """Indices of the sensory channels (the visual cue)."""
-        return np.arange(len(MOTOR_CHANNELS), len(self.channel_names))
+def sensory_index(names: Sequence[str]) -> np.ndarray:
+    """Indices of the sensory channels (the visual cue) among `names`."""
+    return np.array([i for i, n in enumerate(names) if n not in MOTOR_CHANNELS])
 
-    @property
-    def hand(self) -> np.ndarray:
-        return self.sequences[..., : len(HAND_CHANNELS)]
+
+def hand(data: Sequences) -> np.ndarray:
+    """(N, T, 2) hand positions of contextual sequences."""
+    return data.data[..., [data.channel_names.index(n) for n in HAND_CHANNELS]]
 
 
 def channel_names(skills: Sequence[Skill]) -> tuple[str, ...]:
@@ -116,7 +109,7 @@ def balanced_labels(n: int, n_skills: int) -> np.ndarray:
 def assemble(
     paths: np.ndarray, joints: np.ndarray, labels: np.ndarray, skills: Sequence[Skill],
     condition: str, cfg: ContextualConfig,
-) -> ContextualData:
+) -> Sequences:
     """The sequences one condition shows, from shared executed paths and joint angles."""
     if condition not in CONDITIONS:
         raise ValueError(f"condition must be one of {CONDITIONS}, got {condition!r}")
@@ -126,7 +119,7 @@ def assemble(
         paths[:, last + 1 :] = paths[:, last : last + 1]
         joints[:, last + 1 :] = joints[:, last : last + 1]
     sequences = np.concatenate([paths, joints, cue(labels, len(skills), condition, cfg)], axis=-1)
-    return ContextualData(sequences, labels, channel_names(skills))
+    return Sequences(sequences, labels, channel_names(skills), provenance={"condition": condition})
 
 
 def sample(
@@ -142,7 +135,7 @@ def sample(
 @lru_cache(maxsize=8)
 def conditions_data(
     seed: int, cfg: ContextualConfig, test: bool, n_skills: int = 2, cue_width: int | None = None
-) -> dict[str, ContextualData]:
+) -> dict[str, Sequences]:
     """All three conditions of one participant (seed): training demos or test trials.
 
     ``cue_width`` pads the cue to a fixed number of skills, so that datasets with

@@ -11,7 +11,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig
-from experiments.contextual.dataset import JOINT_CHANNELS, ContextualData
+from experiments.contextual.dataset import JOINT_CHANNELS, hand, sensory_index
+from models.sequences import Sequences
 
 CUE_COLOURS = {"CW": "tab:red", "CCW": "tab:blue", "CW_wide": "tab:orange", "CCW_wide": "tab:cyan"}
 LABELS = {
@@ -43,18 +44,20 @@ def _path(ax: plt.Axes, xy: np.ndarray, colour: str, **kw: Any) -> None:
     ax.plot(-xy[:, 1], xy[:, 0], color=colour, **kw)
 
 
-def dataset_figure(data: dict[str, ContextualData], cfg: ContextualConfig, path: Path) -> Path:
+def dataset_figure(data: dict[str, Sequences], cfg: ContextualConfig, path: Path) -> Path:
     """Each condition's demonstrations: hand paths, joint angles and the visual cue."""
     fig, axes = plt.subplots(len(CONDITIONS), 3, figsize=(13, 3.6 * len(CONDITIONS)))
     steps = np.arange(cfg.steps)
     for row, condition in zip(axes, CONDITIONS):
         d = data[condition]
         _plan_view(row[0], cfg)
-        for seq, k in zip(d.sequences, d.skills):
+        joints = [d.channel_names.index(n) for n in JOINT_CHANNELS]
+        sensory = sensory_index(d.channel_names)
+        for seq, xy, k in zip(d.data, hand(d), d.labels):
             colour = CUE_COLOURS[SKILLS[k].name]
-            _path(row[0], seq[:, :2], colour, marker=".", lw=0.8, alpha=0.6)
-            row[1].plot(steps, seq[:, d.motor[2:]], color=colour, lw=0.6, alpha=0.5)
-            row[2].plot(steps, seq[:, d.sensory] + 0.04 * np.arange(len(d.sensory)), color=colour,
+            _path(row[0], xy, colour, marker=".", lw=0.8, alpha=0.6)
+            row[1].plot(steps, seq[:, joints], color=colour, lw=0.6, alpha=0.5)
+            row[2].plot(steps, seq[:, sensory] + 0.04 * np.arange(len(sensory)), color=colour,
                         lw=0.8, alpha=0.6, drawstyle="steps-mid")
         row[0].set_title(f"{LABELS[condition]}: hand (motor)")
         row[1].set_title(f"joint angles {JOINT_CHANNELS[0]}..{JOINT_CHANNELS[-1]} by Panda IK (motor)")

@@ -9,11 +9,12 @@ from typing import Callable
 import numpy as np
 import torch
 
-from experiments.contextual.dataset import ContextualData
+from experiments.contextual.dataset import motor_index, sensory_index
 from models.asm import NeuralASM
 from models.config import TPCConfig
 from models.normaliser import Normaliser
 from models.recall import offline_recall
+from models.sequences import Sequences
 from models.rnn import SensorimotorRNN, SensoryToMotorRNN, roll_out, train_rnn
 from models.tpc import TemporalPC
 
@@ -38,22 +39,22 @@ def recall_with_iterations(
 
 
 def fit_neural_asm(
-    train: ContextualData, test: ContextualData, config: TPCConfig, sweep: tuple[int, ...] = ()
+    train: Sequences, test: Sequences, config: TPCConfig, sweep: tuple[int, ...] = ()
 ) -> Fitted:
-    model = NeuralASM.fit(train.sequences, train.channel_names, config, progress=False)
-    x = model.normaliser.normalise(test.sequences)
-    steps, motor = x.shape[1], train.motor
+    model = NeuralASM.fit(train.data, train.channel_names, config, progress=False)
+    x = model.normaliser.normalise(test.data)
+    steps, motor = x.shape[1], motor_index(train.channel_names)
     recall = lambda k: recall_with_iterations(model.net, x[:, :1], steps, k)[..., motor]  # noqa: E731
     by_iterations = {k: recall(k) for k in sweep}
     recalled = offline_recall(model.net, x[:, :1], steps, np.random.default_rng(config.seed))[..., motor]
     return Fitted(model.normaliser, recalled, model.history, by_iterations)
 
 
-def fit_s_to_m(train: ContextualData, test: ContextualData, config: TPCConfig) -> Fitted:
+def fit_s_to_m(train: Sequences, test: Sequences, config: TPCConfig) -> Fitted:
     """Sensory (cue) at step 0, held -> motor at steps 1..T-1; step 0's motor is observed."""
-    normaliser = Normaliser.fit(train.sequences)
-    x, xt = normaliser.normalise(train.sequences), normaliser.normalise(test.sequences)
-    sensory, motor = train.sensory, train.motor
+    normaliser = Normaliser.fit(train.data)
+    x, xt = normaliser.normalise(train.data), normaliser.normalise(test.data)
+    sensory, motor = sensory_index(train.channel_names), motor_index(train.channel_names)
     torch.manual_seed(config.seed)
     net = SensoryToMotorRNN(len(sensory), len(motor), config.hidden_size)
     history = train_rnn(net, x[:, 0, sensory], x[:, 1:, motor], config)
@@ -61,26 +62,26 @@ def fit_s_to_m(train: ContextualData, test: ContextualData, config: TPCConfig) -
     return Fitted(normaliser, np.concatenate([xt[:, :1, motor], predicted], axis=1), history, {})
 
 
-def fit_sm_to_sm(train: ContextualData, test: ContextualData, config: TPCConfig) -> Fitted:
+def fit_sm_to_sm(train: Sequences, test: Sequences, config: TPCConfig) -> Fitted:
     """All channels at step 0 -> all channels at steps 1..T-1, closed loop."""
-    normaliser = Normaliser.fit(train.sequences)
-    x, xt = normaliser.normalise(train.sequences), normaliser.normalise(test.sequences)
+    normaliser = Normaliser.fit(train.data)
+    x, xt = normaliser.normalise(train.data), normaliser.normalise(test.data)
     torch.manual_seed(config.seed)
     net = SensorimotorRNN(x.shape[-1], config.hidden_size)
     history = train_rnn(net, x[:, 0], x[:, 1:], config)
     predicted = roll_out(net, xt[:, 0], xt.shape[1] - 1)
     recalled = np.concatenate([xt[:, :1], predicted], axis=1)
-    return Fitted(normaliser, recalled[..., train.motor], history, {})
+    return Fitted(normaliser, recalled[..., motor_index(train.channel_names)], history, {})
 
 
 def fit(
-    model: str, train: ContextualData, test: ContextualData, config: TPCConfig,
+    model: str, train: Sequences, test: Sequences, config: TPCConfig,
     sweep: tuple[int, ...] = (),
 ) -> Fitted:
     """Dispatch on the model's name (config.MODELS); the sweep only applies to the tPC."""
     if model == "neural_asm":
         return fit_neural_asm(train, test, config, sweep)
-    baselines: dict[str, Callable[[ContextualData, ContextualData, TPCConfig], Fitted]] = {
+    baselines: dict[str, Callable[[Sequences, Sequences, TPCConfig], Fitted]] = {
         "s_to_m": fit_s_to_m, "sm_to_sm": fit_sm_to_sm,
     }
     if model not in baselines:

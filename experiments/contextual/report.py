@@ -18,6 +18,21 @@ def expressed(summary: dict[str, Any], condition: str, model: str) -> float:
     return summary["separation"][condition][model]["mean"] / (demo["CW"]["mean"] - demo["CCW"]["mean"])
 
 
+def expressed_per_seed(summary: dict[str, Any], condition: str, model: str) -> list[float]:
+    """Each seed's separation as a fraction of that seed's demonstrated separation."""
+    demo = summary["pead"][condition]["demonstrations"]
+    pead = summary["pead"][condition][model]
+    return [(cw - ccw) / (dcw - dccw) for cw, ccw, dcw, dccw in
+            zip(pead["CW"]["per_seed"], pead["CCW"]["per_seed"], demo["CW"]["per_seed"], demo["CCW"]["per_seed"])]
+
+
+def separates_every_seed(summary: dict[str, Any], condition: str, model: str) -> bool:
+    """Every seed's two plans bow apart: opposite signs and > 50 % of its demonstrated separation."""
+    pead = summary["pead"][condition][model]
+    signs = all(cw > 0 > ccw for cw, ccw in zip(pead["CW"]["per_seed"], pead["CCW"]["per_seed"]))
+    return signs and min(expressed_per_seed(summary, condition, model)) > 0.5
+
+
 def claims(summary: dict[str, Any]) -> list[tuple[str, bool]]:
     """The paper's qualitative claims, each with whether this run supports it."""
     out = []
@@ -26,6 +41,8 @@ def claims(summary: dict[str, Any]) -> list[tuple[str, bool]]:
                        and expressed(summary, c, model) > 0.5 for c in PLANNING)
         out.append((f"{LABELS[model]}: in both planning conditions the two cues' plans bow apart "
                     "(opposite signs, > 50 % of the demonstrated separation)", opposite))
+        out.append((f"{LABELS[model]}: ... on every seed", all(separates_every_seed(summary, c, model)
+                                                             for c in PLANNING)))
         out.append((f"{LABELS[model]}: in execute-only they do not (< 25 % of the demonstrated separation)",
                     abs(expressed(summary, "execute_only", model)) < 0.25))
     sweep = summary["recall_error_vs_iterations"]
@@ -53,7 +70,8 @@ def markdown(summary: dict[str, Any]) -> str:
         f"{setup['protocol']['seeds']} seeds x {len(CONDITIONS)} conditions x {len(MODELS)} models, "
         f"{setup['tpc']['epochs']} learning epochs, {setup['protocol']['test_trials']} recalled trials; "
         f"hidden size {setup['tpc']['hidden_size']}, learning rate {setup['tpc']['learning_rate']:g}, "
-        f"batch {setup['tpc']['batch_size'] or 'all'}; runtime {setup['runtime_s']:.0f} s on "
+        f"batch {setup['tpc']['batch_size'] or 'all'}, training noise {setup['tpc']['training_noise']:g} "
+        f"(Neural ASM only); runtime {setup['runtime_s']:.0f} s on "
         f"{setup['workers']} worker(s) ({setup['backend']}).",
         "",
         "## PEAD (mm, mean ± sd over seeds; + = left of S->T)",
@@ -70,6 +88,15 @@ def markdown(summary: dict[str, Any]) -> str:
             lines.append(f"| {LABELS[c]} | {LABELS[m]} | {_mm(p['CW'])} | {_mm(p['CCW'])} | "
                          f"{_mm(summary['separation'][c][m])} | {100 * expressed(summary, c, m):.0f} | "
                          f"{err['mean']:.3f} ± {err['sd']:.3f} |")
+    lines += ["", "## Per seed (planning conditions): PEAD CW / CCW (mm), % of that seed's demonstrated separation",
+              "", "| condition | model | " + " | ".join(f"seed {i}" for i in range(setup["protocol"]["seeds"])) + " |",
+              "|---|---|" + "---|" * setup["protocol"]["seeds"]]
+    for c in PLANNING:
+        for m in MODELS:
+            p, pct = summary["pead"][c][m], expressed_per_seed(summary, c, m)
+            cells = [f"{1000 * cw:+.0f} / {1000 * ccw:+.0f} ({100 * e:.0f} %)"
+                     for cw, ccw, e in zip(p["CW"]["per_seed"], p["CCW"]["per_seed"], pct)]
+            lines.append(f"| {LABELS[c]} | {LABELS[m]} | " + " | ".join(cells) + " |")
     sweep = summary["recall_error_vs_iterations"]
     lines += ["", "## Neural ASM recall MSE vs inference iterations K at the cue", "",
               "| condition | " + " | ".join(f"K={k}" for k in sweep[CONDITIONS[0]]["iterations"]) + " |",

@@ -1,3 +1,5 @@
-"""Reactive correction (issue 4, section 3): a falling object hits the arm while it executes the
-Neural ASM's offline-recalled plan; a correction hook minimises the proprioceptive prediction
-error against the recalled joint trajectory. See `run.py` for the control law and the metrics."""
+"""Reactive correction: a box falls on the arm while it carries the cube along the Neural ASM's
+recalled plan, under stiff and compliant joint control, with and without the correction that
+integrates the proprioceptive prediction error into the set-point (`sim/control.py`); the
+monitor's energy says whether the hit was detected. `pipeline.py` runs it, `metrics.py` measures
+one run, `report.py` and `figures.py` write the results."""

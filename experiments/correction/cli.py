@@ -14,21 +14,24 @@ app = typer.Typer()
 @app.command()
 def correction(
     out: Path = typer.Option(Path("runs/correction"), help="output folder"),
-    seeds: int = typer.Option(8, min=1, help="held-out seeds (skills alternate)"),
+    seeds: int = typer.Option(24, min=1, help="test seeds per hit (skills alternate)"),
     epochs: int | None = typer.Option(None, help="override the FAST model's epochs"),
-    kp: float = typer.Option(1.0, help="K_p: prediction-error feed-forward gain"),
-    ki: float = typer.Option(2.0, help="K_i: integral gain (1/s)"),
 ) -> None:
-    """Falling object hits the arm executing the recalled plan; with vs without correction."""
+    """A box hits the arm carrying the cube, under stiff and compliant control, with and without
+    the memory's correction; writes correction.json, correction.md and correction.png."""
     import torch
 
-    from experiments.correction.run import Gains, fit_model, run_correction, write_figure, write_json, write_markdown
+    from experiments.correction.config import CORRECTION
+    from experiments.correction.figures import write_figure
+    from experiments.correction.pipeline import fit_model, run_correction
+    from experiments.correction.report import write_json, write_markdown
 
     torch.set_num_threads(1)
+    config = CORRECTION.with_(n_seeds=seeds, epochs=epochs)
     out.mkdir(parents=True, exist_ok=True)
     typer.echo("fitting the Neural ASM on the 20 demonstrations ...")
-    model = fit_model(epochs, progress=True)
-    result = run_correction(model, n_seeds=seeds, gains=Gains(kp=kp, ki=ki))
+    model = fit_model(config, progress=True)
+    result = run_correction(model, config)
     write_json(result, out / "correction.json")
     write_markdown(result, out / "correction.md")
     write_figure(result, out / "correction.png")
