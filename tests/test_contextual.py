@@ -70,14 +70,14 @@ def test_per_seed_separation_catches_the_one_seed_that_fails():
     assert separates_every_seed(summary, "plan_and_execute", "neural_asm")
 
 
-def test_baselines_see_only_the_first_step():
+def test_baselines_roll_out_every_step_from_the_first():
+    """Shapes only: that nothing after the first step reaches a recall is measured on trained
+    models by ``test_execute_only_does_not`` (no cue in the first step, no separation)."""
     torch.manual_seed(0)
     s_to_m, sm_to_sm = SensoryToMotorRNN(2, 9, 16), SensorimotorRNN(11, 16)
     first = torch.randn(3, 11)
     assert s_to_m(first[:, 9:], 14).shape == (3, 14, 9)
     assert sm_to_sm(first, 14).shape == (3, 14, 11)
-    # Same first step, same recall: nothing after step 0 reaches the networks.
-    assert torch.equal(sm_to_sm(first, 14), sm_to_sm(first.clone(), 14))
 
 
 @pytest.mark.parametrize("model", MODELS)
