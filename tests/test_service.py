@@ -20,8 +20,6 @@ from typer.testing import CliRunner
 
 from models import checkpoint
 from models.asm import NeuralASM, step_streams
-from models.config import FAST
-from models.synthetic import make_skills
 from recordings.blueprint import ENERGY
 from recordings.readers import read_mcap, read_rrd_series
 from service.app import create_app
@@ -36,15 +34,9 @@ MAX_SESSIONS = 12
 
 
 @pytest.fixture(scope="module")
-def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("models")
-    data = make_skills(n_skills=2, repetitions=8, channels=25, seed=1)
-    model = NeuralASM.fit(data.data, CHANNEL_NAMES, FAST.with_(hidden_size=64, epochs=100), progress=False)
-    for mode in ("offline", "online"):
-        model.calibrate(data.data, data.data, mode, 1)
-    checkpoint.save(model, folder / "panda.safetensors")
-    np.save(folder / "episodes.npy", data.data)
-    return folder
+def model_dir(servable_model) -> Path:
+    return servable_model(n_skills=2, repetitions=8, steps=15, hidden_size=64, epochs=100,
+                          modes=("offline", "online"), name="panda", seed=1)
 
 
 @pytest.fixture(scope="module")

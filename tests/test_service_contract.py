@@ -11,10 +11,7 @@ import jsonschema
 import pytest
 from fastapi.testclient import TestClient
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST, SCORING
-from models.synthetic import make_skills
+from models.config import SCORING
 from service.app import create_app
 from service.auth import HEADER
 from service.settings import Settings
@@ -22,13 +19,8 @@ from sim.channels import CHANNEL_NAMES
 
 
 @pytest.fixture(scope="module")
-def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("models")
-    data = make_skills(n_skills=1, repetitions=4, steps=5, channels=25)
-    model = NeuralASM.fit(data.data, CHANNEL_NAMES, FAST.with_(hidden_size=16, epochs=5), progress=False)
-    model.calibrate(data.data, data.data, "offline", 1)
-    checkpoint.save(model, folder / "m.safetensors")
-    return folder
+def model_dir(servable_model) -> Path:
+    return servable_model(steps=5)
 
 
 def _app(model_dir: Path, **settings):

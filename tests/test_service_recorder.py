@@ -14,29 +14,18 @@ import httpx
 import numpy as np
 import pytest
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST
-from models.synthetic import make_skills
 from recordings.readers import read_mcap
 from recordings.recorder import LAYOUT_FILE
 from recordings.recover import INTERRUPTED_MARKER, OPEN_MARKER
 from service.embedded import start_embedded
 from service.settings import Settings
-from sim.channels import CHANNEL_NAMES
 
 WAIT_S = 120.0
 
 
 @pytest.fixture(scope="module")
-def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("models")
-    data = make_skills(n_skills=1, repetitions=4, steps=6, channels=25)
-    model = NeuralASM.fit(data.data, CHANNEL_NAMES, FAST.with_(hidden_size=16, epochs=5), progress=False)
-    model.calibrate(data.data, data.data, "offline", 1)
-    checkpoint.save(model, folder / "m.safetensors")
-    np.save(folder / "episode.npy", data.data[0])
-    return folder
+def model_dir(servable_model) -> Path:
+    return servable_model()
 
 
 def _episode(c: httpx.Client, episode: np.ndarray, steps: int) -> tuple[dict, list[float]]:
@@ -47,7 +36,7 @@ def _episode(c: httpx.Client, episode: np.ndarray, steps: int) -> tuple[dict, li
 
 
 def test_closing_returns_once_the_files_are_finished(model_dir, tmp_path):
-    episode = np.load(model_dir / "episode.npy")
+    episode = np.load(model_dir / "episodes.npy")[0]
     with start_embedded(Settings(models_dir=model_dir, recordings_dir=tmp_path)) as srv, \
             httpx.Client(base_url=srv.url) as c:
         recorder = srv.server.config.app.state.service.recorder
@@ -65,7 +54,7 @@ def test_closing_returns_once_the_files_are_finished(model_dir, tmp_path):
 
 
 def test_a_dead_recorder_is_replaced_and_the_service_serves_on(model_dir, tmp_path):
-    episode = np.load(model_dir / "episode.npy")
+    episode = np.load(model_dir / "episodes.npy")[0]
     with start_embedded(Settings(models_dir=model_dir, recordings_dir=tmp_path)) as srv, \
             httpx.Client(base_url=srv.url) as c:
         recorder = srv.server.config.app.state.service.recorder
