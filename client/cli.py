@@ -11,6 +11,7 @@ import typer
 from client.run import MODES, fault_spec, run_client
 from client.transport import TRANSPORTS, ServiceError, ServiceLost
 from recordings import DEFAULT_DIR
+from runtime.home import home_path
 from sim.config import SIM
 from sim.disturbances import FallingObject
 from sim.skills import SKILLS
@@ -41,7 +42,7 @@ def client(
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
     reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
     transport: TransportName = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
-    models_dir: Path = typer.Option(Path("runs/models"), help="models folder of the in-process service"),
+    models_dir: Path = typer.Option(home_path("models"), help="models folder of the in-process service"),
     json_out: Path | None = typer.Option(None, "--json", help="also write the summaries as JSON here"),
 ) -> None:
     """Simulate Panda episodes, stream them to the Neural ASM service and record them."""

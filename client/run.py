@@ -11,6 +11,7 @@ from client.stream import stream_episode
 from client.summary import EpisodeSummary, closing_lines, say, summary_line
 from client.transport import TRANSPORTS, check_url
 from recordings import DEFAULT_DIR
+from runtime.home import home_path
 from sim.config import SIM
 from sim.disturbances import FallingObject
 from sim.faults import FaultSpec
@@ -59,7 +60,7 @@ def run_client(
     out: Path = DEFAULT_DIR,
     reconnect: bool = False,
     transport: str = "ws",
-    models_dir: Path = Path("runs/models"),
+    models_dir: Path | None = None,
     quiet: bool = False,
     after_step: Callable[[int, int], None] | None = None,
 ) -> list[EpisodeSummary]:
@@ -77,7 +78,8 @@ def run_client(
         check_url(url)
     out = Path(out)
     summaries: list[EpisodeSummary] = []
-    with _service(url, api_key, Path(models_dir), out, quiet) as service_url:
+    models_dir = home_path("models") if models_dir is None else Path(models_dir)
+    with _service(url, api_key, models_dir, out, quiet) as service_url:
         for i in range(episodes):
             ep = run_episode(skill, seed + i, fault=fault, disturbance=falling_object)
             say(f"episode {i + 1}/{episodes}: {skill}, seed {seed + i}"

@@ -6,7 +6,7 @@ from __future__ import annotations
 import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import json
-
+import os
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,7 @@ from experiments.fault_sweep.cli import faults
 from logs.cli import MAPPING_HELP, evaluate, read_logs, replay
 from recordings.cli import app as recordings_app
 from nasm.data import SYNTHETIC, load_sequences
+from runtime.home import home, home_path
 from service.cli import serve
 from sim.cli import demos
 
@@ -54,7 +55,7 @@ def _check_mode(mode: str) -> None:
 @app.command()
 def train(
     data: str = typer.Argument(SYNTHETIC, help="'synthetic', an .npz of sequences, or an .mcap episode set"),
-    out: Path = typer.Option(Path("runs/models/model.safetensors"), help="checkpoint to write"),
+    out: Path = typer.Option(home_path("models", "model.safetensors"), help="checkpoint to write"),
     preset: str = typer.Option("fast", help=f"hyper-parameter preset: {', '.join(PRESETS)}"),
     epochs: int | None = typer.Option(None, help="override the preset's epochs"),
     hidden: int | None = typer.Option(None, help="override the preset's hidden size"),
@@ -127,8 +128,15 @@ def score(
 
 
 @app.command()
-def info(model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)")) -> None:
-    """Print a checkpoint's configuration, channels, calibrations and provenance."""
+def info(model_path: Path | None = typer.Argument(None, help="checkpoint (.safetensors); none: the data home")) -> None:
+    """Print a checkpoint's configuration, channels, calibrations and provenance; without one,
+    where the data home is (NASM_HOME) and what it holds."""
+    if model_path is None:
+        root = home()
+        folders = sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+        typer.echo(json.dumps({"data_home": str(root), "set_by": "NASM_HOME" if os.environ.get("NASM_HOME") else
+                               "the platform's user data folder (set NASM_HOME to move it)", "holds": folders}, indent=2))
+        return
     model = _load_model(model_path)
     summary = {
         "config": model.config.to_dict(),

@@ -16,6 +16,7 @@ from models.asm import NeuralASM
 from models.config import FAST, TPCConfig
 from models.sequences import Sequences
 from pipelines.episodes import NormalSets, load_normal_sets
+from runtime.home import home_path
 
 DEFAULT_NAME = "panda"
 
@@ -47,12 +48,13 @@ def provenance_of(bench: NormalSets, data_dir: Path) -> dict:
     }
 
 
-def ensure_default_model(models_dir: Path, data_dir: Path = Path("runs/data"), progress: bool = True) -> Path:
+def ensure_default_model(models_dir: Path, data_dir: Path | None = None, progress: bool = True) -> Path:
     """Return models_dir/panda.safetensors, simulating data and training it if missing."""
     path = Path(models_dir) / f"{DEFAULT_NAME}.safetensors"
     if path.exists():
         return path
-    bench = load_normal_sets(Path(data_dir))
+    data_dir = home_path("data") if data_dir is None else Path(data_dir)
+    bench = load_normal_sets(data_dir)
     model = train_calibrated(
         bench.demos, bench.precision, bench.calibration, bench.channel_names,
         progress=progress, provenance=provenance_of(bench, data_dir),

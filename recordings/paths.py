@@ -12,8 +12,10 @@ import secrets
 import time
 from pathlib import Path
 
+from runtime.home import home_path
+
 APP_ID = "neural_asm"
-DEFAULT_DIR = Path("runs/recordings")  # git-ignored (runs/)
+DEFAULT_DIR = home_path("recordings")
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 

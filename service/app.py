@@ -1,6 +1,6 @@
 """The FastAPI application: routers, error handlers, body limit and lifespan.
 
-    app = create_app(Settings(models_dir=Path("runs/models")))
+    app = create_app(Settings(models_dir=Path("my_models")))
 
 The lifespan starts the recorder process (which first recovers what a crash left in the
 recordings folder), the inference runner, loads the models (building the default one on

@@ -8,6 +8,7 @@ from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from models.config import SCORING
+from runtime.home import home_path
 from runtime.net import is_loopback
 
 
@@ -16,7 +17,7 @@ class Settings(BaseSettings):
 
     host: str = Field("127.0.0.1", description="address to bind; non-loopback requires an API key")
     port: int = Field(8000, ge=0, le=65535, description="TCP port (0: any free port)")
-    models_dir: Path = Field(Path("runs/models"), description="folder of *.safetensors checkpoints")
+    models_dir: Path = Field(default_factory=lambda: home_path("models"), description="folder of *.safetensors checkpoints")
     default_model: str | None = Field(
         None, description="model used when a session names none; unset: the newest valid checkpoint"
     )
@@ -30,7 +31,7 @@ class Settings(BaseSettings):
     )
     session_idle_s: float = Field(300.0, gt=0, description="sessions idle this long are closed")
     max_body_bytes: int = Field(64 * 1024, ge=1024, description="larger request bodies get 413")
-    recordings_dir: Path = Field(Path("runs/recordings"), description="where session recordings go")
+    recordings_dir: Path = Field(default_factory=lambda: home_path("recordings"), description="where session recordings go")
     record: bool = Field(True, description="write an .rrd and an .mcap for every session")
     default_fpr: float = Field(SCORING.default_fpr, gt=0, lt=1, description="per-step false-positive rate of /fault")
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 
+from runtime.home import home_path
 from runtime.parallel import Backend
 
 app = typer.Typer(help="Simulated Panda pick-and-place episode sets.", no_args_is_help=True)
@@ -32,7 +33,7 @@ def demos(
     task: Task = typer.Option(Task.paper, help="paper: the paper's two fixed skills; varied: four skills whose "
                               "context varies (all its sets: demos, normal, ood, faults, twins)"),
     sets: Which = typer.Option(Which.demos, "--sets", help="demos, normal (held-out), faults (980 + no-fault twins), or all."),
-    out: Path | None = typer.Option(None, "--out", help="Output directory [default: runs/data, runs/data_varied]."),
+    out: Path | None = typer.Option(None, "--out", help="Output directory [default: data, data_varied in the data home]."),
     workers: int = typer.Option(2, "--workers", min=1, help="Worker processes (CPUs of a local Ray instance)."),
     backend: Backend = typer.Option("processes", "--backend", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)."),
     n_demos: int | None = typer.Option(None, "--n-demos", min=1, help="Demonstrations per skill [default: 10 paper, 40 varied]."),
@@ -44,14 +45,14 @@ def demos(
     if task == Task.varied:
         from sim import varied_sets
 
-        out = out or Path("runs/data_varied")
+        out = out or home_path("data_varied")
         for kind in varied_sets.VARIED_KINDS:
             sizes = {"n_demos": n_demos} if kind == "demos" and n_demos is not None else {}
             path, failures = varied_sets.generate(kind, out, workers, backend, **sizes)
             typer.echo(f"varied {kind}: {len(load_episodes(path))} episodes -> {path} "
                        f"({len(failures)} refused by the simulation: velocity limits or IK)")
         return
-    out = out or Path("runs/data")
+    out = out or home_path("data")
 
     kinds = {"demos": ["demos"], "normal": ["normal"], "faults": ["faults", "twins"],
              "all": ["demos", "normal", "faults", "twins"]}[sets.value]

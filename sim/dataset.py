@@ -224,7 +224,7 @@ def load_episodes(path: str | Path) -> list[Episode]:
     return read_episode_set(path)
 
 
-def generate(kind: str, out_dir: str | Path = "runs/data", workers: int = 2, n_demos: int = 10,
+def generate(kind: str, out_dir: str | Path, workers: int = 2, n_demos: int = 10,
              n_normal: int = 200, backend: Backend = "processes") -> tuple[Path, list[str]]:
     """Simulate set `kind`, write `<out_dir>/<kind>.mcap` and its cache; return the path and failures."""
     episodes, failures = run_jobs(jobs_for(kind, n_demos, n_normal), workers, desc=kind, backend=backend)

@@ -1,5 +1,7 @@
 import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
+import os
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -14,6 +16,12 @@ from models.synthetic import make_skills, split
 from sim.channels import CHANNEL_NAMES
 
 torch.set_num_threads(1)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Tests never touch the user's data home (read by the commands' defaults when their modules load)."""
+    os.environ["NASM_HOME"] = tempfile.mkdtemp(prefix="nasm-home-")
+
 
 # Small but real: three skills, distinct starts, noisy repetitions.
 SMALL = FAST.with_(hidden_size=96, epochs=250)

@@ -14,6 +14,7 @@ from experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, QUICK
 from experiments.contextual.dataset import conditions_data
 from experiments.contextual.protocol import run_protocol
 from models.config import PRESETS
+from runtime.home import home_path
 from runtime.parallel import Backend
 
 app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
@@ -21,7 +22,7 @@ app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_loc
 
 @app.command()
 def contextual(
-    out: Path = typer.Option(Path("runs/contextual"), help="folder for contextual.json/.md and the PNGs"),
+    out: Path = typer.Option(home_path("contextual"), help="folder for contextual.json/.md and the PNGs"),
     seeds: int | None = typer.Option(None, help="participants (seeds); default 6, 1 with --quick"),
     epochs: int | None = typer.Option(None, help="learning epochs of every model; default 1200, 300 with --quick"),
     workers: int = typer.Option(2, min=1, help="worker processes (1: run in this process; CPUs of a local Ray instance)"),

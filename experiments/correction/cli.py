@@ -8,12 +8,14 @@ from pathlib import Path
 
 import typer
 
+from runtime.home import home_path
+
 app = typer.Typer()
 
 
 @app.command()
 def correction(
-    out: Path = typer.Option(Path("runs/correction"), help="output folder"),
+    out: Path = typer.Option(home_path("correction"), help="output folder"),
     seeds: int = typer.Option(24, min=1, help="test seeds per hit (skills alternate)"),
     epochs: int | None = typer.Option(None, help="override the FAST model's epochs"),
 ) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 import typer
 
 from models.config import FAITHFUL
+from runtime.home import home_path
 from runtime.parallel import Backend
 from sim.cli import Task
 
@@ -30,8 +31,8 @@ def faults(
     task: Task = typer.Option(Task.paper, help="paper: the 980 joint locks of the paper's fixed task; varied: "
                               "four skills whose cube, goal, speed and obstacle vary, with nine fault families"),
     context: Context = typer.Option(Context.observed, help="varied task: whether the goal is an observed channel"),
-    out: Path | None = typer.Option(None, help="output folder [default: runs/fault_sweep, runs/varied_<context>]"),
-    data: Path | None = typer.Option(None, help="episode sets, simulated when missing [default: runs/data, runs/data_varied]"),
+    out: Path | None = typer.Option(None, help="output folder [default: fault_sweep, varied_<context> in the data home]"),
+    data: Path | None = typer.Option(None, help="episode sets, simulated when missing [default: data, data_varied in the data home]"),
     paper_epochs: int = typer.Option(FAITHFUL.epochs, help="epochs of the paper-configuration model"),
     fast_epochs: int | None = typer.Option(None, help="override the default model's epochs"),
     ablation: bool = typer.Option(False, "--ablation", help="varied task: train one Neural ASM per lever "
@@ -44,19 +45,19 @@ def faults(
 ) -> None:
     """Run the 980-fault sweep (or the varied-task benchmark) against baselines; write JSON, markdown and figures."""
     if task == Task.varied and ceiling:
-        _ceiling(context.value, out or Path(f"runs/varied_{context.value}"), data or Path("runs/data_varied"),
+        _ceiling(context.value, out or home_path(f"varied_{context.value}"), data or home_path("data_varied"),
                  workers, backend)
         return
     if task == Task.varied and ablation:
-        _ablation(context.value, out or Path(f"runs/varied_{context.value}"), data or Path("runs/data_varied"),
+        _ablation(context.value, out or home_path(f"varied_{context.value}"), data or home_path("data_varied"),
                   fast_epochs, workers, backend)
         return
     if task == Task.varied:
-        _varied(context.value, out or Path(f"runs/varied_{context.value}"), data or Path("runs/data_varied"),
+        _varied(context.value, out or home_path(f"varied_{context.value}"), data or home_path("data_varied"),
                 fast_epochs, paper_epochs, workers, backend)
         return
-    out = out or Path("runs/fault_sweep")
-    data = data or Path("runs/data")
+    out = out or home_path("fault_sweep")
+    data = data or home_path("data")
     from experiments.fault_sweep.figures import write_figures
     from experiments.fault_sweep.report import write_csv, write_json, write_markdown
     from experiments.fault_sweep.run import run_sweep

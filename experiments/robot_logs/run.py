@@ -20,12 +20,13 @@ from pathlib import Path
 import typer
 
 from experiments.fault_sweep.data import SETS, make_benchmark
-from pipelines.episodes import ensure_sets
 from experiments.fault_sweep.methods import neural_asm_methods
 from experiments.fault_sweep.run import score_methods, train_models
 from experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
 from logs.sources import load_log_sequences
 from models.config import FAST
+from pipelines.episodes import ensure_sets
+from runtime.home import home_path
 from sim.episode import Episode
 
 ROWS = (("detected @1 % FPR", "detection_rate", "0.01"), ("detected @5 % FPR", "detection_rate", "0.05"),
@@ -67,8 +68,8 @@ def markdown(results: dict[str, dict], jitter_s: float) -> str:
 
 
 def main(
-    data: Path = typer.Option(Path("runs/data"), help="native episode sets, simulated when missing"),
-    out: Path = typer.Option(Path("runs/robot_logs"), help="bags, mapping and results"),
+    data: Path = typer.Option(home_path("data"), help="native episode sets, simulated when missing"),
+    out: Path = typer.Option(home_path("robot_logs"), help="bags, mapping and results"),
     jitter_s: float = typer.Option(0.002, help="largest shift of a bag time stamp (s)"),
     epochs: int | None = typer.Option(None, help="override the default model's epochs"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
