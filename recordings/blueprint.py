@@ -17,7 +17,9 @@ ARM_JOINTS = "/world/arm/joints"
 EE_PATH = "/world/ee_path"
 CUBE = "/world/cube"
 ENERGY = "/fault/energy"  # [energy, threshold]
+MARGIN = "/fault/margin"  # [log10(energy / threshold), 0]: the threshold at 0 whatever the energies' scale
 FLAG = "/fault/flag"
+EVENTS = "/events"  # fault detected, isolated joint changed
 ERRORS = "/errors"
 OBSERVATION = "/observation"
 JOINTS_OBSERVED = "/joints/observed"
@@ -25,6 +27,11 @@ JOINTS_EXPECTED = "/joints/expected"
 TRAIN_ENERGY = "/train/energy"
 
 ENERGY_SERIES = ("energy", "threshold")
+MARGIN_SERIES = ("log10(energy / threshold)", "threshold")
+SHOWN_ERRORS = 5  # channels drawn in the error view: the largest peaks of the episode
+# Looking at the workcell from the front right, above the table: the whole arm, the cube and
+# the place targets in view (the Panda's base at the origin, the table ahead along +x).
+EYE = rrb.EyeControls3D(position=(1.9, -1.6, 1.3), look_target=(0.45, 0.0, 0.25), eye_up=(0.0, 0.0, 1.0))
 
 
 # One layout object per process: each view and container draws a random id when built, and
@@ -33,12 +40,16 @@ ENERGY_SERIES = ("energy", "threshold")
 def episode_blueprint() -> rrb.Blueprint:
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(origin=WORLD, name="Panda"),
             rrb.Vertical(
-                rrb.TimeSeriesView(origin=ENERGY, name="Energy and threshold"),
+                rrb.Spatial3DView(origin=WORLD, name="Panda", eye_controls=EYE),
+                rrb.TextLogView(origin=EVENTS, name="Events"),
+                row_shares=[4, 1],
+            ),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin=MARGIN, name="Energy against threshold (log10 energy / threshold; above 0: fault)"),
                 rrb.TimeSeriesView(origin=FLAG, name="Fault flag"),
-                rrb.TimeSeriesView(origin=ERRORS, name="Weighted prediction error per channel"),
-                rrb.TimeSeriesView(origin="/joints", name="Joint angles: observed vs expected (rad)"),
+                rrb.TimeSeriesView(origin=ERRORS, name=f"Weighted prediction error, the {SHOWN_ERRORS} largest channels"),
+                rrb.TimeSeriesView(origin="/joints", name="Joint angles (rad): observed (lines), expected (crosses)"),
             ),
             column_shares=[2, 3],
         ),

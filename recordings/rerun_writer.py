@@ -41,6 +41,9 @@ class RerunEpisode:
         self.step_period_s = step_period_s
         self.ee_path: list[np.ndarray] = []
         self.pending: list[StepRecord] = []
+        self.flagged_joint: str | None = None  # the isolated joint while the episode is flagged
+        self.flagged = False
+        self.peak_errors = np.zeros(len(channel_names))
         self.rrd = RrdFile(path, recording_id, bp.episode_blueprint() if layout else None)
         self._log_series_names()
 
@@ -48,11 +51,14 @@ class RerunEpisode:
         joint_names = [self.channel_names[i] for i in self.joints]
         static = {
             bp.ENERGY: rr.SeriesLines(names=list(bp.ENERGY_SERIES)),
-            bp.FLAG: rr.SeriesLines(names=["fault"]),
+            bp.MARGIN: rr.SeriesLines(names=list(bp.MARGIN_SERIES), colors=[[31, 119, 180], [214, 39, 40]],
+                                      widths=[2.0, 1.0]),
+            bp.FLAG: rr.SeriesLines(names=["fault"], colors=[[214, 39, 40]], interpolation_mode="StepAfter"),
             bp.ERRORS: rr.SeriesLines(names=list(self.channel_names)),
             bp.OBSERVATION: rr.SeriesLines(names=list(self.channel_names)),
-            bp.JOINTS_OBSERVED: rr.SeriesLines(names=[f"{n} observed" for n in joint_names]),
-            bp.JOINTS_EXPECTED: rr.SeriesLines(names=[f"{n} expected" for n in joint_names]),
+            bp.JOINTS_OBSERVED: rr.SeriesLines(names=[f"{n} observed" for n in joint_names], widths=2.0),
+            bp.JOINTS_EXPECTED: rr.SeriesPoints(names=[f"{n} expected" for n in joint_names], markers="cross",
+                                                marker_sizes=4.0),
         }
         for path, series in static.items():
             self.rrd.rec.log(path, series, static=True)
@@ -83,16 +89,39 @@ class RerunEpisode:
                     add(bp.JOINTS_EXPECTED, t, r.expected[self.joints])
             if r.errors is not None:
                 add(bp.ERRORS, t, r.errors)
+                self.peak_errors = np.maximum(self.peak_errors, np.abs(r.errors))
             if r.energy is not None:
                 add(bp.ENERGY, t, [r.energy, np.nan if r.threshold is None else r.threshold])
+                if r.threshold is not None and r.threshold > 0 and r.energy > 0:
+                    add(bp.MARGIN, t, [np.log10(r.energy / r.threshold), 0.0])
             if r.fault is not None:
                 add(bp.FLAG, t, [float(r.fault)])
+                self._log_event(r, t)
         self.pending = []
         for path, (times, values) in rows.items():
             seconds = np.asarray(times)
             indexes = [rr.TimeColumn("step", sequence=(seconds / self.step_period_s + 1e-9).astype(np.int64)),
                        rr.TimeColumn("time", duration=seconds)]
             self.rrd.rec.send_columns(path, indexes=indexes, columns=rr.Scalars.columns(scalars=np.stack(values)))
+
+    def _log_event(self, r: StepRecord, t: float) -> None:
+        """A line in the event log when the episode is first flagged and when the isolated joint changes."""
+        if not r.fault or (self.flagged and r.isolated_joint == self.flagged_joint):
+            return
+        self._set_time(t)
+        if not self.flagged:
+            text = (f"fault detected at step {r.step}: energy {r.energy:.4g} > threshold {r.threshold:.4g}; "
+                    f"isolated joint: {r.isolated_joint or 'none'}")
+        else:
+            text = f"step {r.step}: isolated joint now {r.isolated_joint or 'none'}"
+        self.rrd.rec.log(bp.EVENTS, rr.TextLog(text, level="WARN" if not self.flagged else "INFO"))
+        self.flagged, self.flagged_joint = True, r.isolated_joint
+
+    def _show_largest_errors(self) -> None:
+        """Of the error view's channels, keep visible the ones with the largest peaks."""
+        shown = np.zeros(len(self.channel_names), bool)
+        shown[np.argsort(-self.peak_errors, kind="stable")[:bp.SHOWN_ERRORS]] = True
+        self.rrd.rec.log(bp.ERRORS, rr.SeriesLines(names=list(self.channel_names), visible_series=shown), static=True)
 
     def write_world(self, w: WorldRecord) -> None:
         self._set_time(w.time_s)
@@ -114,5 +143,6 @@ class RerunEpisode:
     def close(self) -> None:
         try:
             self.send_steps()
+            self._show_largest_errors()
         finally:
             self.rrd.close()
