@@ -23,6 +23,7 @@ from experiments.correction.cli import correction
 from experiments.fault_sweep.cli import faults
 from logs.cli import MAPPING_HELP, evaluate, read_logs, replay
 from recordings.cli import app as recordings_app
+from recordings.cli import view
 from nasm.data import SYNTHETIC, load_sequences
 from runtime.home import home, home_path
 from service.cli import serve
@@ -152,7 +153,7 @@ def info(model_path: Path | None = typer.Argument(None, help="checkpoint (.safet
     typer.echo(json.dumps(summary, indent=2, default=str))
 
 
-for command in (demos, faults, correction, contextual, serve, client, replay, evaluate):  # each package owns its commands
+for command in (demos, faults, correction, contextual, serve, client, view, replay, evaluate):  # each package owns its commands
     app.command()(command)
 app.add_typer(recordings_app, name="recordings")
 

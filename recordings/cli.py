@@ -1,6 +1,7 @@
 """``nasm recordings``: tools for recording files.
 
-``recover FILE...`` rewrites each ``.mcap`` or ``.rrd`` cut short by a crash into a
+``view RUN`` opens a run's client and service files together in the Rerun viewer, or with
+``--screenshot PNG`` draws them to a file with the real viewer. ``recover FILE...`` rewrites each ``.mcap`` or ``.rrd`` cut short by a crash into a
 valid, indexed file in place (like the official ``mcap recover``); a whole file keeps
 its content. A file that cannot be recovered is named with the reason, and the others
 are still done.
@@ -10,7 +11,9 @@ from pathlib import Path
 
 import typer
 
+from recordings.paths import DEFAULT_DIR
 from recordings.recover import recover as recover_file
+from recordings.view import RunNotFound, view as view_run
 
 app = typer.Typer(help="Tools for the .rrd and .mcap recordings.", no_args_is_help=True,
                   pretty_exceptions_show_locals=False)
@@ -35,6 +38,23 @@ def recover(files: list[Path] = typer.Argument(..., help=".mcap or .rrd files, r
     if failed:
         raise typer.Exit(1)
 
+
+def view(
+    run: str = typer.Argument(..., help="a run id (client-...) or one of its .rrd/.mcap files"),
+    folder: Path = typer.Option(DEFAULT_DIR, help="recordings folder holding the run"),
+    screenshot: Path | None = typer.Option(None, help="write a PNG with the real viewer instead of opening it"),
+) -> None:
+    """Open a run's client and service recordings together in the Rerun viewer, or screenshot them."""
+    try:
+        files = view_run(run, folder, screenshot)
+    except (RunNotFound, RuntimeError) as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
+    shown = " ".join(map(str, files))
+    typer.echo(f"wrote {screenshot} from {shown}" if screenshot else f"viewed {shown}")
+
+
+app.command()(view)
 
 if __name__ == "__main__":
     app()

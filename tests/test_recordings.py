@@ -102,3 +102,31 @@ def test_training_run(tmp_path):
 def test_unknown_format_is_refused(tmp_path):
     with pytest.raises(ValueError, match="formats"):
         EpisodeRecorder("run", NAMES, folder=tmp_path, formats=("rrd", "csv"))
+
+
+def test_a_run_is_found_from_its_id_or_any_of_its_files(tmp_path):
+    from recordings.view import RunNotFound, run_files
+
+    names = ["client-1-a.rrd", "client-1-a.mcap", "service-client-1-a-s1.rrd", "service-client-1-a-s2.rrd",
+             "client-2-b.rrd", "service-client-2-b-s3.rrd"]
+    for name in names:
+        (tmp_path / name).write_bytes(b"")
+    expected = [tmp_path / n for n in ("client-1-a.rrd", "service-client-1-a-s1.rrd", "service-client-1-a-s2.rrd")]
+    assert run_files("client-1-a", tmp_path) == expected
+    assert run_files(tmp_path / "client-1-a.mcap") == expected
+    assert run_files(tmp_path / "service-client-1-a-s2.rrd") == expected
+    with pytest.raises(RunNotFound, match="client-3"):
+        run_files("client-3", tmp_path)
+
+
+def test_a_screenshot_without_a_display_runs_under_xvfb(monkeypatch, tmp_path):
+    from recordings import view
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.setattr(view.shutil, "which", lambda name: "/usr/bin/xvfb-run" if name == "xvfb-run" else None)
+    command = view.viewer_command([tmp_path / "a.rrd"], tmp_path / "a.png")
+    assert command[0] == "xvfb-run" and command[-4:] == ["vulkan", "--screenshot-to", str(tmp_path / "a.png"),
+                                                         str(tmp_path / "a.rrd")]
+    monkeypatch.setattr(view.shutil, "which", lambda name: None)
+    with pytest.raises(RuntimeError, match="xvfb"):
+        view.viewer_command([tmp_path / "a.rrd"], tmp_path / "a.png")
