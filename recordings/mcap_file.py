@@ -89,6 +89,12 @@ class McapFile:
         schema_id = self.writer.register_schema(schema["title"], "jsonschema", orjson.dumps(schema))
         return self.writer.register_channel(topic, "json", schema_id)
 
+    def metadata(self, name: str, values: dict[str, Any]) -> None:
+        """An MCAP Metadata record (what ``mcap info`` and Foxglove list as the file's
+        metadata): strings as they are, anything else as JSON."""
+        self.writer.add_metadata(name, {k: v if isinstance(v, str) else orjson.dumps(v, option=_DUMP).decode()
+                                        for k, v in values.items()})
+
     def write(self, channel: int, time_ns: int, message: dict[str, Any]) -> None:
         self.writer.add_message(channel, time_ns, orjson.dumps(message, option=_DUMP), time_ns)
 

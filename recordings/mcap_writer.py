@@ -1,6 +1,7 @@
 """An episode to an MCAP file: JSON-schema channels any MCAP reader or Foxglove opens.
 
-Topics: ``/metadata`` (once), ``/observation``, ``/expected`` (what the model expected
+Run metadata is an MCAP Metadata record named ``run`` and, for readers of messages, the
+``/metadata`` topic (once). Topics: ``/observation``, ``/expected`` (what the model expected
 of the step), ``/prediction`` (its forecast of the next step), ``/errors`` (weighted
 prediction errors), ``/fault`` (energy, threshold, flag, isolated joint) and ``/tf``
 (``foxglove.FrameTransforms``: link frames, tool point and cube in ``world``).
@@ -35,7 +36,7 @@ class McapEpisode:
         self.start_ns = time.time_ns()
         self.out = McapFile(path)
         self.channels = {
-            topic: self.out.channel(topic, schemas.channel_vector(f"neural_asm{topic}", doc, channel_names))
+            topic: self.out.channel(topic, schemas.channel_vector(f"neural_asm.{topic[1:].capitalize()}", doc, channel_names))
             for topic, doc in _VECTOR_TOPICS.items()
         }
         self.channels["/fault"] = self.out.channel("/fault", schemas.FAULT)
@@ -46,6 +47,7 @@ class McapEpisode:
         self.out.write(self.channels[topic], self.start_ns + int(time_s * 1e9), message)
 
     def write_metadata(self, metadata: dict[str, Any]) -> None:
+        self.out.metadata("run", metadata)
         self._write("/metadata", 0.0, metadata)
         self.out.flush()
 

@@ -130,3 +130,17 @@ def test_a_screenshot_without_a_display_runs_under_xvfb(monkeypatch, tmp_path):
     monkeypatch.setattr(view.shutil, "which", lambda name: None)
     with pytest.raises(RuntimeError, match="xvfb"):
         view.viewer_command([tmp_path / "a.rrd"], tmp_path / "a.png")
+
+
+def test_mcap_carries_the_run_as_a_metadata_record_and_one_schema_naming(tmp_path, rng):
+    from mcap.reader import make_reader
+
+    with EpisodeRecorder("client-meta", NAMES, folder=tmp_path, recording_id="rid-7",
+                         metadata={"skill": "pick", "seed": 3}) as rec:
+        write_episode(rec, 3, rng)
+    with open(rec.paths["mcap"], "rb") as f:
+        reader = make_reader(f)
+        [run] = [m for m in reader.iter_metadata() if m.name == "run"]
+        schemas = {s.name for s in reader.get_summary().schemas.values()}
+    assert run.metadata["skill"] == "pick" and run.metadata["seed"] == "3"
+    assert all(name.startswith(("neural_asm.", "foxglove.")) and "/" not in name for name in schemas), schemas
