@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from experiments.varied.ceiling import ceiling
+from experiments.varied.ceiling import ceiling, ceiling_markdown
 from experiments.varied.data import make_benchmark
 from experiments.varied.methods import Method, neural_asm_methods, train_neural_asm
 from experiments.varied.score import headline, score_all
@@ -125,3 +125,4 @@ def test_ceiling_oracles_see_what_the_context_explains(bench):
     assert mean["episode"]["auroc"] >= replay["episode"]["auroc"]  # half the noise separates faults no worse
     wrong_cube = mean["episode"]["per_family"]["wrong_cube"]
     assert wrong_cube["visible"] > 0 and wrong_cube["detection_visible"] >= 0.5  # a cube 6-10 cm off the reported pose
+    assert set(mean["lower_floors"]) == {"0.01", "0.002"} and "floor 0.002" in ceiling_markdown(result)

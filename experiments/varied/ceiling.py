@@ -34,7 +34,8 @@ import numpy as np
 
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.score import ALPHA, SETS, held_out_error, outcomes, summary
-from models.calibration import estimate
+from models.calibration import error_precision, error_spread
+from models.config import SCORING
 from models.normaliser import Normaliser
 from models.scoring import energy
 from models.sequences import Sequences
@@ -44,6 +45,7 @@ from sim.episode import Episode
 from sim.varied import channel_groups, context_columns
 from sim.varied_sets import VariedJob, run_job
 
+LOWER_FLOORS = (0.01, 0.002)  # normalised units, against ScoringConfig.error_std_floor (0.05)
 REPLICATES = {"fresh": {"replicate": 1}, "same_start": {"replicate": 2, "same_start": True}}
 
 
@@ -115,21 +117,30 @@ def explained_variance(bench: VariedBenchmark, residual: np.ndarray) -> dict[str
             for group, cols in channel_groups(bench.channel_names).items()}
 
 
-def ceiling(bench: VariedBenchmark, workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA) -> dict:
-    """Every oracle's summaries (the benchmark's keys), held-out error and explained variance,
-    and the episodes dropped."""
+def _scored(bench: VariedBenchmark, errors: dict[str, np.ndarray], alpha: float, floor: float) -> dict:
+    """The benchmark's own scoring of residuals, with error spreads floored at ``floor``."""
+    spread = error_spread(errors["precision"], floor)
+    precision = error_precision(errors["precision"], spread)
+    e = {key: energy(err, spread, precision) for key, err in errors.items()}
+    return {rule: summary(o, bench) for rule, o in outcomes(e, bench.onset, alpha).items()}
+
+
+def ceiling(bench: VariedBenchmark, workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA,
+            floors: tuple[float, ...] = LOWER_FLOORS) -> dict:
+    """Every oracle's summaries (the benchmark's keys, at the scoring's own spread floor),
+    held-out error and explained variance; its detection with the spreads floored lower
+    (``floors``: how much the floor, not the noise, hides); and the episodes dropped."""
     bench, reps, dropped = simulate_replicates(bench, workers, backend)
     norm = Normaliser.fit(bench.demos.data)
-    result: dict = {"context": bench.context, "alpha": alpha, "replicates_failed": dropped, "oracles": {}}
+    result: dict = {"context": bench.context, "alpha": alpha, "replicates_failed": dropped,
+                    "spread_floor": SCORING.error_std_floor, "oracles": {}}
     for name, errors in oracle_errors(bench, reps, norm).items():
-        cal = estimate("ceiling", 1, errors["precision"], "precision split", "full")
-        e = {key: energy(err, cal.error_std, cal.error_precision) for key, err in errors.items()}
-        rules = outcomes(e, bench.onset, alpha)
         result["oracles"][name] = {
             "held_out_mse": held_out_error(errors["precision"], bench.channel_names)["all"],
             "held_out_mse_per_group": held_out_error(errors["precision"], bench.channel_names),
             "explained_variance": explained_variance(bench, errors["precision"] * norm.std),
-            **{rule: summary(o, bench) for rule, o in rules.items()}}
+            **_scored(bench, errors, alpha, SCORING.error_std_floor),
+            "lower_floors": {str(f): _scored(bench, errors, alpha, f)["episode"] for f in floors}}
     return result
 
 
@@ -157,6 +168,18 @@ def ceiling_markdown(result: dict) -> str:
     for name, o in result["oracles"].items():
         fam = o["episode"]["per_family"]
         lines.append(f"| {name.replace('_', ' ')} | " + " | ".join(pct(fam[f]["detection_visible"]) for f in families) + " |")
+    floors = list(next(iter(result["oracles"].values()))["lower_floors"])
+    lines += ["", f"Detection (visible) / AUROC with the error spreads floored below the scoring's own "
+              f"{result['spread_floor']:g} (normalised units): what the floor, not the noise, hides:", "",
+              f"| oracle | floor {result['spread_floor']:g} | " + " | ".join(f"floor {f}" for f in floors) + " |",
+              "|---" * (len(floors) + 2) + "|"]
+    for name, o in result["oracles"].items():
+        cells = [o["episode"]] + [o["lower_floors"][f] for f in floors]
+        lines.append(f"| {name.replace('_', ' ')} | " + " | ".join(f"{pct(c['detection'])} / {c['auroc']:.3f}"
+                                                                  for c in cells) + " |")
+    families_low = o["lower_floors"][floors[-1]]["per_family"]
+    lines += ["", f"Per family at floor {floors[-1]} ({name.replace('_', ' ')}): " + ", ".join(
+        f"{f} {pct(families_low[f]['detection_visible'])}" for f in sorted(families_low)) + "."]
     groups = list(next(iter(result["oracles"].values()))["explained_variance"])
     lines += ["", "Held-out error per kind of channel (compare with each method's in fault_sweep.md):", "",
               "| oracle | " + " | ".join(groups) + " |", "|---" * (len(groups) + 1) + "|"]
