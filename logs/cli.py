@@ -42,7 +42,7 @@ def replay(
     source: str = typer.Argument(..., help="ROS 2 bag (.mcap, rosbag2 folder, folder of bags) or LeRobot dataset"),
     mapping: Path = typer.Option(..., help=MAPPING_HELP),
     url: str = typer.Option(..., help="URL of a running service (nasm serve)"),
-    episode: list[int] = typer.Option([], help="episode to stream (0-based, repeatable) [default: every episode]"),
+    episode: list[int] = typer.Option([], help="episode to stream (0-based, repeatable) (default: every episode)"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
     mode: str = typer.Option("offline", help="recall mode: offline or online"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),

@@ -32,7 +32,7 @@ class Timing(_Strict):
     period_s: float = Field(gt=0, description="the model's step period (s); 0.5 for the simulated Panda")
     steps: int = Field(ge=2, description="steps per episode; shorter episodes are refused")
     max_gap_s: float | None = Field(None, gt=0, description="longest silence of a stream inside an "
-                                    "episode [default: period_s]")
+                                    "episode (default: period_s)")
 
     @property
     def gap_limit_s(self) -> float:

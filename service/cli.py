@@ -15,7 +15,12 @@ app = typer.Typer(help="The Neural ASM service.", no_args_is_help=True, pretty_e
 
 
 def _help(name: str) -> str:
-    return Settings.model_fields[name].description or ""
+    """The setting's description, default and environment variable (the options default to
+    None so that unset ones fall through to the environment)."""
+    field = Settings.model_fields[name]
+    default = field.default_factory() if field.default_factory is not None else field.default  # type: ignore[call-arg]
+    shown = "none" if default is None else default
+    return f"{field.description or ''} (default: {shown}; env NASM_{name.upper()})"
 
 
 @app.callback()

@@ -33,10 +33,10 @@ def demos(
     task: Task = typer.Option(Task.paper, help="paper: the paper's two fixed skills; varied: four skills whose "
                               "context varies (all its sets: demos, normal, ood, faults, twins)"),
     sets: Which = typer.Option(Which.demos, "--sets", help="demos, normal (held-out), faults (980 + no-fault twins), or all."),
-    out: Path | None = typer.Option(None, "--out", help="Output directory [default: data, data_varied in the data home]."),
+    out: Path | None = typer.Option(None, "--out", help="Output directory (default: data, data_varied in the data home)."),
     workers: int = typer.Option(2, "--workers", min=1, help="Worker processes (CPUs of a local Ray instance)."),
     backend: Backend = typer.Option("processes", "--backend", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)."),
-    n_demos: int | None = typer.Option(None, "--n-demos", min=1, help="Demonstrations per skill [default: 10 paper, 40 varied]."),
+    n_demos: int | None = typer.Option(None, "--n-demos", min=1, help="Demonstrations per skill (default: 10 paper, 40 varied)."),
     n_normal: int = typer.Option(200, "--n-normal", min=1, help="Held-out normal episodes."),
 ) -> None:
     """Simulate episode sets and write <out>/<set>.mcap and <set>.npz."""

@@ -31,8 +31,8 @@ def faults(
     task: Task = typer.Option(Task.paper, help="paper: the 980 joint locks of the paper's fixed task; varied: "
                               "four skills whose cube, goal, speed and obstacle vary, with nine fault families"),
     context: Context = typer.Option(Context.observed, help="varied task: whether the goal is an observed channel"),
-    out: Path | None = typer.Option(None, help="output folder [default: fault_sweep, varied_<context> in the data home]"),
-    data: Path | None = typer.Option(None, help="episode sets, simulated when missing [default: data, data_varied in the data home]"),
+    out: Path | None = typer.Option(None, help="output folder (default: fault_sweep, varied_<context> in the data home)"),
+    data: Path | None = typer.Option(None, help="episode sets, simulated when missing (default: data, data_varied in the data home)"),
     paper_epochs: int = typer.Option(FAITHFUL.epochs, help="epochs of the paper-configuration model"),
     fast_epochs: int | None = typer.Option(None, help="override the default model's epochs"),
     ablation: bool = typer.Option(False, "--ablation", help="varied task: train one Neural ASM per lever "
