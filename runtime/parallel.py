@@ -10,6 +10,7 @@ it), and otherwise starts a local instance with `workers` CPUs.
 from __future__ import annotations
 
 import os
+import signal
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
@@ -65,12 +66,29 @@ def parallel_map(
 
 
 def _process_map(fn, args, workers, initializer, chunksize, bar) -> list[Any]:
+    """Ctrl-C reaches the whole process group; only this process answers it: the workers
+    ignore it (no traceback from each), and the pool is shut down without waiting for them."""
     results = []
-    with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=initializer) as pool:
+    pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_start,
+                               initargs=(initializer,))
+    try:
         for result in pool.map(_apply, repeat(fn), args, chunksize=chunksize):
             results.append(result)
             bar.update()
+    except BaseException:
+        running = list((pool._processes or {}).values())  # the jobs already running are stopped too
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in running:
+            process.terminate()
+        raise
+    pool.shutdown()
     return results
+
+
+def _worker_start(initializer: Callable[[], None] | None) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if initializer is not None:
+        initializer()
 
 
 def _apply(fn, args):
