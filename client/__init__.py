@@ -16,14 +16,15 @@ default Panda model on first run (a few minutes, with a progress bar).
 Every episode is recorded to ``<out>/client-....rrd`` and ``.mcap`` (``recordings``) under
 a Rerun recording id that is also given to the service session, so the client's file
 (world: arm, tool path, cube; scores) and the service's file merge into one view:
-``rerun runs/recordings/client-X.rrd runs/recordings/service-client-X-*.rrd``.
+``nasm view client-X`` (or ``rerun client-X.rrd service-client-X-*.rrd`` in the recordings folder
+of the data home).
 
 If the service goes away mid-episode the client says so; with ``--reconnect`` it opens a
 new session, replays the steps sent so far and carries on. Recordings are closed in all
 cases (normal exit, lost service, Ctrl-C, errors) and stay readable.
 
-Exit codes: 0 done, 2 the service refused (bad API key, unknown model, ...), 3 the service
-went away (or could not be reached), 130 Ctrl-C. ``run_client`` is the function behind the
+Exit codes: 0 done, 2 a bad option or the service refused (bad API key, unknown model, ...),
+3 the service went away (or could not be reached), 130 Ctrl-C. ``run_client`` is the function behind the
 CLI; it returns one ``EpisodeSummary`` per episode.
 """
 
