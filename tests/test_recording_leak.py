@@ -41,7 +41,9 @@ def test_recorded_sessions_free_their_memory(tmp_path, rng):
     record_sessions(tmp_path, SESSIONS, rng)
     growth = (rss_mb() - rss) / SESSIONS
     assert growth < 0.2, f"RSS grows {growth:.2f} MB per recorded session"
-    assert threads() == n_threads
+    # The leak left four threads per session (1000 here); threads of earlier tests' servers and
+    # pools may still be winding down in this process, so a couple either way is not a leak.
+    assert threads() <= n_threads + 2, f"{threads() - n_threads} threads more after {SESSIONS} sessions"
 
 
 def test_freeing_keeps_the_callers_global_recording(tmp_path, rng):
