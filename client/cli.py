@@ -50,9 +50,7 @@ def client(
         fault = fault_spec(fault_joint, fault_time, fault_overshoot)
         summaries = run_client(skill.value, seed, fault, FallingObject() if falling_object else None, episodes, url,
                                api_key, mode.value, out, reconnect, transport.value, models_dir)
-    except ValueError as exc:
-        raise _fail(str(exc), 2) from None
-    except ServiceError as exc:
+    except (ValueError, ServiceError) as exc:  # a bad option, or the service refused the request
         raise _fail(str(exc), 2) from None
     except ServiceLost as exc:
         raise _fail(f"{exc}; nothing was recorded for the episode", 3) from None

@@ -13,18 +13,18 @@ import numpy as np
 import torch
 import typer
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import PRESETS
-from models.recall import RECALL_MODES
 from client.cli import client
 from experiments.contextual.cli import contextual
 from experiments.correction.cli import correction
 from experiments.fault_sweep.cli import faults
 from logs.cli import MAPPING_HELP, evaluate, read_logs, replay
+from models import checkpoint
+from models.asm import NeuralASM
+from models.config import PRESETS
+from models.recall import RECALL_MODES
+from nasm.data import SYNTHETIC, load_sequences
 from recordings.cli import app as recordings_app
 from recordings.cli import view
-from nasm.data import SYNTHETIC, load_sequences
 from runtime.home import home, home_path
 from service.cli import serve
 from sim.cli import demos
