@@ -8,12 +8,12 @@ Timing follows the paper's "Robot simulation details": a 40 Hz position controll
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
 ControllerKind = Literal["stiff", "compliant"]
-CONTROLLERS: tuple[str, ...] = ("stiff", "compliant")
+CONTROLLERS: tuple[str, ...] = get_args(ControllerKind)
 
 
 @dataclass(frozen=True)
@@ -159,17 +159,20 @@ class SimConfig:
     success_tolerance_m: float = 0.01
 
     def __post_init__(self) -> None:
-        if self.controller not in CONTROLLERS:
-            raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
+        _check_controller(self.controller)
 
     def joint_gains(self, controller: ControllerKind | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(stiffness, damping) per joint of `controller` (default: this config's)."""
-        kind = self.controller if controller is None else controller
-        if kind not in CONTROLLERS:
-            raise ValueError(f"controller must be one of {CONTROLLERS}, got {kind!r}")
+        kind = _check_controller(self.controller if controller is None else controller)
         if kind == "stiff":
             return np.asarray(self.servo.kp, float), np.asarray(self.servo.kv, float)
         return np.asarray(self.impedance.stiffness, float), np.asarray(self.impedance.damping, float)
+
+
+def _check_controller(kind: str) -> str:
+    if kind not in CONTROLLERS:
+        raise ValueError(f"controller must be one of {CONTROLLERS}, got {kind!r}")
+    return kind
 
 
 SIM = SimConfig()

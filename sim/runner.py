@@ -226,27 +226,29 @@ def seed_variation(skill: str, seed: int) -> Variation:
     return sample_variation(skill, _rng(skill, seed))
 
 
+def _seeded(skill: str, seed: int) -> tuple[Variation, np.ndarray]:
+    """`seed`'s scene variation and sensor noise for `skill`, drawn in this order from one stream."""
+    skill_spec(skill)
+    rng = _rng(skill, seed)
+    variation = sample_variation(skill, rng)
+    return variation, rng.standard_normal((SIM.timing.n_steps, N_NOISY))
+
+
 def run_episode(skill: str, seed: int, fault: FaultSpec | None = None,
                 disturbance: FallingObject | None = None, controller: ControllerKind | None = None) -> Episode:
     """Plan `skill` for `seed` by IK and execute it, optionally with a fault and/or a disturbance,
     under `controller` (default `SIM.controller`)."""
-    skill_spec(skill)
-    rng = _rng(skill, seed)
-    variation = sample_variation(skill, rng)
+    variation, noise = _seeded(skill, seed)
     plan = make_plan(skill, variation)
-    noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
     return execute(skill, seed, plan.joints, plan.gripper, variation.cube_xy, variation.cube_yaw, noise,
                     _effects(fault, disturbance), None, fault, disturbance, controller=controller)
 
 
 def first_observation(skill: str, seed: int) -> np.ndarray:
     """(25,) the observation `run_episode(skill, seed)` starts with, taken before any motion:
-    the cue a memory recalls the skill from, at a fifteenth of an episode's cost."""
-    skill_spec(skill)
-    rng = _rng(skill, seed)
-    variation = sample_variation(skill, rng)
+    the cue a memory recalls the skill from, simulating one step of the plan instead of fifteen."""
+    variation, noise = _seeded(skill, seed)
     plan = make_plan(skill, variation)
-    noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
     return execute(skill, seed, plan.joints[:1], plan.gripper[:1], variation.cube_xy, variation.cube_yaw, noise,
                    [], None, None, None).observations[0]
 
@@ -272,8 +274,6 @@ def execute_plan(joint_plan: np.ndarray, gripper_plan: np.ndarray, seed: int,
         raise ValueError(f"joint_plan must be a finite ({n}, {N_JOINTS}) array, got shape {joints.shape}")
     if gripper.shape != (n,) or not np.isin(gripper, (0.0, 1.0)).all():
         raise ValueError(f"gripper_plan must be a ({n},) array of 0/1, got {gripper!r}")
-    rng = _rng(skill, seed)
-    variation = sample_variation(skill, rng)
-    noise = rng.standard_normal((n, N_NOISY))
+    variation, noise = _seeded(skill, seed)
     return execute(skill, seed, joints, gripper, variation.cube_xy, variation.cube_yaw, noise,
                     _effects(fault, disturbance), correction_hook, fault, disturbance, controller=controller)
