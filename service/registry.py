@@ -113,8 +113,9 @@ class ModelRegistry:
                 f"no models loaded from {self.models_dir}; train one with `nasm train` "
                 "or start the service with default-model building enabled"
             )
-        if name in self.broken:
-            raise UnknownModel(f"model {name!r} was refused: {self.broken[name]}")
-        if name not in self.models:
+        hosted = self.hosted.get(name)
+        if hosted is not None and hosted.error is not None:
+            raise UnknownModel(f"model {name!r} was refused: {hosted.error}")
+        if hosted is None or hosted.model is None:
             raise UnknownModel(f"no model named {name!r}; available: {sorted(self.models)}")
-        return name, self.models[name]
+        return name, hosted.model

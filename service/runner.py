@@ -168,7 +168,9 @@ class Runner:
             result = StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs))
             job.loop.call_soon_threadsafe(_settle, job.future, result, None)
         if self.recorder is not None:  # after answering: recording is not on the latency path
-            recorded = [(j, o) for j, o in zip(jobs, results) if o is not None and j.session.recording is not None]
+            live = self.recorder.generation  # a replaced recorder child has no files for older sessions
+            recorded = [(j, o) for j, o in zip(jobs, results) if o is not None and j.session.recording is not None
+                        and j.session.recording.generation == live]
             if recorded:
                 try:
                     self.recorder.write(step_batch(recorded))  # type: ignore[arg-type]

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from models.asm import NeuralASM, SkillStream
+from models.asm import SkillStream
 from models.fault import ThresholdKind, joint_channels
 from recordings.recorder import RecorderProcess, SessionRecording
 from service.errors import BadObservation, NotCalibrated, TooManySessions, UnknownSession
@@ -33,10 +33,6 @@ class Session:
     client: str = ""  # whose quota the session counts against (service.auth.client_of)
     recording: SessionRecording | None = None  # None: not recorded
     last_used: float = field(default_factory=time.monotonic)
-
-    @property
-    def model(self) -> NeuralASM:
-        return self.stream.model
 
     @property
     def channel_names(self) -> tuple[str, ...]:
