@@ -15,6 +15,7 @@ from models.detectors import (
     TemplateResidualOneStep,
     all_detectors,
 )
+from models.one_step import delay_embed, fit_one_step
 
 T, D, C = 10, 8, 2
 CONTEXT = list(range(C))
@@ -154,3 +155,29 @@ def test_bad_input_is_named(task):
         det.expected(x[:, :, :-1], test_skills)
     with pytest.raises(ValueError, match="steps"):
         det.expected(np.concatenate([x, x], axis=1), test_skills)
+
+
+def test_delay_embedding_is_causal_and_keeps_the_current_step_first():
+    x = np.random.default_rng(0).standard_normal((3, 6, 4))
+    embedded = delay_embed(x, 3)
+    assert embedded.shape == (3, 6, 12)
+    np.testing.assert_array_equal(embedded[..., :4], x)
+    np.testing.assert_array_equal(embedded[:, 4, 4:8], x[:, 3])  # one step back
+    np.testing.assert_array_equal(embedded[:, 4, 8:], x[:, 2])  # two steps back
+    np.testing.assert_array_equal(embedded[:, 0, 8:], x[:, 0])  # before the start: the first step
+    np.testing.assert_array_equal(delay_embed(x, 1), x)
+
+
+def test_one_step_predictor_reads_two_steps_of_an_oscillator():
+    """x[t+1] = 2 cos(w) x[t] - x[t-1]: one step cannot tell the phase's direction, two can."""
+    rng = np.random.default_rng(0)
+    t = np.arange(T)[None, :, None]
+    phase = rng.uniform(0, 2 * np.pi, (60, 1, D))
+    x = np.sin(0.7 * t + phase) + 0.01 * rng.standard_normal((60, T, D))
+    skills = np.array(["osc"] * 60)
+    detector = LinearOneStep().fit(x[:40], skills[:40], [], seed=0)
+    assert detector.one_step.lags >= 2
+    error = ((detector.expected(x[40:], skills[40:]) - x[40:])[:, 1:] ** 2).mean()
+    one_lag = fit_one_step(x[:40], skills[:40], seed=0, lag_choices=(1,))
+    one_lag_error = ((one_lag.predict(x[40:], skills[40:]) - x[40:, 1:]) ** 2).mean()
+    assert error < 0.2 * one_lag_error
