@@ -3,8 +3,10 @@
     python sim/client.py                                  # one episode, embedded service (= nasm client)
     python sim/client.py --fault-joint 2 --fault-time 3 --fault-overshoot 15
     python sim/client.py --url http://127.0.0.1:8000 --api-key KEY --episodes 5 --reconnect
+    python sim/client.py --falling-object --controller compliant --correct   # the reactive-correction demo
 
-Each episode is simulated first (``sim.runner.run_episode``), then its 15 observations
+Each episode is simulated first (``sim.runner.run_episode``; under ``--controller compliant``
+the memory's recalled plan, see ``client.run``), then its 15 observations
 are streamed to the service one step at a time over the websocket ``/stream`` (or, with
 ``--transport http``, ``POST /sessions`` + ``POST /fault``). A live line is printed per
 step (energy, threshold, flag, isolated joint) and a summary per episode.

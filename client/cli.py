@@ -8,17 +8,18 @@ from pathlib import Path
 
 import typer
 
-from client.run import MODES, fault_spec, run_client
+from client.run import MODES, falling_object, fault_spec, run_client
 from client.transport import TRANSPORTS, ServiceError, ServiceLost
 from recordings import DEFAULT_DIR
 from runtime.home import home_path
-from sim.config import SIM
-from sim.disturbances import FallingObject
+from experiments.correction.config import CORRECTION
+from sim.config import CONTROLLERS, SIM
 from sim.skills import SKILLS
 
 Skill = Enum("Skill", {s: s for s in SKILLS}, type=str)
 Mode = Enum("Mode", {m: m for m in MODES}, type=str)
 TransportName = Enum("TransportName", {t: t for t in TRANSPORTS}, type=str)
+Controller = Enum("Controller", {c: c for c in CONTROLLERS}, type=str)
 
 
 def _fail(message: str, code: int) -> typer.Exit:
@@ -33,7 +34,17 @@ def client(
     fault_joint: int | None = typer.Option(None, min=1, max=7, help="fault: joint 1..7 (give all three fault options or none)"),
     fault_time: float | None = typer.Option(None, help="fault: time in s, on the 0.5 s grid"),
     fault_overshoot: float | None = typer.Option(None, help="fault: overshoot in degrees"),
-    falling_object: bool = typer.Option(False, "--falling-object", help="drop a 5 kg box on the arm at 4 s"),
+    drop: bool = typer.Option(False, "--falling-object", help=f"drop a box on the elbow at {CORRECTION.release_s:g} s, "
+                              "during the carry (the correction experiment's hit)"),
+    hit_momentum: float | None = typer.Option(None, help=f"the falling box's momentum in kg m/s (default "
+                                              f"{CORRECTION.demo_momentum:g}: a "
+                                              f"{CORRECTION.demo_momentum / CORRECTION.speed_m_s:g} kg box at "
+                                              f"{CORRECTION.speed_m_s:g} m/s); needs --falling-object"),
+    controller: Controller = typer.Option(SIM.controller, help="joint controller: stiff position servos (the IK "
+                                          "plan, as in the training data) or compliant joint impedance (the memory's "
+                                          "recalled plan, monitored by the model calibrated for compliant control)"),
+    correct: bool = typer.Option(False, "--correct", help="correct the hit with the memory's prediction error once "
+                                 "the monitor flags it; needs --controller compliant"),
     episodes: int = typer.Option(1, min=1, help="number of episodes"),
     url: str | None = typer.Option(None, help="service URL, e.g. http://127.0.0.1:8000; default: start one "
                                                "in-process on a free port"),
@@ -48,8 +59,9 @@ def client(
     """Simulate Panda episodes, stream them to the Neural ASM service and record them."""
     try:
         fault = fault_spec(fault_joint, fault_time, fault_overshoot)
-        summaries = run_client(skill.value, seed, fault, FallingObject() if falling_object else None, episodes, url,
-                               api_key, mode.value, out, reconnect, transport.value, models_dir)
+        summaries = run_client(skill.value, seed, fault, falling_object(drop, hit_momentum), episodes, url,
+                               api_key, mode.value, out, reconnect, transport.value, models_dir,
+                               controller=controller.value, correct=correct)
     except (ValueError, ServiceError) as exc:  # a bad option, or the service refused the request
         raise _fail(str(exc), 2) from None
     except ServiceLost as exc:

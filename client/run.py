@@ -1,5 +1,10 @@
 """A client run: the service (the given URL, or one started in-process), then each episode
-simulated and streamed."""
+simulated and streamed.
+
+Under stiff control (the default) an episode is the demonstrator's IK plan, as every data set
+is. Under compliant control it is the memory's recalled plan (the correction experiment's
+setting), corrected or not, and the session names the monitor calibrated for compliant
+control (``experiments.correction.served``), the one the correction's gate also uses."""
 
 from __future__ import annotations
 
@@ -7,13 +12,21 @@ import contextlib
 from pathlib import Path
 from typing import Callable, Iterator
 
+from client.compliant import compliant_episode
 from client.stream import stream_episode
 from client.summary import EpisodeSummary, closing_lines, say, summary_line
-from client.transport import TRANSPORTS, check_url
+from client.transport import TRANSPORTS, ServiceError, check_url, served_digest
+from experiments.correction.config import CORRECTION
+from experiments.correction.pipeline import hit
+from experiments.correction.served import digest_of, ensure_compliant_model
+from models import checkpoint
+from models.asm import NeuralASM
+from models.config import SCORING
 from recordings import DEFAULT_DIR
 from runtime.home import home_path
-from sim.config import SIM
+from sim.config import CONTROLLERS, SIM
 from sim.disturbances import FallingObject
+from sim.episode import Episode
 from sim.faults import FaultSpec
 from sim.runner import run_episode
 from sim.skills import SKILLS
@@ -29,6 +42,46 @@ def fault_spec(joint: int | None, time_s: float | None, overshoot_deg: float | N
     if not all(given):
         raise ValueError("give all three of --fault-joint, --fault-time and --fault-overshoot, or none")
     return FaultSpec(joint, time_s, overshoot_deg)  # type: ignore[arg-type]
+
+
+def falling_object(drop: bool, momentum_kg_m_s: float | None = None) -> FallingObject | None:
+    """The hit ``--falling-object`` drops: the correction experiment's box on the elbow during the
+    carry, of ``--hit-momentum`` (default ``CORRECTION.demo_momentum``, a hit the monitor flags)."""
+    if momentum_kg_m_s is not None and not drop:
+        raise ValueError("--hit-momentum needs --falling-object")
+    if not drop:
+        return None
+    momentum = CORRECTION.demo_momentum if momentum_kg_m_s is None else momentum_kg_m_s
+    if not momentum > 0:
+        raise ValueError(f"--hit-momentum must be > 0 kg m/s, got {momentum}")
+    return hit(CORRECTION, momentum)
+
+
+def _compliant_monitor(models_dir: Path, quiet: bool) -> tuple[Path, NeuralASM]:
+    """The compliant monitor's checkpoint, built (with the default model) on first use."""
+    path = ensure_compliant_model(models_dir, progress=not quiet)
+    return path, checkpoint.load(path)
+
+
+def _check_served(url: str, api_key: str | None, path: Path) -> None:
+    """The service must host the very checkpoint the correction's gate runs."""
+    served = served_digest(url, api_key, path.stem)
+    if served != digest_of(path):
+        raise ServiceError(f"the service at {url} does not host {path} (model {path.stem!r}: "
+                           f"{'digest ' + served if served else 'none'}); start it on that models folder "
+                           f"(nasm serve --models-dir {path.parent}) or omit --url")
+
+
+def _simulate(skill: str, seed: int, fault: FaultSpec | None, disturbance: FallingObject | None,
+              monitor: NeuralASM | None, correct: bool, mode: str) -> tuple[Episode, dict | None]:
+    """The episode (stiff: the IK plan; compliant, ``monitor`` given: the recalled plan) and,
+    with ``correct``, when its correction engaged and let go."""
+    if monitor is None:
+        return run_episode(skill, seed, fault=fault, disturbance=disturbance), None
+    ep, correction = compliant_episode(monitor, skill, seed, disturbance, fault, correct, mode, SCORING.default_fpr)
+    if correction is None:
+        return ep, None
+    return ep, {"engaged_step": correction.engaged_step, "yielded_step": correction.yielded_step}
 
 
 @contextlib.contextmanager
@@ -63,30 +116,46 @@ def run_client(
     models_dir: Path | None = None,
     quiet: bool = False,
     after_step: Callable[[int, int], None] | None = None,
+    controller: str = SIM.controller,
+    correct: bool = False,
 ) -> list[EpisodeSummary]:
     """Simulate ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) and stream each to the service.
 
-    ``after_step(episode, step)`` is called after each scored step (tests use it to stop
-    the service mid-episode). Stops after an episode the service was lost in.
+    ``controller`` is the arm's joint controller; ``correct`` (compliant only) turns the
+    memory's correction on. ``after_step(episode, step)`` is called after each scored step
+    (tests use it to stop the service mid-episode). Stops after an episode the service was lost in.
     """
-    for name, value, known in (("skill", skill, SKILLS), ("mode", mode, MODES), ("transport", transport, TRANSPORTS)):
+    for name, value, known in (("skill", skill, SKILLS), ("mode", mode, MODES), ("transport", transport, TRANSPORTS),
+                               ("controller", controller, CONTROLLERS)):
         if value not in known:
             raise ValueError(f"--{name} must be one of {', '.join(known)}, got {value!r}")
     if episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {episodes}")
+    if correct and controller != "compliant":
+        raise ValueError("--correct needs --controller compliant: the correction drives a compliant arm's "
+                         "set-point (the stiff servos hold these hits alone)")
     if url:
         check_url(url)
     out = Path(out)
     summaries: list[EpisodeSummary] = []
     models_dir = home_path("models") if models_dir is None else Path(models_dir)
+    monitor_path, monitor = _compliant_monitor(models_dir, quiet) if controller == "compliant" else (None, None)
     with _service(url, api_key, models_dir, out, quiet) as service_url:
+        session = None
+        if monitor_path is not None:
+            if url:
+                _check_served(url, api_key, monitor_path)
+            session = {"model": monitor_path.stem, "fpr": SCORING.default_fpr}
         for i in range(episodes):
-            ep = run_episode(skill, seed + i, fault=fault, disturbance=falling_object)
-            say(f"episode {i + 1}/{episodes}: {skill}, seed {seed + i}"
-                + (f", fault {fault.to_dict()}" if fault else "")
+            ep, correction = _simulate(skill, seed + i, fault, falling_object, monitor, correct, mode)
+            say(f"episode {i + 1}/{episodes}: {skill}, seed {seed + i}, {controller} control"
+                + (", corrected" if correct else "") + (f", fault {fault.to_dict()}" if fault else "")
                 + (", falling object" if falling_object else "") + f", streaming to {service_url}", quiet)
             hook = None if after_step is None else (lambda k, i=i: after_step(i, k))
-            s = stream_episode(ep, i + 1, service_url, api_key, mode, out, transport, reconnect, quiet, hook)
+            outcome = {"controller": controller, "correction": correction, "cube_error_m": ep.cube_error_m}
+            s = stream_episode(ep, i + 1, service_url, api_key, mode, out, transport, reconnect, quiet, hook,
+                               session=session, metadata=outcome)
+            s.controller, s.correction, s.cube_error_m = controller, correction, ep.cube_error_m
             summaries.append(s)
             say(summary_line(s), quiet)
             if s.error:

@@ -42,9 +42,13 @@ def stream_episode(
     quiet: bool = False,
     after_step: Callable[[int], None] | None = None,
     period: float = 1.0 / SIM.timing.observation_hz,
+    session: dict[str, Any] | None = None,
+    metadata: dict[str, Any] | None = None,
 ) -> EpisodeSummary:
     """Stream one episode (simulated, or recorded with no 40 Hz world trace) to the service,
-    recording it; never leaves files open. ``period`` is the time between its observations."""
+    recording it; never leaves files open. ``period`` is the time between its observations;
+    ``session`` adds session parameters (the model, its rate), ``metadata`` what the
+    client's recording says about the run."""
     names = tuple(ep.channel_names)
     run_id = new_run_id("client")
     recording_id = run_id  # shared with the service session so both files merge
@@ -56,9 +60,10 @@ def stream_episode(
         first_flag_time_s=None, isolated_joint=None, fault_step=None if ep.fault is None else ep.fault.step,
         completed=False, reconnects=0, recording_id=recording_id, recordings={}, service_recordings={},
     )
-    params = {"mode": mode, "cue_steps": 1, "recording_id": recording_id}
+    params = {"mode": mode, "cue_steps": 1, "recording_id": recording_id, **(session or {})}
     metadata = {"source": "client", "skill": ep.skill, "seed": ep.seed, "fault": summary.fault,
-                "disturbance": summary.disturbance, "mode": mode, "service_url": url, "transport": transport}
+                "disturbance": summary.disturbance, "mode": mode, "service_url": url, "transport": transport,
+                **(metadata or {})}
     make = TRANSPORTS[transport]
 
     def open_session(replay: int) -> Transport:

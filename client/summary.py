@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from sim.config import SIM
+
 
 @dataclass
 class StepLine:
@@ -39,33 +41,70 @@ class EpisodeSummary:
     service_recordings: dict[str, str]
     error: str | None = None
     steps: list[StepLine] = field(default_factory=list)
+    controller: str | None = None  # the simulated arm's joint controller (None: a replayed log)
+    cube_error_m: float | None = None  # the cube's distance from its target at the end (None: a replayed log)
+    correction: dict | None = None  # with --correct: {"engaged_step": int | None, "yielded_step": int | None}
 
     @property
     def energies(self) -> list[float]:
         return [s.energy for s in self.steps]
 
+    @property
+    def placed(self) -> bool | None:
+        """Cube within the success tolerance of its target (None: not simulated)."""
+        return None if self.cube_error_m is None else self.cube_error_m < SIM.success_tolerance_m
+
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
+def _disturbance(d: dict) -> str:
+    momentum = d["mass_kg"] * d["speed_m_s"]
+    return f"falling object {d['mass_kg']:g} kg at {d['speed_m_s']:g} m/s ({momentum:g} kg m/s) at {d['release_s']:g} s"
+
+
+def _verdict(s: EpisodeSummary) -> str:
+    if s.detected:
+        flag = next(line for line in s.steps if line.step == s.first_flag_step)
+        return (f"DETECTED at step {s.first_flag_step} (t={s.first_flag_time_s:g} s, energy {flag.energy:.4g} > "
+                f"threshold {flag.threshold:.4g}), isolated joint: {s.isolated_joint or 'none'}")
+    verdict = "not detected" if s.completed else "not detected in the steps scored"
+    if s.steps:
+        peak = max(s.steps, key=lambda line: line.energy)
+        verdict += f" (peak energy {peak.energy:.4g} at step {peak.step}, threshold {peak.threshold:.4g})"
+    return verdict
+
+
+def _outcome(s: EpisodeSummary) -> list[str]:
+    """What the arm did: the correction, then where the cube ended (simulated episodes only)."""
+    out = []
+    if s.correction is not None:
+        engaged, yielded = s.correction["engaged_step"], s.correction["yielded_step"]
+        out.append("not corrected (the monitor never flagged)" if engaged is None else
+                   f"corrected from step {engaged}" + (f", let go at step {yielded} (a joint at its torque limit)"
+                                                       if yielded is not None else ""))
+    if s.cube_error_m is not None:
+        tolerance = f"{SIM.success_tolerance_m * 100:g} cm"
+        out.append(f"cube {s.cube_error_m * 1000:.1f} mm from its target: "
+                   + (f"placed (within {tolerance})" if s.placed else f"NOT placed (beyond {tolerance})"))
+    return out
+
+
 def summary_line(s: EpisodeSummary) -> str:
     what = f"{s.skill} seed {s.seed}"
+    if s.controller:
+        what += f", {s.controller} control"
     if s.fault:
         f = s.fault
         what += f", fault joint{f['joint']} {f['overshoot_deg']:+g} deg at {f['time_s']:g} s (step {s.fault_step})"
     if s.disturbance:
-        what += f", falling object at {s.disturbance['release_s']:g} s"
-    if s.detected:
-        verdict = (f"DETECTED at step {s.first_flag_step} (t={s.first_flag_time_s:g} s), "
-                   f"isolated joint: {s.isolated_joint or 'none'}")
-    else:
-        verdict = "not detected" if s.completed else "not detected in the steps scored"
+        what += ", " + _disturbance(s.disturbance)
     tail = f"{s.steps_scored}/{s.steps_total} steps scored"
     if s.reconnects:
         tail += f", {s.reconnects} reconnect(s)"
     if s.error:
         tail += f", INTERRUPTED: {s.error}"
-    return f"summary: episode {s.episode} ({what}): {verdict}; {tail}"
+    return f"summary: episode {s.episode} ({what}): " + "; ".join([_verdict(s), *_outcome(s), tail])
 
 
 def step_line(line: StepLine) -> str:
@@ -83,7 +122,14 @@ def closing_lines(summaries: list[EpisodeSummary]) -> str:
     rrd += [p for s in summaries for p in s.service_recordings.values() if p.endswith(".rrd")]
     mcap = [s.recordings["mcap"] for s in summaries if "mcap" in s.recordings]
     mcap += [p for s in summaries for p in s.service_recordings.values() if p.endswith(".mcap")]
-    lines = [f"done: {len(summaries)} episode(s), {faulty} with a fault or disturbance, {flagged} flagged"]
+    done = f"done: {len(summaries)} episode(s), {faulty} with a fault or disturbance, {flagged} flagged"
+    corrected = [s for s in summaries if s.correction is not None]
+    if corrected:
+        done += f", {sum(s.correction['engaged_step'] is not None for s in corrected)} corrected"  # type: ignore[index]
+    simulated = [s for s in summaries if s.placed is not None]
+    if simulated:
+        done += f", {sum(bool(s.placed) for s in simulated)}/{len(simulated)} cubes placed"
+    lines = [done]
     if rrd:
         lines.append("open in Rerun:   rerun " + " ".join(rrd))
     if mcap:

@@ -157,4 +157,14 @@ class HttpTransport:
         self.client.close()
 
 
+def served_digest(url: str, api_key: str | None, name: str) -> str | None:
+    """The tensor digest of the model ``name`` the service hosts (None: it hosts none by that name)."""
+    t = HttpTransport(url, api_key)
+    try:
+        models: list[dict[str, Any]] = t._request("GET", "/models")  # type: ignore[assignment]  # a JSON list
+    finally:
+        t.close()
+    return next((m.get("digest") for m in models if m.get("name") == name and m.get("status") == "ok"), None)
+
+
 TRANSPORTS: dict[str, Callable[[str, str | None], Transport]] = {"ws": WebSocketTransport, "http": HttpTransport}

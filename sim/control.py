@@ -38,6 +38,7 @@ from sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS
 from sim.config import SIM, ControllerKind, CorrectionGains
 from sim.disturbances import FallingObject
 from sim.episode import Episode
+from sim.faults import FaultSpec
 from sim.panda import TAU_MAX, dh_forward
 from sim.runner import N_JOINTS, ControlState, execute_plan, seed_variation
 from sim.skills import DOWN, PRECISE_STEPS, shared_ik, skill_spec, waypoints
@@ -107,17 +108,17 @@ class PlanCorrection:
         return state.target + g.ki * self.integral
 
 
-def execute_recalled(recalled: np.ndarray, skill: str, seed: int, corrected: bool,
+def execute_recalled(recalled: np.ndarray, skill: str, seed: int, correction: PlanCorrection | None = None,
                      controller: ControllerKind | None = None, disturbance: FallingObject | None = None,
-                     gains: CorrectionGains = SIM.correction, detector: Detector | None = None) -> Episode:
+                     fault: FaultSpec | None = None) -> Episode:
     """Execute a memory's recalled (15, 25) sequence for `seed`'s scene, anchored to its cube and goal.
 
-    `corrected` adds `PlanCorrection` (gated by `detector` if given); `controller` defaults to
+    `correction` (a fresh `PlanCorrection` per run; None: uncorrected) is the tick hook, and the
+    caller keeps it to read when it engaged or let go; `controller` defaults to
     `SIM.controller`. This is the one call a demo needs: recall from the episode's first
     observation, then this.
     """
     joints, gripper = plan_from_recall(recalled)
     joints = anchor_plan(joints, skill, seed_variation(skill, seed).cube_xy)
-    hook = PlanCorrection(gains, detector) if corrected else None
-    return execute_plan(joints, gripper, seed, correction_hook=hook, disturbance=disturbance, skill=skill,
-                        controller=controller)
+    return execute_plan(joints, gripper, seed, correction_hook=correction, disturbance=disturbance, skill=skill,
+                        fault=fault, controller=controller)

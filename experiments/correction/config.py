@@ -20,10 +20,13 @@ class CorrectionConfig:
     selection_seeds: tuple[int, int] = (SIM.seeds.held_out, SIM.seeds.held_out + 20)  # gains chosen here
     monitor_seed: int = SIM.seeds.held_out + 500  # normal episodes calibrating the monitor
     monitor_seeds: int = 20  # per split (precisions, thresholds)
+    served_monitor_seeds: int = 50  # per split, for the compliant monitor the service hosts (served.py)
     # The hit (sim.disturbances.elbow_hit): a box dropped from 5 cm above the elbow at 2 m/s
     # during the carry, heavier and heavier; momentum = mass x speed.
     momenta: tuple[float, ...] = (10.0, 20.0, 30.0, 40.0, 60.0, 80.0)  # kg m/s
     speed_m_s: float = 2.0
+    demo_momentum: float = 40.0  # the client demo's hit (nasm client --falling-object): the compliant arm alone
+    # drops the cube on one skill there, and the correction places it (README)
     drop_height_m: float = 0.05
     release_s: float = 4.0  # the carry: the cube is in the hand from 2.5 s to 6.0 s
     # Recovered: the cube within SIM.success_tolerance_m of its target AND every joint back

@@ -28,7 +28,7 @@ from models.fault import threshold_for
 from models.scoring import energy
 from sim.channels import CHANNEL_NAMES
 from sim.config import SIM
-from sim.control import Detector, execute_recalled
+from sim.control import Detector, PlanCorrection, execute_recalled
 from sim.disturbances import FallingObject, elbow_hit
 from sim.episode import Episode
 from sim.runner import SimulationError, first_observation, run_episode
@@ -66,13 +66,19 @@ def recall(model: NeuralASM, skill: str, seed: int) -> np.ndarray:
     return model.recall(first_observation(skill, seed)[None, None], SIM.timing.n_steps)[0]
 
 
-def calibrate_monitor(model: NeuralASM, config: CorrectionConfig, controller: str) -> Calibration:
-    """Precisions and thresholds from undisturbed executions of recalled plans under `controller`."""
+def undisturbed(model: NeuralASM, config: CorrectionConfig, controller: str) -> tuple[np.ndarray, np.ndarray]:
+    """Observations of undisturbed, uncorrected executions of recalled plans under `controller`:
+    the precision split, then the threshold split, `config.monitor_seeds` seeds each."""
     def normal(first: int) -> np.ndarray:
         seeds = range(first, first + config.monitor_seeds)
-        return np.stack([execute_recalled(recall(model, skill_of(s), s), skill_of(s), s, False, controller).observations
+        return np.stack([execute_recalled(recall(model, skill_of(s), s), skill_of(s), s, None, controller).observations
                          for s in seeds])
-    precision, thresholds = normal(config.monitor_seed), normal(config.monitor_seed + config.monitor_seeds)
+    return normal(config.monitor_seed), normal(config.monitor_seed + config.monitor_seeds)
+
+
+def calibrate_monitor(model: NeuralASM, config: CorrectionConfig, controller: str) -> Calibration:
+    """Precisions and thresholds from undisturbed executions of recalled plans under `controller`."""
+    precision, thresholds = undisturbed(model, config, controller)
     return model.calibrate(precision, thresholds, config.monitor_mode, 1, fprs=(config.fpr,),
                            source=f"undisturbed recalled plans, {controller} control")
 
@@ -94,8 +100,8 @@ def monitor(model: NeuralASM, calibration: Calibration, threshold: float) -> Det
 def _run(recalled: np.ndarray, skill: str, seed: int, controller: str, correction: str,
          disturbance: FallingObject | None, config: CorrectionConfig, detector: Detector) -> Episode | str:
     try:
-        return execute_recalled(recalled, skill, seed, correction == "corrected", controller, disturbance,
-                                config.gains, detector if config.gated else None)
+        hook = PlanCorrection(config.gains, detector if config.gated else None) if correction == "corrected" else None
+        return execute_recalled(recalled, skill, seed, hook, controller, disturbance)
     except SimulationError as exc:
         return repr(exc)
 
