@@ -4,7 +4,9 @@ Checkpoints are safetensors (no pickle) whose tensors are checked against the di
 in their header on load; a checkpoint that fails any check is refused, kept out of
 service and listed as broken with the reason. A model's name is its file stem. The
 default model (used when a session names none) is explicit: the ``default_model``
-setting, otherwise the newest valid checkpoint, never a broken one. When the folder
+setting, otherwise the newest valid checkpoint that is not derived from another (a
+checkpoint whose provenance names ``derived_from``, e.g. the default model recalibrated for
+compliant control, serves only sessions that name it), never a broken one. When the folder
 holds none, the default Panda model can be built on first run (training on simulated
 demonstrations, with a progress bar); that lives in ``pipelines`` and is imported
 only then, so the service runs without the simulator installed.
@@ -99,10 +101,11 @@ class ModelRegistry:
 
     @property
     def default_name(self) -> str | None:
-        """The configured default, else the newest valid checkpoint (None: no valid default)."""
+        """The configured default, else the newest valid checkpoint not derived from another
+        (None: no valid default)."""
         if self.configured_default:
             return self.configured_default if self.configured_default in self.models else None
-        valid = [h for h in self.hosted.values() if h.model is not None]
+        valid = [h for h in self.hosted.values() if h.model is not None and "derived_from" not in h.model.provenance]
         return max(valid, key=lambda h: (h.modified, h.name)).name if valid else None
 
     def get(self, name: str | None) -> tuple[str, NeuralASM]:

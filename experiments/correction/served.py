@@ -6,14 +6,12 @@ threshold, so its flag would say nothing about a hit. The compliant monitor is t
 network calibrated the correction experiment's way, on undisturbed compliant executions of
 recalled plans, for both recall modes and every rate, written as `<default>-compliant`, a
 checkpoint the service hosts and a session names. It records the digest of the checkpoint
-it was derived from and is rebuilt when that changes. Its file time is set just before the
-default's, because the service's default model is the newest checkpoint, and this one must
-never be it.
+it was derived from and is rebuilt when that changes; being derived, it is never the
+service's default (`service.registry`).
 """
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from experiments.correction.config import CORRECTION, CorrectionConfig
@@ -51,6 +49,4 @@ def ensure_compliant_model(models_dir: Path, config: CorrectionConfig = CORRECTI
     model.provenance |= {"derived_from": base.stem, "derived_from_sha256": source, "controller": CONTROLLER,
                          "monitor_seeds": [first, first + 2 * config.served_monitor_seeds - 1]}
     checkpoint.save(model, path)
-    older = base.stat().st_mtime - 1.0
-    os.utime(path, (older, older))
     return path
