@@ -101,6 +101,9 @@ def test_ablation_rows_carry_validation_error_and_test_scores(bench):
     assert rows[2]["config"]["wf_max_norm"] is None and rows[0]["config"]["wf_max_norm"] == tiny.wf_max_norm
     for r in rows:
         assert r["validation_mse"] > 0 and 0.0 <= r["detection"] <= 1.0 and 0.0 <= r["auroc"] <= 1.0
+        assert r["validation_mse_per_group"]["all"] == r["validation_mse"]
+        assert set(r["training_mse_per_group"]) == set(r["validation_mse_per_group"]) >= {"all", "joints"}
+        assert all(v > 0 for v in r["training_mse_per_group"].values())
     table = ablation_markdown(rows, "hidden")
     assert table.count("\n| ") == 1 + len(rows)  # header and one line per row
 
