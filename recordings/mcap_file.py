@@ -1,4 +1,4 @@
-"""A JSON-over-MCAP file written so that a crash leaves it readable by any MCAP reader.
+"""An MCAP file (JSON channels, and Foxglove's protobuf messages) written so that a crash leaves it readable by any MCAP reader.
 
 Messages go into small chunks, each followed by its message indexes, and a finished
 file ends with the summary (chunk indexes, statistics), so readers seek it by time. A
@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import orjson
+from foxglove import Schema as FoxgloveSchema
 from mcap.data_stream import RecordBuilder
 from mcap.records import DataEnd, Footer
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
@@ -89,6 +90,12 @@ class McapFile:
         schema_id = self.writer.register_schema(schema["title"], "jsonschema", orjson.dumps(schema))
         return self.writer.register_channel(topic, "json", schema_id)
 
+    def foxglove_channel(self, topic: str, schema: FoxgloveSchema) -> int:
+        """Register a channel of a Foxglove message type (``foxglove.messages.X.get_schema()``:
+        protobuf, its schema a serialized FileDescriptorSet, as MCAP's protobuf profile wants)."""
+        schema_id = self.writer.register_schema(schema.name, schema.encoding, schema.data)
+        return self.writer.register_channel(topic, schema.encoding, schema_id)
+
     def metadata(self, name: str, values: dict[str, Any]) -> None:
         """An MCAP Metadata record (what ``mcap info`` and Foxglove list as the file's
         metadata): strings as they are, anything else as JSON."""
@@ -96,7 +103,11 @@ class McapFile:
                                         for k, v in values.items()})
 
     def write(self, channel: int, time_ns: int, message: dict[str, Any]) -> None:
-        self.writer.add_message(channel, time_ns, orjson.dumps(message, option=_DUMP), time_ns)
+        self.write_encoded(channel, time_ns, orjson.dumps(message, option=_DUMP))
+
+    def write_encoded(self, channel: int, time_ns: int, data: bytes) -> None:
+        """A message already in its channel's encoding (e.g. a Foxglove message's ``encode()``)."""
+        self.writer.add_message(channel, time_ns, data, time_ns)
 
     def flush(self) -> None:
         """Put the chunks completed so far on disk, the file ending validly after them."""
