@@ -22,12 +22,13 @@ def link_positions(q: np.ndarray) -> np.ndarray:
 
 
 def world_records(ep: Episode, upto_s: float, start_row: int) -> Iterator[tuple[int, WorldRecord]]:
-    """40 Hz world rows from ``start_row`` with time <= ``upto_s``; the falling box from its release."""
+    """40 Hz world rows from ``start_row`` with time <= ``upto_s``; the falling box after its release
+    (the row at the release instant still has it parked, out of sight)."""
     release_s = None if ep.disturbance is None else ep.disturbance.release_s
     row = start_row
     while row < len(ep.t_hi) and ep.t_hi[row] <= upto_s + 1e-9:
         t = float(ep.t_hi[row])
-        falling = release_s is not None and t + 1e-9 >= release_s
+        falling = release_s is not None and t > release_s + 1e-9
         yield row, WorldRecord(time_s=t, link_positions=link_positions(ep.qpos_hi[row]), ee=ep.ee_hi[row],
                                cube=ep.cube_hi[row], box=ep.box_hi[row] if falling else None, workcell=WORKCELL)
         row += 1

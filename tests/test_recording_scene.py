@@ -74,7 +74,7 @@ def test_the_falling_box_is_drawn_from_its_release_only_when_the_episode_has_one
     rec = record(tmp_path, episode(FallingObject(release_s=0.1)))
     m = read_mcap(rec.paths["mcap"])
     with_box = [i for i, u in enumerate(m["/scene"]) if "falling_box" in {e["id"] for e in u["entities"]}]
-    assert with_box == list(range(4, 12))  # rows at 40 Hz from t = 0.1 s
+    assert with_box == list(range(5, 12))  # rows at 40 Hz after t = 0.1 s
     size = entities(m["/scene"])[-1]["cubes"][0]["size"]
     assert [size[k] for k in "xyz"] == [2 * h for h in WORKCELL.box_half_size]
     paths = {c.entity_path for c in RrdReader(rec.paths["rrd"]).stream()}
