@@ -47,6 +47,7 @@ class RerunEpisode:
         self.flagged_joint: str | None = None  # the isolated joint while the episode is flagged
         self.flagged = False
         self.links: np.ndarray | None = None  # the arm's latest link positions
+        self.marked = False  # the faulty-joint marker is drawn
         self.workcell: Workcell | None = None  # the one drawn
         self.peak_errors = np.zeros(len(channel_names))
         self.rrd = RrdFile(path, recording_id, bp.episode_blueprint() if layout else None)
@@ -133,11 +134,18 @@ class RerunEpisode:
         return self.joints.index(channel) + 1 if channel in self.joints else None
 
     def _mark_faulty_joint(self) -> None:
-        row = self._faulty_row()
-        if row is None or self.links is None or row >= len(self.links):
+        """The marker on the isolated joint; cleared when the flagged steps isolate none it can draw."""
+        if self.links is None:
             return
-        self.rrd.rec.log(bp.FAULTY_JOINT, rr.Points3D([self.links[row]], radii=drawing.FAULT_MARKER_RADIUS,
-                                                      colors=[drawing.FAULTY], labels=[f"{self.flagged_joint}: fault"]))
+        row = self._faulty_row()
+        if row is not None and row < len(self.links):
+            self.rrd.rec.log(bp.FAULTY_JOINT, rr.Points3D([self.links[row]], radii=drawing.FAULT_MARKER_RADIUS,
+                                                          colors=[drawing.FAULTY],
+                                                          labels=[f"{self.flagged_joint}: fault"]))
+            self.marked = True
+        elif self.marked:
+            self.rrd.rec.log(bp.FAULTY_JOINT, rr.Clear(recursive=False))
+            self.marked = False
 
     def _show_largest_errors(self) -> None:
         """Of the error view's channels, keep visible the ones with the largest peaks."""
