@@ -83,6 +83,7 @@ class McapFile:
         self.file = EndedFile(path)
         self.writer = Writer(self.file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)  # type: ignore[arg-type]
         self.writer.start(profile="", library="neural_asm")
+        self.foxglove_schemas: dict[str, int] = {}
         self.file.flush()
 
     def channel(self, topic: str, schema: dict[str, Any]) -> int:
@@ -92,9 +93,11 @@ class McapFile:
 
     def foxglove_channel(self, topic: str, schema: FoxgloveSchema) -> int:
         """Register a channel of a Foxglove message type (``foxglove.messages.X.get_schema()``:
-        protobuf, its schema a serialized FileDescriptorSet, as MCAP's protobuf profile wants)."""
-        schema_id = self.writer.register_schema(schema.name, schema.encoding, schema.data)
-        return self.writer.register_channel(topic, schema.encoding, schema_id)
+        protobuf, its schema a serialized FileDescriptorSet, as MCAP's protobuf profile wants);
+        channels of one type share its schema record (~5 KB for a SceneUpdate)."""
+        if schema.name not in self.foxglove_schemas:
+            self.foxglove_schemas[schema.name] = self.writer.register_schema(schema.name, schema.encoding, schema.data)
+        return self.writer.register_channel(topic, schema.encoding, self.foxglove_schemas[schema.name])
 
     def metadata(self, name: str, values: dict[str, Any]) -> None:
         """An MCAP Metadata record (what ``mcap info`` and Foxglove list as the file's

@@ -7,7 +7,8 @@ forecast of the next step), ``/errors`` (weighted prediction errors) and ``/faul
 threshold, their log ratio ``margin``, flag, isolated joint). The world is in Foxglove's
 own messages, protobuf from foxglove-sdk: ``/tf`` (``foxglove.FrameTransforms``: link
 frames, tool point and cube in ``world``), ``/scene`` (``foxglove.SceneUpdate``: the arm,
-cube and falling box) and ``/scene/workcell`` (the table, once).
+cube and falling box) and ``/scene/workcell`` (the table, once), registered with the
+first world record (a service session's file has none).
 Timestamps are the recorder's start time plus episode time. Flushed after every step.
 """
 
@@ -47,9 +48,14 @@ class McapEpisode:
         }
         self.channels[FAULT] = self.out.channel(FAULT, schemas.FAULT)
         self.channels[METADATA] = self.out.channel(METADATA, schemas.METADATA)
-        self.channels[TF] = self.out.foxglove_channel(TF, FrameTransforms.get_schema())
-        self.channels[SCENE] = self.out.foxglove_channel(SCENE, SceneUpdate.get_schema())
-        self.channels[WORKCELL] = self.out.foxglove_channel(WORKCELL, SceneUpdate.get_schema())
+
+    def _world_channel(self, topic: str) -> int:
+        """A world topic's channel, registered with its first message: a file without a world
+        (a service session's) carries no Foxglove schemas."""
+        if topic not in self.channels:
+            message_type = FrameTransforms if topic == TF else SceneUpdate
+            self.channels[topic] = self.out.foxglove_channel(topic, message_type.get_schema())
+        return self.channels[topic]
 
     def _ns(self, time_s: float) -> int:
         return self.start_ns + int(time_s * 1e9)
@@ -81,13 +87,13 @@ class McapEpisode:
         stamp = Timestamp(ns // 1_000_000_000, ns % 1_000_000_000)
         if w.workcell is not None and w.workcell != self.workcell:
             self.workcell = w.workcell
-            self.out.write_encoded(self.channels[WORKCELL], ns, foxglove_scene.workcell_update(w.workcell, stamp).encode())
+            self.out.write_encoded(self._world_channel(WORKCELL), ns, foxglove_scene.workcell_update(w.workcell, stamp).encode())
         scene = foxglove_scene.world_update(w, stamp)
         if scene is not None:
-            self.out.write_encoded(self.channels[SCENE], ns, scene.encode())
+            self.out.write_encoded(self._world_channel(SCENE), ns, scene.encode())
         transforms = _frames(w, stamp)
         if transforms:
-            self.out.write_encoded(self.channels[TF], ns, FrameTransforms(transforms=transforms).encode())
+            self.out.write_encoded(self._world_channel(TF), ns, FrameTransforms(transforms=transforms).encode())
         self.out.flush()
 
     def flush(self) -> None:
