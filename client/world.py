@@ -1,4 +1,4 @@
-"""The arm, tool and cube at 40 Hz for the recordings' 3D view, from a simulated episode."""
+"""The arm, tool, cube and falling box at 40 Hz for the recordings' 3D view, from a simulated episode."""
 
 from __future__ import annotations
 
@@ -6,20 +6,29 @@ from typing import Iterator
 
 import numpy as np
 
-from recordings.records import WorldRecord
+from recordings.records import WorldRecord, Workcell
 from sim.episode import Episode
 from sim.panda import dh_frames
+from sim.scene import BOX_HALF, CUBE_HALF, TABLE_CENTER, TABLE_HALF
+
+WORKCELL = Workcell(table_center=TABLE_CENTER, table_half_size=TABLE_HALF, cube_half_size=CUBE_HALF,
+                    box_half_size=BOX_HALF)
 
 
 def link_positions(q: np.ndarray) -> np.ndarray:
-    """(10, 3) origins of the base, the 8 DH frames (Franka's table) and the tool centre point."""
+    """(10, 3) origins of the base, the 8 DH frames (Franka's table) and the tool centre point;
+    row i (1..7) lies on joint i's axis."""
     return np.array([frame[:3, 3] for frame in dh_frames(q)])
 
 
 def world_records(ep: Episode, upto_s: float, start_row: int) -> Iterator[tuple[int, WorldRecord]]:
-    """40 Hz world rows from ``start_row`` with time <= ``upto_s``."""
+    """40 Hz world rows from ``start_row`` with time <= ``upto_s``; the falling box after its release
+    (the row at the release instant still has it parked, out of sight)."""
+    release_s = None if ep.disturbance is None else ep.disturbance.release_s
     row = start_row
     while row < len(ep.t_hi) and ep.t_hi[row] <= upto_s + 1e-9:
-        yield row, WorldRecord(time_s=float(ep.t_hi[row]), link_positions=link_positions(ep.qpos_hi[row]),
-                               ee=ep.ee_hi[row], cube=ep.cube_hi[row])
+        t = float(ep.t_hi[row])
+        falling = release_s is not None and t > release_s + 1e-9
+        yield row, WorldRecord(time_s=t, link_positions=link_positions(ep.qpos_hi[row]), ee=ep.ee_hi[row],
+                               cube=ep.cube_hi[row], box=ep.box_hi[row] if falling else None, workcell=WORKCELL)
         row += 1

@@ -5,6 +5,8 @@
 - ``recorder.RecorderProcess``: a service's sessions, written by a process of their own;
 - ``readers``: read values back (tests, analysis);
 - ``paths``: run ids and the git-ignored output folder.
+- ``foxglove_scene``: the world as Foxglove scene messages; ``layouts/neural_asm.json``:
+  a Foxglove layout for the MCAP files.
 
 Every writer is a context manager that closes its files on normal exit, Ctrl-C and
 errors. After a kill (SIGKILL) what was written stays readable:

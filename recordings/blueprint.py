@@ -14,8 +14,11 @@ import rerun.blueprint as rrb
 WORLD = "/world"
 ARM = "/world/arm"
 ARM_JOINTS = "/world/arm/joints"
+FAULTY_JOINT = "/world/arm/faulty_joint"  # a red sphere on the isolated joint, from the fault's detection
 EE_PATH = "/world/ee_path"
 CUBE = "/world/cube"
+TABLE = "/world/table"
+BOX = "/world/falling_box"
 ENERGY = "/fault/energy"  # [energy, threshold]
 MARGIN = "/fault/margin"  # [log10(energy / threshold), 0]: the threshold at 0 whatever the energies' scale
 FLAG = "/fault/flag"
@@ -31,30 +34,38 @@ MARGIN_SERIES = ("log10(energy / threshold)", "threshold")
 SHOWN_ERRORS = 5  # channels drawn in the error view: the largest peaks of the episode
 # Looking at the workcell from the front right, above the table: the whole arm, the cube and
 # the place targets in view (the Panda's base at the origin, the table ahead along +x).
-EYE = rrb.EyeControls3D(position=(1.9, -1.6, 1.3), look_target=(0.45, 0.0, 0.25), eye_up=(0.0, 0.0, 1.0))
+EYE = rrb.EyeControls3D(position=(1.5, -1.25, 1.05), look_target=(0.35, 0.0, 0.3), eye_up=(0.0, 0.0, 1.0))
 
 
 # One layout object per process: each view and container draws a random id when built, and
 # Rerun interns the entity path parts made of them without ever freeing them (~2.5 KB a file).
 @cache
-def episode_blueprint() -> rrb.Blueprint:
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Spatial3DView(origin=WORLD, name="Panda", eye_controls=EYE),
-                rrb.TextLogView(origin=EVENTS, name="Events"),
-                row_shares=[4, 1],
-            ),
-            rrb.Vertical(
-                rrb.TimeSeriesView(origin=MARGIN, name="Energy against threshold (log10 energy / threshold; above 0: fault)"),
-                rrb.TimeSeriesView(origin=FLAG, name="Fault flag"),
-                rrb.TimeSeriesView(origin=ERRORS, name=f"Weighted prediction error, the {SHOWN_ERRORS} largest channels"),
-                rrb.TimeSeriesView(origin="/joints", name="Joint angles (rad): observed (lines), expected (crosses)"),
-            ),
-            column_shares=[2, 3],
+def _episode_views() -> rrb.Container:
+    return rrb.Horizontal(
+        rrb.Vertical(
+            rrb.Spatial3DView(origin=WORLD, name="Panda", eye_controls=EYE),
+            rrb.TextLogView(origin=EVENTS, name="Events"),
+            row_shares=[4, 1],
         ),
-        collapse_panels=True,
+        rrb.Vertical(
+            rrb.TimeSeriesView(origin=MARGIN, name="Energy against threshold (log10 energy / threshold; above 0: fault)"),
+            rrb.TimeSeriesView(origin=FLAG, name="Fault flag"),
+            rrb.TimeSeriesView(origin=ERRORS, name=f"Weighted prediction error, the {SHOWN_ERRORS} largest channels"),
+            rrb.TimeSeriesView(origin="/joints", name="Joint angles (rad): observed (lines), expected (crosses)"),
+        ),
+        column_shares=[2, 3],
     )
+
+
+@cache
+def episode_blueprint() -> rrb.Blueprint:
+    return rrb.Blueprint(_episode_views(), collapse_panels=True)
+
+
+def episode_end_blueprint() -> rrb.Blueprint:
+    """The episode layout with the time cursor following the data to its end: what a
+    screenshot shows (the whole path, every event, the faulty joint marked)."""
+    return rrb.Blueprint(_episode_views(), rrb.TimePanel(state="collapsed", play_state="following"), collapse_panels=True)
 
 
 @cache

@@ -1,7 +1,8 @@
 """``nasm recordings``: tools for recording files.
 
 ``view RUN`` opens a run's client and service files together in the Rerun viewer, or with
-``--screenshot PNG`` draws them to a file with the real viewer. ``recover FILE...`` rewrites each ``.mcap`` or ``.rrd`` cut short by a crash into a
+``--screenshot PNG`` draws them to a file with the real viewer; ``--blueprint FILE.rbl``
+lays them out with a layout of the user's own. ``recover FILE...`` rewrites each ``.mcap`` or ``.rrd`` cut short by a crash into a
 valid, indexed file in place (like the official ``mcap recover``); a whole file keeps
 its content. A file that cannot be recovered is named with the reason, and the others
 are still done.
@@ -43,10 +44,11 @@ def view(
     run: str = typer.Argument(..., help="a run id (client-...) or one of its .rrd/.mcap files"),
     folder: Path = typer.Option(DEFAULT_DIR, help="recordings folder holding the run"),
     screenshot: Path | None = typer.Option(None, help="write a PNG with the real viewer instead of opening it"),
+    blueprint: Path | None = typer.Option(None, help="a Rerun .rbl layout to use instead of the recordings' own"),
 ) -> None:
     """Open a run's client and service recordings together in the Rerun viewer, or screenshot them."""
     try:
-        files = view_run(run, folder, screenshot)
+        files = view_run(run, folder, screenshot, blueprint)
     except (RunNotFound, RuntimeError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None

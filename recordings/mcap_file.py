@@ -1,4 +1,4 @@
-"""A JSON-over-MCAP file written so that a crash leaves it readable by any MCAP reader.
+"""An MCAP file (JSON channels, and Foxglove's protobuf messages) written so that a crash leaves it readable by any MCAP reader.
 
 Messages go into small chunks, each followed by its message indexes, and a finished
 file ends with the summary (chunk indexes, statistics), so readers seek it by time. A
@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import orjson
+from foxglove import Schema as FoxgloveSchema
 from mcap.data_stream import RecordBuilder
 from mcap.records import DataEnd, Footer
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
@@ -82,12 +83,21 @@ class McapFile:
         self.file = EndedFile(path)
         self.writer = Writer(self.file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)  # type: ignore[arg-type]
         self.writer.start(profile="", library="neural_asm")
+        self.foxglove_schemas: dict[str, int] = {}
         self.file.flush()
 
     def channel(self, topic: str, schema: dict[str, Any]) -> int:
         """Register a JSON channel whose messages follow ``schema`` (titled)."""
         schema_id = self.writer.register_schema(schema["title"], "jsonschema", orjson.dumps(schema))
         return self.writer.register_channel(topic, "json", schema_id)
+
+    def foxglove_channel(self, topic: str, schema: FoxgloveSchema) -> int:
+        """Register a channel of a Foxglove message type (``foxglove.messages.X.get_schema()``:
+        protobuf, its schema a serialized FileDescriptorSet, as MCAP's protobuf profile wants);
+        channels of one type share its schema record (~5 KB for a SceneUpdate)."""
+        if schema.name not in self.foxglove_schemas:
+            self.foxglove_schemas[schema.name] = self.writer.register_schema(schema.name, schema.encoding, schema.data)
+        return self.writer.register_channel(topic, schema.encoding, self.foxglove_schemas[schema.name])
 
     def metadata(self, name: str, values: dict[str, Any]) -> None:
         """An MCAP Metadata record (what ``mcap info`` and Foxglove list as the file's
@@ -96,7 +106,11 @@ class McapFile:
                                         for k, v in values.items()})
 
     def write(self, channel: int, time_ns: int, message: dict[str, Any]) -> None:
-        self.writer.add_message(channel, time_ns, orjson.dumps(message, option=_DUMP), time_ns)
+        self.write_encoded(channel, time_ns, orjson.dumps(message, option=_DUMP))
+
+    def write_encoded(self, channel: int, time_ns: int, data: bytes) -> None:
+        """A message already in its channel's encoding (e.g. a Foxglove message's ``encode()``)."""
+        self.writer.add_message(channel, time_ns, data, time_ns)
 
     def flush(self) -> None:
         """Put the chunks completed so far on disk, the file ending validly after them."""

@@ -1,46 +1,8 @@
-"""JSON schemas of the MCAP channels, including Foxglove's standard FrameTransforms."""
+"""JSON schemas of the MCAP channels of our own messages (Foxglove's come from foxglove-sdk)."""
 
 from __future__ import annotations
 
 from typing import Any
-
-_VECTOR3 = {
-    "type": "object",
-    "properties": {k: {"type": "number"} for k in ("x", "y", "z")},
-}
-_QUATERNION = {
-    "type": "object",
-    "properties": {k: {"type": "number"} for k in ("x", "y", "z", "w")},
-}
-_TIME = {
-    "type": "object",
-    "properties": {
-        "sec": {"type": "integer", "minimum": 0},
-        "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
-    },
-}
-
-FRAME_TRANSFORMS = {
-    "title": "foxglove.FrameTransforms",
-    "description": "An array of FrameTransform messages",
-    "type": "object",
-    "properties": {
-        "transforms": {
-            "type": "array",
-            "items": {
-                "title": "foxglove.FrameTransform",
-                "type": "object",
-                "properties": {
-                    "timestamp": _TIME,
-                    "parent_frame_id": {"type": "string"},
-                    "child_frame_id": {"type": "string"},
-                    "translation": _VECTOR3,
-                    "rotation": _QUATERNION,
-                },
-            },
-        }
-    },
-}
 
 METADATA = {
     "title": "neural_asm.Metadata",
@@ -62,6 +24,7 @@ FAULT = {
         "step": {"type": "integer"},
         "energy": {"type": ["number", "null"]},
         "threshold": {"type": ["number", "null"]},
+        "margin": {"type": ["number", "null"], "description": "log10(energy / threshold): above 0 is a fault"},
         "fault": {"type": ["boolean", "null"]},
         "isolated_joint": {"type": ["string", "null"]},
     },

@@ -2,7 +2,9 @@
 
 Used by the tests to check that files hold exactly what the service answered, and
 handy for analysis. ``read_mcap`` accepts a file cut short by a crash; an ``.rrd`` cut
-short is first repaired with ``repair_rrd``.
+short is first repaired with ``repair_rrd``. MCAP messages come back as dicts: JSON ones
+as they are, protobuf ones (Foxglove's) decoded from the schema the file carries, with
+their field names.
 """
 
 from __future__ import annotations
@@ -12,13 +14,15 @@ import subprocess
 import sys
 from collections import defaultdict
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import orjson
+from google.protobuf import descriptor_pb2, descriptor_pool, json_format, message_factory
+from google.protobuf.message import DecodeError
 from mcap.exceptions import McapError
 from mcap.reader import StreamReader
-from mcap.records import Channel, Message
+from mcap.records import Channel, Message, Schema
 from rerun.chunk import RrdReader
 
 SCALARS = "Scalars:scalars"
@@ -46,17 +50,34 @@ def repair_rrd(path: str | Path, out: str | Path) -> None:
     subprocess.run(cmd, check=True, capture_output=True)
 
 
+Decoder = Callable[[bytes], dict[str, Any]]
+
+
+def protobuf_decoder(schema: Schema) -> Decoder:
+    """Messages of a protobuf schema (a serialized FileDescriptorSet) as dicts."""
+    pool = descriptor_pool.DescriptorPool()
+    for file in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:  # dependencies come first
+        pool.Add(file)
+    message_class = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+    return lambda data: json_format.MessageToDict(message_class.FromString(data), preserving_proto_field_name=True)
+
+
 def read_mcap(path: str | Path) -> dict[str, list[dict[str, Any]]]:
-    """Every JSON message by topic, in file order; stops at a chunk torn by a crash."""
-    channels: dict[int, Channel] = {}
+    """Every message by topic, in file order; stops at a chunk torn by a crash."""
+    decoders: dict[int, Decoder] = {}
+    topics: dict[int, tuple[str, Decoder]] = {}
     messages: dict[str, list[dict[str, Any]]] = defaultdict(list)
     with open(path, "rb") as f:
         try:
             for record in StreamReader(f).records:
-                if isinstance(record, Channel):
-                    channels[record.id] = record
+                if isinstance(record, Schema) and record.encoding == "protobuf":
+                    decoders[record.id] = protobuf_decoder(record)
+                elif isinstance(record, Channel):
+                    topics[record.id] = (record.topic, orjson.loads if record.message_encoding == "json"
+                                         else decoders[record.schema_id])
                 elif isinstance(record, Message):
-                    messages[channels[record.channel_id].topic].append(orjson.loads(record.data))
-        except (McapError, EOFError, struct.error, orjson.JSONDecodeError):
+                    topic, decode = topics[record.channel_id]
+                    messages[topic].append(decode(record.data))
+        except (McapError, EOFError, struct.error, orjson.JSONDecodeError, DecodeError):
             pass  # truncated: keep what was whole
     return dict(messages)

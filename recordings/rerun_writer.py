@@ -7,6 +7,10 @@ step. Rerun's batcher writes them to the file within a fraction of a second, and
 ``flush`` waits until it has; a crash loses the steps not yet flushed.
 Two timelines: ``step`` (the model's observation steps) and ``time`` (episode seconds,
 for 40 Hz world traces).
+
+Fault events are logged as their step arrives, not with its batch: from the step a fault is
+detected, the event log says so and, in a file that also has the world (a client's), a red
+sphere marks the isolated joint on the arm.
 """
 
 from __future__ import annotations
@@ -18,11 +22,10 @@ import numpy as np
 import rerun as rr
 
 from recordings import blueprint as bp
-from recordings.records import StepRecord, WorldRecord
+from recordings import drawing
+from recordings.records import StepRecord, WorldRecord, Workcell
 from recordings.rerun_file import RrdFile
 
-CUBE_HALF_SIZE = 0.025  # m
-LINK_RADIUS = 0.04  # m
 STEP_BATCH = 16  # steps per columnar send and file flush
 
 
@@ -43,6 +46,9 @@ class RerunEpisode:
         self.pending: list[StepRecord] = []
         self.flagged_joint: str | None = None  # the isolated joint while the episode is flagged
         self.flagged = False
+        self.links: np.ndarray | None = None  # the arm's latest link positions
+        self.marked = False  # the faulty-joint marker is drawn
+        self.workcell: Workcell | None = None  # the one drawn
         self.peak_errors = np.zeros(len(channel_names))
         self.rrd = RrdFile(path, recording_id, bp.episode_blueprint() if layout else None)
         self._log_series_names()
@@ -69,6 +75,8 @@ class RerunEpisode:
 
     def write_step(self, r: StepRecord) -> None:
         self.pending.append(r)
+        if r.fault is not None:
+            self._log_event(r, r.step * self.step_period_s if r.time_s is None else r.time_s)
         if len(self.pending) >= STEP_BATCH:
             self.send_steps()
 
@@ -92,11 +100,10 @@ class RerunEpisode:
                 self.peak_errors = np.maximum(self.peak_errors, np.abs(r.errors))
             if r.energy is not None:
                 add(bp.ENERGY, t, [r.energy, np.nan if r.threshold is None else r.threshold])
-                if r.threshold is not None and r.threshold > 0 and r.energy > 0:
-                    add(bp.MARGIN, t, [np.log10(r.energy / r.threshold), 0.0])
+                if r.margin is not None:
+                    add(bp.MARGIN, t, [r.margin, 0.0])
             if r.fault is not None:
                 add(bp.FLAG, t, [float(r.fault)])
-                self._log_event(r, t)
         self.pending = []
         for path, (times, values) in rows.items():
             seconds = np.asarray(times)
@@ -105,7 +112,8 @@ class RerunEpisode:
             self.rrd.rec.send_columns(path, indexes=indexes, columns=rr.Scalars.columns(scalars=np.stack(values)))
 
     def _log_event(self, r: StepRecord, t: float) -> None:
-        """A line in the event log when the episode is first flagged and when the isolated joint changes."""
+        """A line in the event log, and the joint marked, when the episode is first flagged and
+        when the isolated joint changes."""
         if not r.fault or (self.flagged and r.isolated_joint == self.flagged_joint):
             return
         self._set_time(t)
@@ -116,6 +124,28 @@ class RerunEpisode:
             text = f"step {r.step}: isolated joint now {r.isolated_joint or 'none'}"
         self.rrd.rec.log(bp.EVENTS, rr.TextLog(text, level="WARN" if not self.flagged else "INFO"))
         self.flagged, self.flagged_joint = True, r.isolated_joint
+        self._mark_faulty_joint()
+
+    def _faulty_row(self) -> int | None:
+        """The link-position row of the isolated joint (row i + 1 for the i-th joint channel)."""
+        if self.flagged_joint not in self.channel_names:
+            return None
+        channel = self.channel_names.index(self.flagged_joint)
+        return self.joints.index(channel) + 1 if channel in self.joints else None
+
+    def _mark_faulty_joint(self) -> None:
+        """The marker on the isolated joint; cleared when the flagged steps isolate none it can draw."""
+        if self.links is None:
+            return
+        row = self._faulty_row()
+        if row is not None and row < len(self.links):
+            self.rrd.rec.log(bp.FAULTY_JOINT, rr.Points3D([self.links[row]], radii=drawing.FAULT_MARKER_RADIUS,
+                                                          colors=[drawing.FAULTY],
+                                                          labels=[f"{self.flagged_joint}: fault"]))
+            self.marked = True
+        elif self.marked:
+            self.rrd.rec.log(bp.FAULTY_JOINT, rr.Clear(recursive=False))
+            self.marked = False
 
     def _show_largest_errors(self) -> None:
         """Of the error view's channels, keep visible the ones with the largest peaks."""
@@ -126,14 +156,26 @@ class RerunEpisode:
     def write_world(self, w: WorldRecord) -> None:
         self._set_time(w.time_s)
         log = self.rrd.rec.log
+        cell = w.workcell
+        if cell is not None and cell != self.workcell:
+            self.workcell = cell
+            log(bp.TABLE, rr.Boxes3D(centers=[cell.table_center], half_sizes=[cell.table_half_size],
+                                     colors=[drawing.TABLE], fill_mode="solid"), static=True)
         if w.link_positions is not None:
-            log(bp.ARM, rr.LineStrips3D([w.link_positions], radii=LINK_RADIUS))
-            log(bp.ARM_JOINTS, rr.Points3D(w.link_positions, radii=LINK_RADIUS * 1.2))
+            self.links = np.asarray(w.link_positions, np.float64)
+            log(bp.ARM, rr.LineStrips3D([self.links], radii=drawing.LINK_RADIUS, colors=[drawing.ARM]))
+            log(bp.ARM_JOINTS, rr.Points3D(self.links, radii=drawing.LINK_RADIUS * 1.2, colors=[drawing.ARM]))
+            if self.flagged:
+                self._mark_faulty_joint()
         if w.ee is not None:
             self.ee_path.append(np.asarray(w.ee, np.float64))
             log(bp.EE_PATH, rr.LineStrips3D([np.stack(self.ee_path)], radii=0.005))
-        if w.cube is not None:
-            log(bp.CUBE, rr.Boxes3D(centers=[w.cube], half_sizes=[[CUBE_HALF_SIZE] * 3]))
+        if cell is not None and w.cube is not None:
+            log(bp.CUBE, rr.Boxes3D(centers=[w.cube], half_sizes=[[cell.cube_half_size] * 3], colors=[drawing.CUBE],
+                                    fill_mode="solid"))
+        if cell is not None and w.box is not None:
+            log(bp.BOX, rr.Boxes3D(centers=[w.box], half_sizes=[cell.box_half_size], colors=[drawing.BOX],
+                                   fill_mode="solid"))
 
     def flush(self) -> None:
         """Send the buffered steps and wait until they are in the file."""

@@ -4,6 +4,11 @@ A client run ``client-X`` leaves ``client-X.rrd`` and, from the service it strea
 ``service-client-X-<session>.rrd`` (one per session, more after reconnects); opened together
 they are one view. A screenshot needs a display: without one, the viewer runs under
 ``xvfb-run`` (Debian's ``xvfb``) with the Vulkan renderer, which works in software.
+
+The layout: the viewer makes the blueprint it receives last the active one, so a ``.rbl``
+file given after the recordings overrides the one the client's file embeds. That is how a
+user's own layout is used (``blueprint``), and how a screenshot shows the episode's end
+(``episode_end_blueprint``: the time cursor follows the data) rather than its first second.
 """
 
 from __future__ import annotations
@@ -12,9 +17,13 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
-from recordings.paths import DEFAULT_DIR
+from recordings import blueprint as bp
+from recordings.paths import APP_ID, DEFAULT_DIR
+
+SCREENSHOT_SIZE = "1600x1000"  # logical points; the PNG may have more pixels (the display's scale)
 
 
 class RunNotFound(FileNotFoundError):
@@ -36,12 +45,13 @@ def run_files(run: str | Path, folder: Path = DEFAULT_DIR) -> list[Path]:
     return files
 
 
-def viewer_command(files: list[Path], screenshot: Path | None = None) -> list[str]:
-    """The command that opens ``files`` in the Rerun viewer, or writes their screenshot."""
-    command = [sys.executable, "-m", "rerun", *map(str, files)]
+def viewer_command(files: list[Path], screenshot: Path | None = None, blueprint: Path | None = None) -> list[str]:
+    """The command that opens ``files`` in the Rerun viewer (laid out by ``blueprint`` if
+    given), or writes their screenshot."""
+    command = [sys.executable, "-m", "rerun", *map(str, files), *([str(blueprint)] if blueprint else [])]
     if screenshot is None:
         return command
-    command[3:3] = ["--renderer", "vulkan", "--screenshot-to", str(screenshot)]
+    command[3:3] = ["--renderer", "vulkan", "--window-size", SCREENSHOT_SIZE, "--screenshot-to", str(screenshot)]
     if os.environ.get("DISPLAY"):
         return command
     if shutil.which("xvfb-run") is None:
@@ -49,13 +59,21 @@ def viewer_command(files: list[Path], screenshot: Path | None = None) -> list[st
     return ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", *command]
 
 
-def view(run: str | Path, folder: Path = DEFAULT_DIR, screenshot: Path | None = None) -> list[Path]:
-    """Open the run in the viewer (returns when it is closed) or write its screenshot."""
+def view(run: str | Path, folder: Path = DEFAULT_DIR, screenshot: Path | None = None,
+         blueprint: Path | None = None) -> list[Path]:
+    """Open the run in the viewer (returns when it is closed) or write its screenshot;
+    ``blueprint``: a ``.rbl`` layout to use instead of the recordings' own."""
     files = run_files(run, folder)
+    if blueprint is not None and (blueprint.suffix != ".rbl" or not blueprint.is_file()):
+        raise RunNotFound(f"no Rerun blueprint file (.rbl) at {blueprint}")
     if screenshot is None:
-        subprocess.run(viewer_command(files), check=True)
+        subprocess.run(viewer_command(files, blueprint=blueprint), check=True)
         return files
-    done = subprocess.run(viewer_command(files, screenshot), capture_output=True, text=True)  # its log only on failure
+    with tempfile.TemporaryDirectory() as tmp:
+        if blueprint is None:
+            blueprint = Path(tmp) / "end.rbl"
+            bp.episode_end_blueprint().save(APP_ID, blueprint)
+        done = subprocess.run(viewer_command(files, screenshot, blueprint), capture_output=True, text=True)  # log only on failure
     if done.returncode != 0 or not screenshot.exists():
         raise RuntimeError(f"the viewer wrote no screenshot to {screenshot}:\n{done.stderr[-2000:]}")
     return files

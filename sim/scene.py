@@ -22,6 +22,8 @@ BOX_PARK = (-1.5, 1.5, 1.0)  # hovering (gravity-compensated) behind the robot: 
 POST_HALF = (0.025, 0.025, 0.125)  # a 25 cm post that a carried cube must go around, not over
 POST_PARK = ((-1.5, -1.5, 0.0), (-1.7, -1.5, 0.0))  # where the two posts wait, off the table
 TABLE_TOP, FLOOR_Z = 0.0, -0.75
+TABLE_HALF = (0.45, 0.7, 0.375)
+TABLE_CENTER = (0.35, 0.0, TABLE_TOP - TABLE_HALF[2])  # reaching 10 cm behind the Panda's base (the origin)
 WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 1 | ARM_CONTYPE
 
 
@@ -50,8 +52,8 @@ def build_scene(timestep_s: float) -> SceneHandles:
     root.worldbody.add("light", pos=(0, 0, 3), dir=(0, 0, -1))
     root.worldbody.add("geom", name="floor", type="plane", size=(3, 3, 0.1), pos=(0, 0, FLOOR_Z),
                        rgba=(0.5, 0.55, 0.6, 1), **contact)
-    table = root.worldbody.add("geom", name="table", type="box", size=(0.45, 0.7, 0.375),
-                               pos=(0.35, 0, TABLE_TOP - 0.375), rgba=(0.6, 0.45, 0.3, 1), **contact)
+    table = root.worldbody.add("geom", name="table", type="box", size=TABLE_HALF, pos=TABLE_CENTER,
+                               rgba=(0.6, 0.45, 0.3, 1), **contact)
 
     cube_body = root.worldbody.add("body", name="cube", pos=(0.5, 0, CUBE_HALF))
     cube = cube_body.add("freejoint", name="cube_free")

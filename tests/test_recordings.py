@@ -124,9 +124,9 @@ def test_a_screenshot_without_a_display_runs_under_xvfb(monkeypatch, tmp_path):
 
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.setattr(view.shutil, "which", lambda name: "/usr/bin/xvfb-run" if name == "xvfb-run" else None)
-    command = view.viewer_command([tmp_path / "a.rrd"], tmp_path / "a.png")
-    assert command[0] == "xvfb-run" and command[-4:] == ["vulkan", "--screenshot-to", str(tmp_path / "a.png"),
-                                                         str(tmp_path / "a.rrd")]
+    command = view.viewer_command([tmp_path / "a.rrd"], tmp_path / "a.png", tmp_path / "end.rbl")
+    assert command[0] == "xvfb-run" and command[-4:] == ["--screenshot-to", str(tmp_path / "a.png"),
+                                                         str(tmp_path / "a.rrd"), str(tmp_path / "end.rbl")]
     monkeypatch.setattr(view.shutil, "which", lambda name: None)
     with pytest.raises(RuntimeError, match="xvfb"):
         view.viewer_command([tmp_path / "a.rrd"], tmp_path / "a.png")

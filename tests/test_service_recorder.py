@@ -61,7 +61,8 @@ def test_a_dead_recorder_is_replaced_and_the_service_serves_on(model_dir, tmp_pa
         old, _ = _episode(c, episode, 3)
         os.kill(recorder.pid, signal.SIGKILL)
         deadline = time.monotonic() + WAIT_S
-        while recorder.generation == 0 and time.monotonic() < deadline:
+        # the generation moves on before the new child is spawned (a fork of a big process): wait for both
+        while not (recorder.generation == 1 and recorder.alive) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert recorder.generation == 1 and recorder.alive
         step = c.post("/fault", json={"session_id": old["session_id"], "observation": episode[3].tolist()})
