@@ -44,6 +44,35 @@ def rng():
 
 
 @pytest.fixture(scope="session")
+def small_panda_model() -> NeuralASM:
+    """A small network trained on simulated Panda episodes (4 per skill), calibrated in both
+    recall modes on others: the model the client tests serve."""
+    from sim.runner import run_episode
+    from sim.skills import SKILLS
+
+    def episodes(seeds: range) -> np.ndarray:
+        return np.stack([run_episode(s, seed).observations for s in SKILLS for seed in seeds])
+
+    demos, precision, thresholds = episodes(range(4)), episodes(range(10, 15)), episodes(range(20, 25))
+    model = NeuralASM.fit(demos, CHANNEL_NAMES, FAST.with_(hidden_size=64, epochs=150), progress=False)
+    for mode in ("offline", "online"):
+        model.calibrate(precision, thresholds, mode, 1)
+    return model
+
+
+@pytest.fixture(scope="module")
+def server(model_dir: Path, tmp_path_factory: pytest.TempPathFactory):
+    """An embedded service on the requesting module's ``model_dir``."""
+    from service.embedded import start_embedded
+    from service.settings import Settings
+
+    settings = Settings(models_dir=model_dir, recordings_dir=tmp_path_factory.mktemp("service-recordings"),
+                        build_default_model=False)
+    with start_embedded(settings) as srv:
+        yield srv
+
+
+@pytest.fixture(scope="session")
 def servable_model(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Path]:
     """Make a service's model folder: a small network trained on synthetic 25-channel skills
     (the Panda's channel names), calibrated for ``modes``, its training episodes beside it

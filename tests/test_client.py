@@ -15,15 +15,13 @@ import pytest
 
 from models import checkpoint
 from models.asm import NeuralASM
-from models.config import FAST
 from recordings.readers import read_mcap, read_rrd_series
 from service.embedded import start_embedded
 from service.settings import Settings
-from sim.channels import CHANNEL_NAMES, JOINT_NAMES
+from sim.channels import JOINT_NAMES
 from client import run_client
 from client.summary import summary_line
 from sim.faults import FaultSpec
-from sim.runner import run_episode
 from sim.skills import SKILLS
 
 SKILL = SKILLS[0]
@@ -31,24 +29,10 @@ TEST_SEED = 40  # neither a training nor a calibration seed
 
 
 @pytest.fixture(scope="module")
-def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def model_dir(tmp_path_factory: pytest.TempPathFactory, small_panda_model: NeuralASM) -> Path:
     folder = tmp_path_factory.mktemp("models")
-    demos = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(4)])
-    precision = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(10, 15)])
-    thresholds = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(20, 25)])
-    model = NeuralASM.fit(demos, CHANNEL_NAMES, FAST.with_(hidden_size=64, epochs=150), progress=False)
-    for mode in ("offline", "online"):
-        model.calibrate(precision, thresholds, mode, 1)
-    checkpoint.save(model, folder / "panda.safetensors")
+    checkpoint.save(small_panda_model, folder / "panda.safetensors")
     return folder
-
-
-@pytest.fixture(scope="module")
-def server(model_dir: Path, tmp_path_factory: pytest.TempPathFactory):
-    settings = Settings(models_dir=model_dir, recordings_dir=tmp_path_factory.mktemp("service-recordings"),
-                        build_default_model=False)
-    with start_embedded(settings) as srv:
-        yield srv
 
 
 def _fault_messages(path: str) -> list[dict]:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -27,14 +26,10 @@ from experiments.correction.metrics import first_hit_step
 from experiments.correction.served import COMPLIANT_NAME, ensure_compliant_model
 from models import checkpoint
 from models.asm import NeuralASM
-from models.config import FAST
 from recordings.readers import read_mcap
 from service.embedded import start_embedded
 from service.registry import ModelRegistry
 from service.settings import Settings
-from sim.channels import CHANNEL_NAMES
-from sim.runner import run_episode
-from sim.skills import SKILLS
 
 SKILL, SEED = "pick_right_place_left", 42
 UNDISTURBED_SEED = 44  # 44 and 45; the small model's recall misses the cube at 43 and is flagged there
@@ -43,25 +38,11 @@ runner = CliRunner()
 
 
 @pytest.fixture(scope="module")
-def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def model_dir(tmp_path_factory: pytest.TempPathFactory, small_panda_model: NeuralASM) -> Path:
     folder = tmp_path_factory.mktemp("models")
-    demos = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(4)])
-    precision = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(10, 15)])
-    thresholds = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(20, 25)])
-    model = NeuralASM.fit(demos, CHANNEL_NAMES, FAST.with_(hidden_size=64, epochs=150), progress=False)
-    for mode in ("offline", "online"):
-        model.calibrate(precision, thresholds, mode, 1)
-    checkpoint.save(model, folder / "panda.safetensors")
+    checkpoint.save(small_panda_model, folder / "panda.safetensors")
     ensure_compliant_model(folder, CORRECTION.with_(served_monitor_seeds=6), progress=False)
     return folder
-
-
-@pytest.fixture(scope="module")
-def server(model_dir: Path, tmp_path_factory: pytest.TempPathFactory):
-    settings = Settings(models_dir=model_dir, recordings_dir=tmp_path_factory.mktemp("service-recordings"),
-                        build_default_model=False)
-    with start_embedded(settings) as srv:
-        yield srv
 
 
 def _flags(path: str) -> list[bool]:
