@@ -105,8 +105,8 @@ def score(
     data: str = typer.Argument(SYNTHETIC, help="sequences to score"),
     mode: str = typer.Option("offline", help="recall mode: offline or online"),
     cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
-    weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)"),
-    as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON"),
+    weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)", metavar=""),
+    as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON", metavar=""),
     mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS 2 bag or LeRobot dataset"),
 ) -> None:
     """Energy of every step of every sequence, and the channel with the largest error."""

@@ -35,7 +35,7 @@ def serve(
     models_dir: Path | None = typer.Option(None, help=_help("models_dir")),
     default_model: str | None = typer.Option(None, help=_help("default_model")),
     build_default_model: bool | None = typer.Option(
-        None, "--build-default-model/--no-build-default-model", help=_help("build_default_model")
+        None, "--build-default-model/--no-build-default-model", help=_help("build_default_model"), metavar=""
     ),
     api_key: str | None = typer.Option(None, help=_help("api_key") + " (prefer NASM_API_KEY: argv is visible)"),
     max_sessions: int | None = typer.Option(None, help=_help("max_sessions")),
@@ -43,7 +43,7 @@ def serve(
     session_idle_s: float | None = typer.Option(None, help=_help("session_idle_s")),
     max_body_bytes: int | None = typer.Option(None, help=_help("max_body_bytes")),
     recordings_dir: Path | None = typer.Option(None, help=_help("recordings_dir")),
-    record: bool | None = typer.Option(None, "--record/--no-record", help=_help("record")),
+    record: bool | None = typer.Option(None, "--record/--no-record", help=_help("record"), metavar=""),
     default_fpr: float | None = typer.Option(None, help=_help("default_fpr")),
     log_level: str = typer.Option("info", help="uvicorn log level"),
 ) -> None:

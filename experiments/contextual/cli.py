@@ -29,7 +29,7 @@ def contextual(
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
     preset: str = typer.Option(DEFAULT_PRESET, help=f"tPC hyper-parameters, shared by the RNNs (but for the "
                                f"training noise): {', '.join(PRESETS)}"),
-    quick: bool = typer.Option(False, help="reduced protocol: 1 seed, 300 epochs, short K sweep"),
+    quick: bool = typer.Option(False, help="reduced protocol: 1 seed, 300 epochs, short K sweep", metavar=""),
 ) -> None:
     """Neural ASM vs S-to-M and SM-to-SM RNNs on plan & execute / plan only / execute only:
     PEAD (panels E, F), recall error vs inference iterations (G), energy vs number of

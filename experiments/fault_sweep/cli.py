@@ -36,9 +36,9 @@ def faults(
     paper_epochs: int = typer.Option(FAITHFUL.epochs, help="epochs of the paper-configuration model"),
     fast_epochs: int | None = typer.Option(None, help="override the default model's epochs"),
     ablation: bool = typer.Option(False, "--ablation", help="varied task: train one Neural ASM per lever "
-                                  "(experiments/varied/ablation.py) and write ablation.json and ablation.md"),
+                                  "(experiments/varied/ablation.py) and write ablation.json and ablation.md", metavar=""),
     ceiling: bool = typer.Option(False, "--ceiling", help="varied task: score two oracles that know each episode's "
-                                 "exact context (experiments/varied/ceiling.py); write ceiling.json and ceiling.md"),
+                                 "exact context (experiments/varied/ceiling.py); write ceiling.json and ceiling.md", metavar=""),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
     workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
