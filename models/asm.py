@@ -287,10 +287,7 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     model = streams[0].model
     recallers = [s.recaller for s in streams]
     steps = [r.t for r in recallers]
-    batch = recall_.Recaller(model.net, len(recallers), recallers[0].mode, recallers[0].cue_steps)
-    batch.zhat, batch.t = np.concatenate([r.zhat for r in recallers]), steps[0]
-    if steps[0] > 0 and model.net.has_context:
-        batch.context = np.concatenate([r.context for r in recallers])
+    batch = recall_.Recaller.stack(recallers)
     x = model.normaliser.normalise(observations)
     expected = batch.step(x)
     errors = x - expected
@@ -303,9 +300,7 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
         if not finite[i]:
             results.append(None)
             continue
-        r.zhat, r.t = batch.zhat[i : i + 1].copy(), r.t + 1
-        if batch.context is not None:
-            r.context = batch.context[i : i + 1].copy()
+        r.advance_as(batch, i)
         score = StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i])
         decision = None
         if s.fpr is not None:

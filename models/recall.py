@@ -14,7 +14,7 @@ W_F f(z): with x-hat free that is the minimum of eq. 5 (see relax_observation).
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, Sequence
 
 import numpy as np
 
@@ -46,7 +46,34 @@ class Recaller:
         self.net, self.mode, self.cue_steps = net, mode, cue_steps
         self.zhat = net.initial_state(batch, rng)
         self.context: np.ndarray | None = None  # read from the first observation (networks with W_C)
+        # Once ``forecast`` has run: the next step's prior W_H f(zhat) (+ W_C c) and what it
+        # predicts, W_F f(prior), which past the cue is that step's expectation.
+        self.next_prior: np.ndarray | None = None
+        self.next_expected: np.ndarray | None = None
         self.t = 0
+
+    @classmethod
+    def stack(cls, recallers: Sequence["Recaller"]) -> "Recaller":
+        """One batch of recallers of one network and mode, all in the cue or all past it."""
+        first = recallers[0]
+        batch = cls(first.net, 0, first.mode, first.cue_steps)
+        batch.t = first.t
+        batch.zhat = np.concatenate([r.zhat for r in recallers])
+        if first.context is not None:
+            batch.context = np.concatenate([r.context for r in recallers])
+        if all(r.next_prior is not None for r in recallers):
+            batch.next_prior = np.concatenate([r.next_prior for r in recallers])
+            batch.next_expected = np.concatenate([r.next_expected for r in recallers])
+        return batch
+
+    def advance_as(self, batch: "Recaller", i: int) -> None:
+        """Take the state of row i of ``batch``, stacked from this recaller and stepped once
+        (copies, so the batch's arrays are free to go; the rows' steps may differ past the cue)."""
+        def row(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[i : i + 1].copy()
+
+        self.zhat, self.context, self.t = row(batch.zhat), row(batch.context), self.t + 1
+        self.next_prior, self.next_expected = row(batch.next_prior), row(batch.next_expected)
 
     @property
     def infers_now(self) -> bool:
@@ -58,22 +85,28 @@ class Recaller:
             if x is None:
                 raise ValueError("step 0 needs an observation: it sets the context input")
             self.context = self.net.context_of(x)
-        prior = self.net.prior(self.zhat, self.context)
-        if self.infers_now:
-            if x is None:
-                raise ValueError(f"step {self.t} needs an observation in {self.mode} recall")
+            self.next_prior = None  # a forecast made before the context was known
+        if self.infers_now and x is None:
+            raise ValueError(f"step {self.t} needs an observation in {self.mode} recall")
+        if self.next_prior is None:
+            self.forecast()
+        prior, forecast = self.next_prior, self.next_expected
+        if self.t < self.cue_steps:  # the cue: what it is, not what was predicted of it
             z = self.net.infer(prior, x)
-            expected = self.net.observe(z if self.t < self.cue_steps else prior)
-        else:
-            z = prior
             expected = self.net.observe(z)
-        self.zhat = z
+        else:
+            z = self.net.infer(prior, x) if self.mode == "online" else prior
+            expected = forecast
+        self.zhat, self.next_prior, self.next_expected = z, None, None
         self.t += 1
         return expected
 
     def forecast(self) -> np.ndarray:
-        """Prediction of the next observation, W_F f(W_H f(zhat))."""
-        return self.net.observe(self.net.prior(self.zhat, self.context))
+        """Prediction of the next observation, W_F f(W_H f(zhat)); kept for the next step."""
+        if self.next_prior is None:
+            self.next_prior = self.net.prior(self.zhat, self.context)
+            self.next_expected = self.net.observe(self.next_prior)
+        return self.next_expected
 
 
 def run(

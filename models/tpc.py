@@ -10,9 +10,9 @@ context channels the term is absent and the energy is the paper's.
 
 torch holds the parameters and the optimiser. The relaxation of z (eq. 2) runs on
 numpy views of the same memory: it is a loop of tiny operations (K=100 gradient steps, or two
-Gauss-Newton steps), where torch's per-call overhead (~3 us) costs about three times
-numpy's, and no autograd is needed because the learning rules (eqs. 3-4) are local Hebbian
-products written out below.
+Gauss-Newton steps, compiled in models/kernels.py), where torch's per-call overhead (~3 us)
+costs about three times numpy's, and no autograd is needed because the learning rules
+(eqs. 3-4) are local Hebbian products written out below.
 """
 
 from __future__ import annotations
@@ -21,13 +21,9 @@ import math
 
 import numpy as np
 import torch
-from scipy.linalg import lapack
 
 from models.config import TPCConfig
-
-
-# Halvings of a Gauss-Newton step that would raise the energy before it is given up.
-MAX_HALVINGS = 4
+from models.kernels import gauss_newton, spectral_norm
 
 
 def stable_wf_norm(inference_rate: float, margin: float = 0.5) -> float:
@@ -38,33 +34,6 @@ def stable_wf_norm(inference_rate: float, margin: float = 0.5) -> float:
     and ||W_F||^2 < 2/gamma - 1 suffices; ``margin`` keeps us well inside that bound.
     """
     return math.sqrt(margin * (2.0 / inference_rate - 1.0))
-
-
-class Cholesky:
-    """Cholesky factors of symmetric positive definite matrices (B, D, D), to solve with
-    several right-hand sides.
-
-    LAPACK's potrf/potrs are called directly for one matrix, torch's batched Cholesky for
-    several: for D = 25, numpy's and torch's general solvers spend most of their time on
-    dispatch and checks (~8-13 us a call against ~3 us for LAPACK).
-    """
-
-    def __init__(self, a: np.ndarray) -> None:
-        if len(a) == 1:
-            factor, info = lapack.spotrf(a[0], lower=1, clean=0)
-            self.factor: np.ndarray | torch.Tensor = factor
-        else:
-            self.factor, info = torch.linalg.cholesky_ex(torch.from_numpy(a))
-            info = int(info.any())
-        if info != 0:
-            raise np.linalg.LinAlgError("the Gauss-Newton curvature is not positive definite")
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        """x with a[i] @ x[i] = b[i], for b (B, D)."""
-        if isinstance(self.factor, np.ndarray):
-            x, _ = lapack.spotrs(self.factor, b[0], lower=1)
-            return x[None]
-        return torch.cholesky_solve(torch.from_numpy(b)[..., None], self.factor)[..., 0].numpy()
 
 
 class TemporalPC:
@@ -99,6 +68,7 @@ class TemporalPC:
         self.w_f = self.W_F.numpy()
         self.w_c = self.W_C.numpy()
         self.pi = self.precision.numpy()
+        self.pi_sqrt = np.sqrt(self.pi)
 
     @property
     def has_context(self) -> bool:
@@ -216,37 +186,11 @@ class TemporalPC:
 
         Far from what the network can predict (an observation tens of normalised units off)
         tanh saturates and a full step can overshoot: a step that would raise F is halved,
-        up to ``MAX_HALVINGS`` times, and a sequence whose F still rises keeps its z. F never
+        up to ``models.kernels.MAX_HALVINGS`` times, and a sequence whose F still rises keeps its z. F never
         increases.
         """
-        scale = np.sqrt(self.pi)
-        w = scale[:, None] * self.w_f  # Pi^1/2 W_F
-        target = (scale * x).astype(np.float32, copy=False)
-        z = prior.copy()
-        fz = np.tanh(z)
-        residual = target - fz @ w.T  # Pi^1/2 eps_x
-        energy = (residual * residual).sum(1)
-        slope_0 = 1.0 - fz * fz  # f'(prior): the curvature of every step is evaluated here
-        curvature = ((slope_0 * slope_0)[:, None, :] * w) @ w.T  # J J^T, (B, D, D)
-        curvature += np.eye(self.obs_size, dtype=np.float32)
-        factor = Cholesky(curvature)
-        for _ in range(steps):
-            grad = (z - prior) - (1.0 - fz * fz) * (residual @ w)
-            dz = grad - slope_0 * (factor.solve((slope_0 * grad) @ w.T) @ w)
-            for _ in range(MAX_HALVINGS + 1):
-                new_z = z - dz
-                new_fz = np.tanh(new_z)
-                new_residual = target - new_fz @ w.T
-                new_energy = ((new_z - prior) ** 2).sum(1) + (new_residual * new_residual).sum(1)
-                rises = new_energy > energy
-                if not rises.any():
-                    break
-                dz[rises] *= 0.5
-            else:
-                for new, old in ((new_z, z), (new_fz, fz), (new_residual, residual), (new_energy, energy)):
-                    new[rises] = old[rises]
-            z, fz, residual, energy = new_z, new_fz, new_residual, new_energy
-        return z
+        return gauss_newton(np.ascontiguousarray(prior, np.float32), np.ascontiguousarray(x, np.float32),
+                            self.w_f, self.pi_sqrt, steps)
 
     def hebbian_gradients(
         self, zhat_prev: np.ndarray, prior: np.ndarray, z: np.ndarray, x: np.ndarray,
@@ -271,9 +215,6 @@ class TemporalPC:
         cap = self.wf_max_norm
         if float(np.linalg.norm(self.w_f)) <= cap:  # Frobenius >= spectral: nothing to do
             return
-        # ||W_F||_2^2 is the largest eigenvalue of the smaller Gram matrix: cheaper than an SVD.
-        w = self.w_f
-        gram = w @ w.T if w.shape[0] <= w.shape[1] else w.T @ w
-        norm = math.sqrt(float(np.linalg.eigvalsh(gram)[-1]))
+        norm = spectral_norm(self.w_f)
         if norm > cap:
             self.W_F.mul_(cap / norm)

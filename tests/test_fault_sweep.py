@@ -62,9 +62,11 @@ def test_large_faults_are_detected_at_or_after_their_step(sweep, method, weighti
 def test_clear_case_is_isolated_to_the_locked_joint(sweep, method, weighting):
     result, _ = sweep
     outcome = result.outcomes[(method, weighting)]
-    # joint 4 at -15 deg: visible and isolable at its own step
-    assert outcome["isolated_at_fault_step"][1] == 4
-    assert outcome["isolated_at_detection"][1] == 4
+    # joint 1 at +10 deg: visible and isolable at its own step (its weighted error is ~5-10x any
+    # other joint's). Not joint 4 at -15 deg: there the online predictor's errors on joints 4 and
+    # 6 are within 1 % of each other, and rounding decides which one is named.
+    assert outcome["isolated_at_fault_step"][2] == 1
+    assert outcome["isolated_at_detection"][2] == 1
 
 
 def test_normal_episodes_are_not_flagged_by_the_episode_threshold(sweep):

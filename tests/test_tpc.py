@@ -6,7 +6,8 @@ import pytest
 from models import recall
 from models.asm import NeuralASM, channel_precision
 from models.config import FAITHFUL, TPCConfig
-from models.tpc import Cholesky, TemporalPC, stable_wf_norm
+from models.kernels import spectral_norm
+from models.tpc import TemporalPC, stable_wf_norm
 from models.train import recall_error
 
 from conftest import SMALL
@@ -158,15 +159,15 @@ def test_gauss_newton_never_climbs_on_observations_far_off(trained, rng):
             assert np.all(energy(net.infer(prior, x, steps=steps)) <= energy(prior) * (1 + 1e-6))
 
 
-def test_cholesky_solves_one_system_and_a_batch_alike(rng):
-    a = rng.standard_normal((5, 25, 40)).astype(np.float32)
-    a = a @ a.transpose(0, 2, 1) + np.eye(25, dtype=np.float32)
-    b = rng.standard_normal((5, 25)).astype(np.float32)
-    expected = np.linalg.solve(a.astype(np.float64), b[..., None].astype(np.float64))[..., 0]
-    np.testing.assert_allclose(Cholesky(a).solve(b), expected, rtol=1e-3, atol=1e-4)
-    np.testing.assert_allclose(Cholesky(a[:1]).solve(b[:1]), expected[:1], rtol=1e-3, atol=1e-4)
-    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
-        Cholesky(-a[:1])
+def test_gauss_newton_relaxes_a_batch_as_its_sequences_alone(trained, rng):
+    """The service steps streams together or alone: either way each gets the same z."""
+    net = trained.net
+    prior = net.prior(0.5 * rng.standard_normal((6, net.config.hidden_size)).astype(np.float32))
+    x = net.observe(prior) + 0.5 * rng.standard_normal((6, net.obs_size)).astype(np.float32)
+    together = net.infer(prior, x)
+    alone = np.concatenate([net.infer(prior[i : i + 1], x[i : i + 1]) for i in range(6)])
+    np.testing.assert_array_equal(together, alone)
+    assert not np.allclose(together, prior)
 
 
 def test_long_training_5000_epochs_is_finite(skills):
@@ -229,3 +230,9 @@ def test_training_noise_is_seeded_and_regularises(skills):
     assert noisy[0].history[-1] < noisy[0].history[0] / 3
     with pytest.raises(ValueError, match="training_noise"):
         TPCConfig(training_noise=-0.1)
+
+
+@pytest.mark.parametrize("shape", [(25, 256), (256, 25), (7, 7)])
+def test_spectral_norm_matches_the_svd(rng, shape):
+    w = rng.standard_normal(shape).astype(np.float32)
+    assert spectral_norm(w) == pytest.approx(float(np.linalg.norm(w.astype(np.float64), 2)), rel=1e-5)
