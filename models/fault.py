@@ -63,11 +63,12 @@ def isolated_joint(weighted_errors: np.ndarray, channel_names: Sequence[str]) ->
 
 
 def isolate(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> tuple[str | None, list[tuple[str, float]]]:
+    """The isolated joint's name (None without joint channels) and every channel ranked by |error|."""
     magnitude = np.abs(weighted_errors)
     order = np.argsort(-magnitude, kind="stable")
-    ranked = [(channel_names[i], float(magnitude[i])) for i in order]
+    ranked = list(zip([channel_names[i] for i in order.tolist()], magnitude[order].tolist()))
     joints = joint_channels(channel_names)
-    isolated = channel_names[joints[int(isolated_joint(weighted_errors, channel_names))]] if joints else None
+    isolated = channel_names[joints[int(magnitude[joints].argmax())]] if joints else None
     return isolated, ranked
 
 

@@ -83,7 +83,7 @@ def _cholesky_solve(factor: np.ndarray, b: np.ndarray) -> np.ndarray:
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # the service's event loop runs on while a batch relaxes
 def gauss_newton(prior: np.ndarray, x: np.ndarray, w_f: np.ndarray, scale: np.ndarray, steps: int) -> np.ndarray:
     """z after ``steps`` chord Gauss-Newton steps on F = ||z - prior||^2 + ||Pi^1/2 (x - W_F f(z))||^2
     for every row of prior (B, H) and x (B, D), given W_F (D, H) and scale = Pi^1/2 (D,), float32.
@@ -120,3 +120,11 @@ def gauss_newton(prior: np.ndarray, x: np.ndarray, w_f: np.ndarray, scale: np.nd
                 dz *= half
         out[b] = z
     return out
+
+
+def compile_now() -> None:
+    """Compile the kernels (or load them from the cache) before they are needed, so that a
+    service's first step does not wait for the compiler."""
+    w = np.ones((2, 3), np.float32)
+    gauss_newton(np.zeros((1, 3), np.float32), np.zeros((1, 2), np.float32), w, np.ones(2, np.float32), 1)
+    spectral_norm(w)

@@ -8,6 +8,7 @@ import asyncio
 import logging
 import time
 
+from models.kernels import compile_now
 from recordings.recorder import RecorderProcess
 from service.registry import ModelRegistry
 from service.runner import Runner, StepOutcome
@@ -33,6 +34,7 @@ class ServiceState:
         if self.recorder is not None:
             await asyncio.to_thread(self.recorder.start)
         self.runner.start()
+        await self.runner.call(compile_now)
         await self.runner.call(lambda: self.registry.load(self.settings.build_default_model))
 
     async def shutdown(self) -> None:
