@@ -186,8 +186,8 @@ class TemporalPC:
 
         Far from what the network can predict (an observation tens of normalised units off)
         tanh saturates and a full step can overshoot: a step that would raise F is halved,
-        up to ``models.kernels.MAX_HALVINGS`` times, and a sequence whose F still rises keeps its z. F never
-        increases.
+        up to ``models.kernels.MAX_HALVINGS`` times, and a sequence whose F still rises keeps
+        its z. F never increases.
         """
         return gauss_newton(np.ascontiguousarray(prior, np.float32), np.ascontiguousarray(x, np.float32),
                             self.w_f, self.pi_sqrt, steps)
