@@ -68,7 +68,7 @@ def isolate(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> tuple[
     order = np.argsort(-magnitude, kind="stable")
     ranked = list(zip([channel_names[i] for i in order.tolist()], magnitude[order].tolist()))
     joints = joint_channels(channel_names)
-    isolated = channel_names[joints[int(magnitude[joints].argmax())]] if joints else None
+    isolated = channel_names[joints[int(isolated_joint(weighted_errors, channel_names))]] if joints else None
     return isolated, ranked
 
 
