@@ -16,7 +16,7 @@ import numpy as np
 from models import recall as recall_
 from models.calibration import Calibration, calibration_key, estimate, set_thresholds
 from models.config import FAST, SCORING, Covariance, TPCConfig
-from models.fault import FaultDecision, ThresholdKind, decide, threshold_for
+from models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_for
 from models.normaliser import Normaliser
 from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
 from models.tpc import TemporalPC
@@ -295,19 +295,20 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     expected_raw = model.normaliser.denormalise(expected)
     prediction = model.normaliser.denormalise(batch.forecast())
     finite = np.isfinite(energies) & np.isfinite(prediction).all(1) & np.isfinite(expected_raw).all(1)
-    results: list[StreamStep | None] = []
-    for i, (s, r) in enumerate(zip(streams, recallers)):
-        if not finite[i]:
-            results.append(None)
-            continue
-        r.advance_as(batch, i)
-        score = StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i])
-        decision = None
-        if s.fpr is not None:
-            assert s.calibration is not None
-            decision = decide(score, s.calibration, model.channel_names, s.fpr, s.threshold)
-        results.append(StreamStep(score, decision))
-    return results
+    scores: list[StepScore | None] = []
+    for i, r in enumerate(recallers):
+        if finite[i]:
+            r.advance_as(batch, i)
+            scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i]))
+        else:
+            scores.append(None)
+    # One decision for the batch's deciding streams: isolation ranks their errors in one sort.
+    deciding = [(i, s, score) for i, (s, score) in enumerate(zip(streams, scores))
+                if s.fpr is not None and s.calibration is not None and score is not None]
+    decisions = dict(zip([i for i, _, _ in deciding], decide_rows(
+        [score for _, _, score in deciding], [s.calibration for _, s, _ in deciding], model.channel_names,
+        [s.fpr for _, s, _ in deciding], [s.threshold for _, s, _ in deciding])))
+    return [None if score is None else StreamStep(score, decisions.get(i)) for i, score in enumerate(scores)]
 
 
 def weigh_step(

@@ -12,6 +12,7 @@ absolute (precision-weighted, when the energy is) prediction error, as in the pa
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Literal, Sequence
 
@@ -27,7 +28,19 @@ THRESHOLD_KINDS: tuple[str, ...] = ("step", "per_step", "episode")
 
 def joint_channels(channel_names: Sequence[str]) -> list[int]:
     """Indices of the joint-angle channels (named joint1..joint7)."""
-    return [i for i, n in enumerate(channel_names) if n.startswith(JOINT_PREFIX)]
+    return list(_joint_index(tuple(channel_names)))
+
+
+@functools.lru_cache(maxsize=64)
+def _joint_index(channel_names: tuple[str, ...]) -> tuple[int, ...]:
+    return tuple(i for i, n in enumerate(channel_names) if n.startswith(JOINT_PREFIX))
+
+
+@functools.lru_cache(maxsize=64)
+def _name_array(channel_names: tuple[str, ...]) -> np.ndarray:
+    names = np.array(channel_names, dtype=object)
+    names.flags.writeable = False
+    return names
 
 
 @dataclass(frozen=True)
@@ -56,20 +69,51 @@ def threshold_for(calibration: Calibration, fpr: float, step: int, kind: Thresho
 def isolated_joint(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> np.ndarray:
     """Position (0-based, among the joint channels) of the joint with the largest |error|, for
     errors (..., D) of any leading shape: the served decision and the fault sweep use this."""
-    joints = joint_channels(channel_names)
+    joints = _joint_index(tuple(channel_names))
     if not joints:
         raise ValueError("no joint channels (named joint...) to isolate a fault in")
-    return np.abs(weighted_errors[..., joints]).argmax(axis=-1)
+    return np.abs(weighted_errors[..., list(joints)]).argmax(axis=-1)
 
 
 def isolate(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> tuple[str | None, list[tuple[str, float]]]:
     """The isolated joint's name (None without joint channels) and every channel ranked by |error|."""
+    isolated, ranked = isolate_rows(np.asarray(weighted_errors)[None], channel_names)
+    return isolated[0], ranked[0]
+
+
+def isolate_rows(
+    weighted_errors: np.ndarray, channel_names: Sequence[str]
+) -> tuple[list[str | None], list[list[tuple[str, float]]]]:
+    """``isolate`` for each row of (B, D) errors at once: the service decides a batch of
+    sessions' steps together, and one sort of the batch costs what one row's did."""
+    names = tuple(channel_names)
     magnitude = np.abs(weighted_errors)
-    order = np.argsort(-magnitude, kind="stable")
-    ranked = list(zip([channel_names[i] for i in order.tolist()], magnitude[order].tolist()))
-    joints = joint_channels(channel_names)
-    isolated = channel_names[joints[int(isolated_joint(weighted_errors, channel_names))]] if joints else None
+    order = np.argsort(-magnitude, axis=1, kind="stable")
+    ranked_names = _name_array(names)[order].tolist()
+    ranked = [list(zip(n, m)) for n, m in zip(ranked_names, np.take_along_axis(magnitude, order, 1).tolist())]
+    joints = _joint_index(names)
+    if not joints:
+        return [None] * len(ranked), ranked
+    isolated = [names[joints[j]] for j in isolated_joint(weighted_errors, names).tolist()]
     return isolated, ranked
+
+
+def decide_rows(
+    scores: Sequence[StepScore],
+    calibrations: Sequence[Calibration],
+    channel_names: Sequence[str],
+    fprs: Sequence[float],
+    kinds: Sequence[ThresholdKind],
+) -> list[FaultDecision]:
+    """``decide`` for a batch of steps, each with its own calibration, rate and threshold kind."""
+    if not scores:
+        return []
+    isolated, ranked = isolate_rows(np.array([s.weighted_errors for s in scores]), channel_names)
+    decisions = []
+    for s, cal, fpr, kind, joint, channels in zip(scores, calibrations, fprs, kinds, isolated, ranked):
+        threshold = threshold_for(cal, fpr, s.step, kind)
+        decisions.append(FaultDecision(s.energy > threshold, s.energy, threshold, joint, channels))
+    return decisions
 
 
 def decide(
@@ -79,6 +123,4 @@ def decide(
     fpr: float = 0.01,
     kind: ThresholdKind = "episode",
 ) -> FaultDecision:
-    threshold = threshold_for(calibration, fpr, score.step, kind)
-    isolated, ranked = isolate(score.weighted_errors, channel_names)
-    return FaultDecision(score.energy > threshold, score.energy, threshold, isolated, ranked)
+    return decide_rows([score], [calibration], channel_names, [fpr], [kind])[0]
