@@ -302,12 +302,13 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
             scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i]))
         else:
             scores.append(None)
-    # One decision for the batch's deciding streams: isolation ranks their errors in one sort.
-    deciding = [(i, s, score) for i, (s, score) in enumerate(zip(streams, scores))
+    # The deciding streams' steps are decided together: isolation ranks their errors in one sort.
+    deciding = [i for i, (s, score) in enumerate(zip(streams, scores))
                 if s.fpr is not None and s.calibration is not None and score is not None]
-    decisions = dict(zip([i for i, _, _ in deciding], decide_rows(
-        [score for _, _, score in deciding], [s.calibration for _, s, _ in deciding], model.channel_names,
-        [s.fpr for _, s, _ in deciding], [s.threshold for _, s, _ in deciding])))
+    decided = decide_rows([scores[i] for i in deciding], [streams[i].calibration for i in deciding],
+                          model.channel_names, [streams[i].fpr for i in deciding],
+                          [streams[i].threshold for i in deciding])
+    decisions = dict(zip(deciding, decided))
     return [None if score is None else StreamStep(score, decisions.get(i)) for i, score in enumerate(scores)]
 
 
