@@ -81,7 +81,7 @@ def _outcome(s: EpisodeSummary) -> list[str]:
     if s.correction is not None:
         engaged, yielded = s.correction["engaged_step"], s.correction["yielded_step"]
         out.append("not corrected (the monitor never flagged)" if engaged is None else
-                   f"corrected from step {engaged}" + (f", let go at step {yielded} (a joint at its torque limit)"
+                   f"corrected from step {engaged}" + (f", let go at step {yielded} (a joint near its torque limit)"
                                                        if yielded is not None else ""))
     if s.cube_error_m is not None:
         tolerance = f"{SIM.success_tolerance_m * 100:g} cm"

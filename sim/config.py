@@ -96,22 +96,30 @@ class Impedance:
 @dataclass(frozen=True)
 class CorrectionGains:
     """The memory's reactive correction (sim/control.py): q* = q_rec + K_i I, I the leaky
-    integral of q_rec - q. Chosen on selection seeds, never on an experiment's test seeds
-    (experiments/correction)."""
+    integral of q_rec - q, its torque bounded by the external torque the arm feels. Chosen on
+    selection seeds, never on an experiment's test seeds (experiments/correction)."""
 
     ki: float = 4.0  # 1/s
     leak: float = 0.25  # 1/s
     i_max_deg: float = 10.0  # bound on K_i I per joint
-    # A joint held at its torque limit this long is pushing against a load the arm cannot
-    # move (or a person): the correction lets go for the rest of the episode, and the arm
-    # yields as the compliant controller alone would. None: never.
-    yield_s: float | None = 0.5
+    # A joint at `yield_torque` of its torque limit for `yield_s` is holding a load the arm
+    # should not hold (or pushing a person): the correction lets go for the rest of the episode,
+    # and does not engage if the arm got there first. None: never.
+    yield_torque: float = 0.9  # fraction of the joint's torque limit
+    yield_s: float | None = 0.1
+    # Letting go, the offset decays with this time constant: a set-point step under a heavy
+    # load would slam the hand down (at 80 kg m/s it drags the cube 5-7 mm through the fingers).
+    release_s: float = 0.05
 
     def __post_init__(self) -> None:
         if not (self.ki > 0 and self.leak >= 0 and self.i_max_deg > 0):
             raise ValueError(f"correction gains need ki > 0, leak >= 0, i_max_deg > 0, got {self}")
+        if not 0 < self.yield_torque <= 1:
+            raise ValueError(f"yield_torque must be in (0, 1], got {self.yield_torque}")
         if self.yield_s is not None and not self.yield_s > 0:
             raise ValueError(f"yield_s must be > 0 or None, got {self.yield_s}")
+        if not self.release_s > 0:
+            raise ValueError(f"release_s must be > 0, got {self.release_s}")
 
 
 @dataclass(frozen=True)

@@ -13,19 +13,25 @@ in about one run in ten.
 `PlanCorrection` is the reactive correction: the joint set-point sent to the controller is the
 recalled plan plus an integral of the proprioceptive prediction error e = q_recalled - q,
 
-    q*(t) = q_rec(t) + K_i I(t),    dI/dt = e - leak I,    |K_i I| <= i_max per joint,
+    q*(t) = q_rec(t) + c(t),   c = clip(K_i I, +-min(i_max, |tau_ext| / K)),   dI/dt = e - leak I,
 
 so the arm is driven back onto what the memory expects rather than onto wherever a load holds
-it. With a `detector` (the memory's monitor: does the energy of the observations so far say
-something is wrong?) the correction stays off until the monitor first flags, and the arm is a
-plain compliant arm until then. A joint held at its torque limit for `yield_s` is pushing
-against a load the arm cannot move, which on a collaborative arm may be a person: the
-correction lets go for the rest of the episode, and the arm yields as the compliant controller
-alone would. There is no proportional term on e: it would stiffen the compliant arm during the impact
-itself (the hook runs at 40 Hz, the impact lasts milliseconds), which is what a compliant
-controller is there to avoid; the integral only grows while the error persists (a box resting
-on the arm, a load the gravity compensation does not know). The leak and the clip are
-anti-windup. `SIM.correction` holds the gains.
+it. The offset's torque K c never exceeds the external torque the arm feels at that joint
+(`ControlState.external_torque`, what a torque-sensing arm such as the Panda estimates): the
+correction holds the arm up against a load, and when the load goes (a box sliding off the
+forearm) the offset goes with it in the same tick, instead of springing the hand up by the
+offset while the integral unwinds. With a `detector` (the memory's monitor: does the energy of
+the observations so far say something is wrong?) the correction stays off until the monitor
+first flags, and the arm is a plain compliant arm until then. A joint at 90 % of its torque
+limit for 0.1 s is holding a load the arm should not hold, which on a collaborative arm may be
+a person: the correction lets go for the rest of the episode (or never engages, if the arm was
+there before the monitor flagged), its offset decaying within ~0.1 s rather than in one tick
+(a set-point step under a heavy load slams the hand down), and the arm yields as the
+compliant controller alone would. There is no proportional term on e: it would stiffen the compliant arm during the
+impact itself (the hook runs at 40 Hz, the impact lasts milliseconds), which is what a
+compliant controller is there to avoid; the integral only grows while the error persists (a
+box resting on the arm, a load the gravity compensation does not know). The leak, the clip and
+the torque bound are anti-windup. `SIM.correction` holds the gains.
 """
 
 from __future__ import annotations
@@ -74,8 +80,9 @@ def anchor_plan(joints: np.ndarray, skill: str, cube_xy: np.ndarray) -> np.ndarr
 
 
 class PlanCorrection:
-    """Correction hook: q* = q_rec + K_i I, I the leaky, clipped integral of q_rec - q; with a
-    `detector`, engaged from the first observation it flags on."""
+    """Correction hook: q* = q_rec + K_i I, I the leaky, clipped integral of q_rec - q, its
+    torque bounded by the external torque; with a `detector`, engaged from the first
+    observation it flags on."""
 
     def __init__(self, gains: CorrectionGains = SIM.correction, detector: Detector | None = None) -> None:
         self.gains, self.detector = gains, detector
@@ -83,8 +90,10 @@ class PlanCorrection:
         self.previous: np.ndarray | None = None
         self.engaged_step: int | None = None if detector is not None else 0
         self.seen = 0
-        self.saturated_s = 0.0
+        self.loaded_s = 0.0  # how long a joint has been at the yield torque, engaged or not
+        self.overloaded = False
         self.yielded_step: int | None = None
+        self.offset = np.zeros(N_JOINTS)  # the last set-point offset sent (decays once let go)
 
     def __call__(self, state: ControlState) -> np.ndarray:
         g, dt = self.gains, 1.0 / SIM.timing.control_hz
@@ -92,20 +101,26 @@ class PlanCorrection:
         # previous tick's target now (else one tick of planned motion would count as error).
         reference = state.target if self.previous is None else self.previous
         self.previous = state.target.copy()
+        loaded = (np.abs(state.torque) >= g.yield_torque * TAU_MAX).any()
+        self.loaded_s = self.loaded_s + dt if loaded else 0.0
+        self.overloaded |= g.yield_s is not None and self.loaded_s >= g.yield_s
         if self.engaged_step is None and len(state.observations) > self.seen:
             self.seen = len(state.observations)
             if self.detector(state.observations):
                 self.engaged_step = state.step
-        if self.engaged_step is None or self.yielded_step is not None:
+        if self.engaged_step is None:
             return state.target
+        if self.overloaded and self.yielded_step is None:
+            self.yielded_step = state.step
+        if self.yielded_step is not None:
+            self.offset = self.offset * np.exp(-dt / g.release_s)
+            return state.target + self.offset
         self.integral = self.integral * (1.0 - g.leak * dt) + (reference - state.q) * dt
         bound = np.radians(g.i_max_deg) / g.ki
         self.integral = np.clip(self.integral, -bound, bound)
-        self.saturated_s = self.saturated_s + dt if (np.abs(state.torque) >= 0.98 * TAU_MAX).any() else 0.0
-        if g.yield_s is not None and self.saturated_s >= g.yield_s:
-            self.yielded_step = state.step
-            return state.target
-        return state.target + g.ki * self.integral
+        held = np.minimum(np.radians(g.i_max_deg), np.abs(state.external_torque) / state.stiffness)
+        self.offset = np.clip(g.ki * self.integral, -held, held)
+        return state.target + self.offset
 
 
 def execute_recalled(recalled: np.ndarray, skill: str, seed: int, correction: PlanCorrection | None = None,

@@ -53,6 +53,10 @@ class ControlState:
     target: np.ndarray  # (7,) the plan's target for the end of this tick
     torque: np.ndarray  # (7,) joint torques the controller applied at the last physics step (N m)
     observations: np.ndarray  # (k + 1, 25) observations so far (a new one arrives when the tick starts a block)
+    # (7,) external joint torques at the last physics step (N m): what contacts (a box on the arm,
+    # the carried cube) exert at each joint, which a torque-sensing arm such as the Panda estimates
+    external_torque: np.ndarray
+    stiffness: np.ndarray  # (7,) the joint controller's stiffness (N m/rad): set-point offset -> torque
 
 
 CorrectionHook = Callable[[ControlState], "np.ndarray | None"]
@@ -164,7 +168,9 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
     timing, w = SIM.timing, world()
     physics, scene = w.physics, w.scene
     model, data = physics.model.ptr, physics.data.ptr
-    kv_over_kp = set_joint_gains(w, SIM.controller if controller is None else controller)
+    controller = SIM.controller if controller is None else controller
+    kv_over_kp = set_joint_gains(w, controller)
+    stiffness = SIM.joint_gains(controller)[0]
     tare = _reset(w, joints[0], cube_xy, cube_yaw)
     for effect in effects:
         effect.initialize(physics, scene)
@@ -192,7 +198,8 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
         if hook is not None:
             state = ControlState(index, tick.time_s, k, w.qpos, data.qvel[w.arm_dof].copy(),
                                  data.site_xpos[w.tcp_site].copy(), tick.target.copy(),
-                                 data.actuator_force[w.arm_act].copy(), np.array(obs))
+                                 data.actuator_force[w.arm_act].copy(), np.array(obs),
+                                 data.qfrc_constraint[w.arm_dof].copy(), stiffness)
             corrected = hook(state)
             if corrected is not None:
                 tick.target = np.asarray(corrected, dtype=float).reshape(N_JOINTS)

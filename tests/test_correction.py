@@ -11,7 +11,7 @@ import pytest
 from experiments.correction.config import CORRECTION
 from experiments.correction.metrics import deviation_deg, detection, first_hit_step
 from sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS
-from sim.config import CorrectionGains
+from sim.config import SIM, CorrectionGains
 from sim.control import PlanCorrection, anchor_plan, plan_from_recall
 from sim.disturbances import elbow_hit
 from sim.panda import TAU_MAX, dh_forward
@@ -33,9 +33,14 @@ def _run(plan, controller, hook=None, disturbance=None):
                         skill=SKILLS[0], controller=controller)
 
 
-def _state(q, target, tick=0, torque=None):
+STIFFNESS = SIM.joint_gains("compliant")[0]
+HEAVY_LOAD = np.full(7, 1e3)  # N m at every joint: the torque bound does not bind
+
+
+def _state(q, target, tick=0, torque=None, external=HEAVY_LOAD):
     torque = np.zeros(7) if torque is None else torque
-    return ControlState(tick, tick / 40, 0, q, np.zeros(7), np.zeros(3), target, torque, np.zeros((1, N_CHANNELS)))
+    return ControlState(tick, tick / 40, tick // 20, q, np.zeros(7), np.zeros(3), target, torque,
+                        np.zeros((1, N_CHANNELS)), np.asarray(external, float), STIFFNESS)
 
 
 def test_compliant_arm_tracks_the_plan_undisturbed(plan):
@@ -77,20 +82,50 @@ def test_correction_is_bounded_and_leaks():
     assert (out - 1.0 < np.radians(0.1)).all()
 
 
-def test_correction_waits_for_the_monitor_and_lets_go_of_a_load_it_cannot_move():
+def test_correction_holds_no_more_than_the_external_torque_it_feels():
+    hook = PlanCorrection(CorrectionGains(ki=4.0, leak=0.0, i_max_deg=90.0))
+    target, q = np.full(7, 0.10), np.full(7, 0.05)
+    for tick in range(40):  # 1 s below the plan under a load of 6 N m per joint
+        out = hook(_state(q, target, tick, external=np.full(7, 6.0)))
+    np.testing.assert_allclose(np.abs(out - target) * STIFFNESS, 6.0)  # the offset's torque is the load's
+    assert (hook.gains.ki * hook.integral > out - target).all()  # the integral wants more
+    gone = hook(_state(q, target, 40, external=np.zeros(7)))  # the load leaves: so does the offset, at once
+    np.testing.assert_array_equal(gone, target)
+    back = hook(_state(q, target, 41, external=np.full(7, 6.0)))  # ... and the integral was kept
+    np.testing.assert_allclose(np.abs(back - target) * STIFFNESS, 6.0)
+
+
+def test_correction_waits_for_the_monitor_and_lets_go_of_a_load_it_should_not_hold():
     flags = iter([False, False, True])
-    hook = PlanCorrection(CorrectionGains(ki=4.0, leak=0.0, i_max_deg=3.0, yield_s=0.5), lambda obs: next(flags))
+    gains = CorrectionGains(ki=4.0, leak=0.0, i_max_deg=3.0, yield_torque=0.9, yield_s=0.5)
+    hook = PlanCorrection(gains, lambda obs: next(flags))
     target, pinned = np.ones(7), np.zeros(7)  # a load holds the arm 57 deg off its plan
-    at_limit = TAU_MAX * [1, 0, 0, 0, 0, 0, 0]  # ... and joint 1 pushes at its torque limit
+    near_limit = 0.92 * TAU_MAX * [1, 0, 0, 0, 0, 0, 0]  # ... and joint 1 pushes at 92 % of its torque limit
     outputs = []
     for tick in range(80):
-        state = _state(pinned, target, tick, at_limit if tick >= 50 else None)
+        state = _state(pinned, target, tick, near_limit if tick >= 50 else None)
         state.observations = np.zeros((1 + min(tick // 20, 2), N_CHANNELS))  # one observation per 20 ticks
         outputs.append(hook(state))
     assert hook.engaged_step is not None and all(np.array_equal(o, target) for o in outputs[:40])  # until flagged
     assert (outputs[45] > target).all()  # engaged, pushing towards the plan
-    assert (outputs[65] > target).all()  # at the torque limit for less than 0.5 s: still pushing
-    assert hook.yielded_step is not None and np.array_equal(outputs[-1], target)  # 0.5 s: lets go
+    assert (outputs[65] > target).all()  # near the torque limit for less than 0.5 s: still pushing
+    assert hook.yielded_step is not None  # 0.5 s (tick 70): lets go ...
+    assert (outputs[70] > target).all() and (np.diff(np.array(outputs[69:])[:, 0]) < 0).all()  # ... gradually
+    np.testing.assert_allclose(outputs[-1], target, atol=np.radians(0.05))  # within 0.25 s
+
+
+def test_correction_never_engages_on_an_arm_already_at_its_torque_limit():
+    flags = iter([False, True, True])
+    gains = CorrectionGains(ki=4.0, leak=0.0, i_max_deg=3.0, yield_torque=0.9, yield_s=0.25)
+    hook = PlanCorrection(gains, lambda obs: next(flags))
+    target, pinned, at_limit = np.ones(7), np.zeros(7), TAU_MAX * [1, 0, 0, 0, 0, 0, 0]
+    outputs = []
+    for tick in range(40):  # at the limit from tick 5 to 15, before the monitor flags at tick 20 (step 1)
+        state = _state(pinned, target, tick, at_limit if 5 <= tick < 16 else None)
+        state.observations = np.zeros((1 + tick // 20, N_CHANNELS))
+        outputs.append(hook(state))
+    assert hook.engaged_step == 1 and hook.yielded_step == 1
+    assert all(np.array_equal(o, target) for o in outputs)
 
 
 def test_anchor_plan_puts_grasp_and_place_on_the_scene_and_keeps_the_start():

@@ -107,13 +107,16 @@ def write_markdown(result: Result, path: Path) -> None:
         f"| {u['controller']} | {_pct(u['demonstration_placed_rate'])} | {_pct(u['recalled_none_placed_rate'])} | "
         f"{_pct(u['recalled_corrected_placed_rate'])} | {_pct(u['monitor_false_alarm_rate'])} |"
         for u in undisturbed(result))
+    letting_go = (f"letting go once a joint is at {g.yield_torque:.0%} of its torque limit for {g.yield_s:g} s"
+                  if g.yield_s is not None else "never letting go")
     path.write_text(f"""# Reactive correction: a box falls on the arm carrying the cube
 
 {cfg.n_seeds} test seeds ({seeds[0]}..{seeds[-1]}, skills alternating) per hit; a box dropped
 {cfg.drop_height_m * 100:g} cm above the elbow (link 4) at {cfg.speed_m_s:g} m/s at t = {cfg.release_s:g} s (the carry),
 its mass setting the momentum. Plan: the Neural ASM's offline recall from the first observation,
 grasp and place anchored to the perceived cube and goal (`sim.control.anchor_plan`). Correction: q* = q_rec + K_i I, I the leaky ({g.leak:g}/s)
-integral of q_rec - q, K_i = {g.ki:g}/s, |K_i I| <= {g.i_max_deg:g} deg (chosen on seeds
+integral of q_rec - q, K_i = {g.ki:g}/s, |K_i I| <= {g.i_max_deg:g} deg and its torque at most the external torque at each joint,
+{letting_go} (chosen on seeds
 {cfg.selection_seeds[0]}..{cfg.selection_seeds[1] - 1}), {"engaged when the monitor first flags" if cfg.gated else "on from the start"}. Recovered: cube within 1 cm of its target and every joint within
 {cfg.band_deg:g} deg of the plan from t = {cfg.deadline_s:g} s on. Detected: the monitor's precision-weighted offline
 energy exceeds its whole-episode threshold at {cfg.fpr:.0%} false-positive rate at a step after the hit
