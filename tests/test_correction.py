@@ -179,3 +179,10 @@ def test_a_small_run_writes_the_results_contract(tmp_path):
         assert r["n_seeds"] == 1 and 0.0 <= r["detected_rate"] <= 1.0
     assert "| compliant | 40 |" in (tmp_path / "correction.md").read_text()
     assert (tmp_path / "correction.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("first", [CORRECTION.selection_seeds[0] + 5, CORRECTION.monitor_seed - 10])
+def test_test_seeds_may_not_overlap_the_selection_or_monitor_seeds(first):
+    with pytest.raises(ValueError, match="overlap"):
+        CORRECTION.with_(test_seed=first)
+    assert CORRECTION.with_(test_seed=12_000).test_seeds[0] == 12_000

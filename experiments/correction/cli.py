@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from experiments.correction.config import CORRECTION
 from runtime.home import home_path
 
 app = typer.Typer()
@@ -17,19 +18,23 @@ app = typer.Typer()
 def correction(
     out: Path = typer.Option(home_path("correction"), help="output folder"),
     seeds: int = typer.Option(24, min=1, help="test seeds per hit (skills alternate)"),
+    first_seed: int = typer.Option(CORRECTION.test_seed, help="first test seed (a fresh block: any range clear of "
+                                   "the selection and monitor seeds)"),
     epochs: int | None = typer.Option(None, help="override the FAST model's epochs"),
 ) -> None:
     """A box hits the arm carrying the cube, under stiff and compliant control, with and without
     the memory's correction; writes correction.json, correction.md and correction.png."""
     import torch
 
-    from experiments.correction.config import CORRECTION
     from experiments.correction.figures import write_figure
     from experiments.correction.pipeline import fit_model, run_correction
     from experiments.correction.report import write_json, write_markdown
 
     torch.set_num_threads(1)
-    config = CORRECTION.with_(n_seeds=seeds, epochs=epochs)
+    try:
+        config = CORRECTION.with_(n_seeds=seeds, test_seed=first_seed, epochs=epochs)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--seeds / --first-seed") from exc
     out.mkdir(parents=True, exist_ok=True)
     typer.echo("fitting the Neural ASM on the 20 demonstrations ...")
     model = fit_model(config, progress=True)

@@ -17,7 +17,7 @@ from sim.config import CONTROLLERS, SIM, CorrectionGains
 class CorrectionConfig:
     n_seeds: int = 24  # test seeds per hit, skills alternating
     test_seed: int = SIM.seeds.held_out + 1000  # first test seed
-    selection_seeds: tuple[int, int] = (SIM.seeds.held_out, SIM.seeds.held_out + 20)  # gains chosen here
+    selection_seeds: tuple[int, int] = (SIM.seeds.held_out, SIM.seeds.held_out + 40)  # gains chosen here
     monitor_seed: int = SIM.seeds.held_out + 500  # normal episodes calibrating the monitor
     monitor_seeds: int = 20  # per split (precisions, thresholds)
     served_monitor_seeds: int = 50  # per split, for the compliant monitor the service hosts (served.py)
@@ -39,6 +39,15 @@ class CorrectionConfig:
     gains: CorrectionGains = SIM.correction
     gated: bool = True  # the correction engages when the monitor first flags (False: from the start)
     epochs: int | None = None  # None: the FAST preset's
+
+    def __post_init__(self) -> None:
+        tests = range(self.test_seed, self.test_seed + self.n_seeds)
+        reserved = {"selection": range(*self.selection_seeds),
+                    "monitor": range(self.monitor_seed, self.monitor_seed + 2 * self.served_monitor_seeds)}
+        for name, seeds in reserved.items():
+            if tests.start < seeds.stop and seeds.start < tests.stop:
+                raise ValueError(f"test seeds {tests.start}..{tests.stop - 1} overlap the {name} seeds "
+                                 f"{seeds.start}..{seeds.stop - 1}")
 
     @property
     def test_seeds(self) -> list[int]:
