@@ -38,7 +38,8 @@ class ServedMonitor:
 def compliant_episode(model: NeuralASM, skill: str, seed: int, hit: FallingObject | None, fault: FaultSpec | None,
                       corrected: bool, mode: str, fpr: float) -> tuple[Episode, PlanCorrection | None]:
     """The memory's plan recalled from the first observation, executed under compliant control;
-    with `corrected`, the correction engages when the served monitor first flags."""
+    with `corrected`, the correction engages once the served monitor has flagged `SIM.correction.confirm`
+    observations in a row."""
     correction = PlanCorrection(SIM.correction, ServedMonitor(model, mode, fpr)) if corrected else None
     episode = execute_recalled(recall(model, skill, seed), skill, seed, correction, "compliant", hit, fault)
     return episode, correction

@@ -22,7 +22,9 @@ correction holds the arm up against a load, and when the load goes (a box slidin
 forearm) the offset goes with it in the same tick, instead of springing the hand up by the
 offset while the integral unwinds. With a `detector` (the memory's monitor: does the energy of
 the observations so far say something is wrong?) the correction stays off until the monitor
-first flags, and the arm is a plain compliant arm until then. A joint at 90 % of its torque
+has flagged two observations in a row, and the arm is a plain compliant arm until then: one
+flag may be a false alarm, or a blow that is already over, and a correction engaged at once
+would hold a heavy box on the arm that would have slid off. A joint at 90 % of its torque
 limit for 0.1 s is holding a load the arm should not hold, which on a collaborative arm may be
 a person: the correction lets go for the rest of the episode (or never engages, if the arm was
 there before the monitor flagged), its offset decaying within ~0.1 s rather than in one tick
@@ -81,8 +83,8 @@ def anchor_plan(joints: np.ndarray, skill: str, cube_xy: np.ndarray) -> np.ndarr
 
 class PlanCorrection:
     """Correction hook: q* = q_rec + K_i I, I the leaky, clipped integral of q_rec - q, its
-    torque bounded by the external torque; with a `detector`, engaged from the first
-    observation it flags on."""
+    torque bounded by the external torque; with a `detector`, engaged once it has flagged
+    `gains.confirm` observations in a row."""
 
     def __init__(self, gains: CorrectionGains = SIM.correction, detector: Detector | None = None) -> None:
         self.gains, self.detector = gains, detector
@@ -90,6 +92,7 @@ class PlanCorrection:
         self.previous: np.ndarray | None = None
         self.engaged_step: int | None = None if detector is not None else 0
         self.seen = 0
+        self.flags = 0  # consecutive observations the detector flagged
         self.loaded_s = 0.0  # how long a joint has been at the yield torque, engaged or not
         self.overloaded = False
         self.yielded_step: int | None = None
@@ -106,7 +109,8 @@ class PlanCorrection:
         self.overloaded |= g.yield_s is not None and self.loaded_s >= g.yield_s
         if self.engaged_step is None and len(state.observations) > self.seen:
             self.seen = len(state.observations)
-            if self.detector(state.observations):
+            self.flags = self.flags + 1 if self.detector(state.observations) else 0
+            if self.flags >= g.confirm:
                 self.engaged_step = state.step
         if self.engaged_step is None:
             return state.target

@@ -88,16 +88,17 @@ def test_corrected_demo_flags_the_hit_in_both_recordings_and_places_the_cube(mod
     [s] = run_client(SKILL, SEED, falling_object=falling_object(True), out=tmp_path, models_dir=model_dir,
                      controller="compliant", correct=True, quiet=True)
     assert s.completed and s.detected and s.first_flag_step == HIT_STEP
-    assert s.correction == {"engaged_step": HIT_STEP, "yielded_step": None}  # the gate agrees with the service
+    # the gate agrees with the service: engaged at the second flagged step in a row
+    assert s.correction == {"engaged_step": HIT_STEP + 1, "yielded_step": None}
     assert s.placed and s.cube_error_m < 0.01
     line = summary_line(s)
-    assert f"DETECTED at step {HIT_STEP}" in line and f"corrected from step {HIT_STEP}" in line
+    assert f"DETECTED at step {HIT_STEP}" in line and f"corrected from step {HIT_STEP + 1}" in line
     assert "placed (within 1 cm)" in line and "40 kg m/s) at 4 s" in line
     for path in (s.recordings["mcap"], s.service_recordings["mcap"]):
         flags = _flags(path)
-        assert flags[HIT_STEP] and not any(flags[:HIT_STEP])
+        assert flags[HIT_STEP] and flags[HIT_STEP + 1] and not any(flags[:HIT_STEP])
     meta = read_mcap(s.recordings["mcap"])["/metadata"][0]
-    assert meta["controller"] == "compliant" and meta["correction"]["engaged_step"] == HIT_STEP
+    assert meta["controller"] == "compliant" and meta["correction"]["engaged_step"] == HIT_STEP + 1
 
 
 def test_uncorrected_compliant_arm_is_flagged_but_drops_the_cube(server, model_dir, tmp_path):

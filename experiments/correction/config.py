@@ -37,7 +37,7 @@ class CorrectionConfig:
     monitor_mode: str = "offline"
     controllers: tuple[str, ...] = CONTROLLERS
     gains: CorrectionGains = SIM.correction
-    gated: bool = True  # the correction engages when the monitor first flags (False: from the start)
+    gated: bool = True  # the correction engages once the monitor has flagged (False: from the start)
     epochs: int | None = None  # None: the FAST preset's
 
     def __post_init__(self) -> None:
