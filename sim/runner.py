@@ -104,8 +104,9 @@ def _rng(skill: str, seed: int) -> np.random.Generator:
     return np.random.default_rng((int(seed), SKILLS.index(skill)))
 
 
-def set_joint_gains(w: World, controller: ControllerKind) -> np.ndarray:
-    """Give the arm's joint actuators `controller`'s stiffness and damping; return damping / stiffness.
+def set_joint_gains(w: World, controller: ControllerKind) -> tuple[np.ndarray, np.ndarray]:
+    """Give the arm's joint actuators `controller`'s stiffness and damping; return the stiffness
+    and damping / stiffness.
 
     The actuators are MuJoCo position actuators, torque = K (ctrl - q) - D qd, so one actuator
     serves both controllers: only its gains change (no recompilation). The returned ratio turns
@@ -116,7 +117,7 @@ def set_joint_gains(w: World, controller: ControllerKind) -> np.ndarray:
     model.actuator_gainprm[w.arm_act, 0] = stiffness
     model.actuator_biasprm[w.arm_act, 1] = -stiffness
     model.actuator_biasprm[w.arm_act, 2] = -damping
-    return damping / stiffness
+    return stiffness, damping / stiffness
 
 
 def _reset(w: World, plan0: np.ndarray, cube_xy: np.ndarray, cube_yaw: float) -> np.ndarray:
@@ -168,9 +169,7 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
     timing, w = SIM.timing, world()
     physics, scene = w.physics, w.scene
     model, data = physics.model.ptr, physics.data.ptr
-    controller = SIM.controller if controller is None else controller
-    kv_over_kp = set_joint_gains(w, controller)
-    stiffness = SIM.joint_gains(controller)[0]
+    stiffness, kv_over_kp = set_joint_gains(w, SIM.controller if controller is None else controller)
     tare = _reset(w, joints[0], cube_xy, cube_yaw)
     for effect in effects:
         effect.initialize(physics, scene)
