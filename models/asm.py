@@ -134,8 +134,12 @@ class NeuralASM:
     def obs_size(self) -> int:
         return self.net.obs_size
 
-    def _rng(self) -> np.random.Generator:
-        # Recall with a random initial state stays reproducible for a given model.
+    def _rng(self) -> np.random.Generator | None:
+        # Recall with a random initial state stays reproducible for a given model. A zero
+        # initial state draws nothing, and seeding a generator costs more than opening the
+        # rest of a served session.
+        if self.config.initial_state == "zeros":
+            return None
         return np.random.default_rng(self.config.seed)
 
     def recall(self, cue: np.ndarray, horizon: int) -> np.ndarray:

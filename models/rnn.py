@@ -25,7 +25,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from models.config import TPCConfig
-from models.train import make_schedule
+from models.train import learning_rate
 
 
 class SensoryToMotorRNN(nn.Module):
@@ -79,7 +79,8 @@ def train_rnn(
     n, steps = targets_t.shape[:2]
     batch = config.batch_size or n
     optimizer = _optimizer(net, config)
-    schedule = make_schedule(optimizer, config)
+    # The tPC's schedule, as a factor of the base rate.
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda epoch: learning_rate(config, epoch) / config.learning_rate)
     rng = np.random.default_rng(config.seed)
     history: list[float] = []
     for _ in tqdm(range(config.epochs), desc="BPTT", unit="epoch", disable=not progress):
@@ -93,8 +94,7 @@ def train_rnn(
             optimizer.step()
             total += loss.item() * len(idx)
         history.append(total / n)
-        if schedule is not None:
-            schedule.step()
+        schedule.step()
     return history
 
 

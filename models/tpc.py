@@ -192,23 +192,27 @@ class TemporalPC:
         return gauss_newton(np.ascontiguousarray(prior, np.float32), np.ascontiguousarray(x, np.float32),
                             self.w_f, self.pi_sqrt, steps)
 
-    def hebbian_gradients(
+    def hebbian_terms(
         self, zhat_prev: np.ndarray, prior: np.ndarray, z: np.ndarray, x: np.ndarray,
         context: np.ndarray | None = None,
-    ) -> tuple[list[np.ndarray], float]:
-        """Negative Hebbian terms of eqs. 3-4 (in the order of ``parameters``), averaged over
-        the batch, and the energy F. W_C learns like W_H, from eps_z and its presynaptic c."""
-        batch = x.shape[0]
+    ) -> tuple[list[tuple[np.ndarray, np.ndarray]], float]:
+        """The Hebbian terms of eqs. 3-4 as (postsynaptic error, presynaptic activity) pairs, one
+        per weight in the order of ``parameters``, and the batch's mean energy F.
+
+        A weight (O, I) learns from its pair (post (B, O), pre (B, I)) by post^T pre / B, the
+        negative gradient of F averaged over the batch: eps_z f(zhat_prev)^T for W_H,
+        (Pi eps_x) f(z)^T for W_F and, like W_H, eps_z c^T for W_C. The products are left to
+        the update (``models.train.WeightUpdate``), which forms them in buffers it keeps.
+        """
         fz = np.tanh(z)
         eps_z = z - prior
         eps_x = x - fz @ self.w_f.T
-        grads = [-(eps_z.T @ np.tanh(zhat_prev)) / batch]
         weighted = eps_x * self.pi
-        grads.append(-(weighted.T @ fz) / batch)
+        terms = [(eps_z, np.tanh(zhat_prev)), (weighted, fz)]
         if self.has_context:
-            grads.append(-(eps_z.T @ context) / batch)
-        energy = float((eps_z * eps_z).sum() + (weighted * eps_x).sum()) / batch
-        return grads, energy
+            terms.append((eps_z, context))
+        energy = float((eps_z * eps_z).sum() + (weighted * eps_x).sum()) / x.shape[0]
+        return terms, energy
 
     def project(self) -> None:
         """Keep ||W_F||_2 <= wf_max_norm so that inference stays stable (see stable_wf_norm)."""
@@ -217,4 +221,4 @@ class TemporalPC:
             return
         norm = spectral_norm(self.w_f)
         if norm > cap:
-            self.W_F.mul_(cap / norm)
+            self.w_f *= np.float32(cap / norm)

@@ -7,47 +7,67 @@ SGD at the paper's 1e-4 barely learns in the same number of epochs.
 
 from __future__ import annotations
 
-from typing import Callable
+import math
+from typing import Callable, Sequence
 
 import numpy as np
-import torch
 from tqdm.auto import tqdm
 
-from models.config import TPCConfig
+from models.config import Optimizer, TPCConfig
+from models.kernels import adam_step
 from models.recall import run
 from models.tpc import TemporalPC
 
 EpochCallback = Callable[[int, float], None]
 
 
-def make_optimizer(net: TemporalPC) -> torch.optim.Optimizer:
-    params = net.parameters
-    lr = net.config.learning_rate
-    if net.config.optimizer == "adam":
-        # The fused kernel: one call per step instead of a dozen (half the time on these sizes).
-        return torch.optim.Adam(params, lr=lr, fused=True)
-    return torch.optim.SGD(params, lr=lr)
+class WeightUpdate:
+    """Adam (torch.optim.Adam's rule, betas 0.9 / 0.999, eps 1e-8) or plain SGD on the network's
+    weights, in place through their numpy views, from the Hebbian terms of each step.
+
+    The gradients are formed in buffers kept from step to step (a fresh quarter-megabyte
+    array for W_H every step cost as much in page faults as its product) and Adam's
+    arithmetic runs in one compiled call per weight (``models.kernels.adam_step``):
+    torch.optim.Adam gives the same updates, but its Python wrapper cost three times the
+    arithmetic at these sizes.
+    """
+
+    def __init__(self, weights: Sequence[np.ndarray], optimizer: Optimizer) -> None:
+        self.weights = list(weights)
+        self.adam = optimizer == "adam"
+        self.grads = [np.empty_like(w) for w in self.weights]
+        self.moments = [(np.zeros_like(w), np.zeros_like(w)) for w in self.weights]
+        self.steps = 0
+
+    def apply(self, terms: Sequence[tuple[np.ndarray, np.ndarray]], rate: float) -> None:
+        """Descend the energy along the Hebbian terms (post, pre) of each weight at ``rate``:
+        the gradient of a weight is -post^T pre / B."""
+        self.steps += 1
+        for weight, grad, (post, pre), (mean, square) in zip(self.weights, self.grads, terms, self.moments):
+            np.matmul((post * np.float32(-1.0 / len(post))).T, pre, out=grad)
+            if self.adam:
+                adam_step(weight, grad, mean, square, rate, self.steps)
+            else:
+                grad *= np.float32(rate)
+                weight -= grad
 
 
-def make_schedule(
-    optimizer: torch.optim.Optimizer, config: TPCConfig
-) -> torch.optim.lr_scheduler.LRScheduler | None:
-    """Cosine decay of the learning rate to ``lr_final_fraction`` of it at the last epoch.
+def learning_rate(config: TPCConfig, epoch: int) -> float:
+    """The learning rate of an epoch (0-based): cosine decay from ``config.learning_rate`` to
+    ``lr_final_fraction`` of it at the last epoch (torch's CosineAnnealingLR).
 
     Per-step Adam updates at a rate high enough to learn quickly keep the weights
     oscillating between epochs; annealing lets them settle.
     """
-    if config.lr_final_fraction >= 1.0:
-        return None
-    return torch.optim.lr_scheduler.CosineAnnealingLR(
-        optimizer, T_max=config.epochs, eta_min=config.learning_rate * config.lr_final_fraction
-    )
+    floor = config.learning_rate * config.lr_final_fraction
+    return floor + (config.learning_rate - floor) * (1 + math.cos(math.pi * epoch / config.epochs)) / 2
 
 
 def train_epoch(
     net: TemporalPC,
     sequences: np.ndarray,
-    optimizer: torch.optim.Optimizer,
+    update: WeightUpdate,
+    rate: float,
     rng: np.random.Generator,
 ) -> float:
     """One pass over all sequences (N, T, D), normalised; returns mean energy per step."""
@@ -65,10 +85,8 @@ def train_epoch(
             x = x_seq[:, t]
             prior = net.prior(zhat, context)
             z = net.infer(prior, x)
-            grads, energy = net.hebbian_gradients(zhat, prior, z, x, context)
-            for weight, grad in zip(net.parameters, grads):
-                weight.grad = torch.from_numpy(grad)
-            optimizer.step()
+            terms, energy = net.hebbian_terms(zhat, prior, z, x, context)
+            update.apply(terms, rate)
             net.project()
             total += energy
             count += 1
@@ -111,28 +129,25 @@ def train(
         validation = _checked(validation, net.obs_size, "validation sequences")
     best = (np.inf, net.config.epochs - 1, None)
     rng = np.random.default_rng(net.config.seed)
-    optimizer = make_optimizer(net)
-    schedule = make_schedule(optimizer, net.config)
+    weights = [w.numpy() for w in net.parameters]  # views: updated in place, the tensors with them
+    update = WeightUpdate(weights, net.config.optimizer)
     history: list[float] = []
     bar = tqdm(range(net.config.epochs), desc="training", unit="epoch", disable=not progress)
-    with torch.no_grad():
-        for epoch in bar:
-            energy = train_epoch(net, sequences, optimizer, rng)
-            if not np.isfinite(energy):
-                raise FloatingPointError(f"energy became {energy} at epoch {epoch}")
-            history.append(energy)
-            if schedule is not None:
-                schedule.step()
-            if validation is not None and ((epoch + 1) % eval_every == 0 or epoch + 1 == net.config.epochs):
-                error = recall_error(net, validation)
-                if error < best[0]:
-                    best = (error, epoch, [w.clone() for w in net.parameters])
-                bar.set_postfix(energy=f"{energy:.4g}", held_out=f"{error:.4g}", refresh=False)
-            else:
-                bar.set_postfix(energy=f"{energy:.4g}", refresh=False)
-            if on_epoch is not None:
-                on_epoch(epoch, energy)
+    for epoch in bar:
+        energy = train_epoch(net, sequences, update, learning_rate(net.config, epoch), rng)
+        if not np.isfinite(energy):
+            raise FloatingPointError(f"energy became {energy} at epoch {epoch}")
+        history.append(energy)
+        if validation is not None and ((epoch + 1) % eval_every == 0 or epoch + 1 == net.config.epochs):
+            error = recall_error(net, validation)
+            if error < best[0]:
+                best = (error, epoch, [w.copy() for w in weights])
+            bar.set_postfix(energy=f"{energy:.4g}", held_out=f"{error:.4g}", refresh=False)
+        else:
+            bar.set_postfix(energy=f"{energy:.4g}", refresh=False)
+        if on_epoch is not None:
+            on_epoch(epoch, energy)
     if best[2] is not None:
-        for weight, kept in zip(net.parameters, best[2]):
-            weight.copy_(kept)
+        for weight, kept in zip(weights, best[2]):
+            np.copyto(weight, kept)
     return history, best[1]

@@ -2,13 +2,14 @@
 
 import numpy as np
 import pytest
+import torch
 
 from models import recall
 from models.asm import NeuralASM, channel_precision
 from models.config import FAITHFUL, TPCConfig
 from models.kernels import spectral_norm
 from models.tpc import TemporalPC, stable_wf_norm
-from models.train import recall_error
+from models.train import WeightUpdate, learning_rate, recall_error
 
 from conftest import SMALL
 
@@ -236,3 +237,31 @@ def test_training_noise_is_seeded_and_regularises(skills):
 def test_spectral_norm_matches_the_svd(rng, shape):
     w = rng.standard_normal(shape).astype(np.float32)
     assert spectral_norm(w) == pytest.approx(float(np.linalg.norm(w.astype(np.float64), 2)), rel=1e-5)
+
+
+@pytest.mark.parametrize("optimizer", ["adam", "sgd"])
+def test_weight_update_follows_torch_optimizers(rng, optimizer):
+    """The compiled update is torch.optim.Adam's (or SGD's) rule on the Hebbian gradient -post^T pre / B."""
+    weight = rng.standard_normal((25, 64)).astype(np.float32)
+    reference = torch.tensor(weight.copy())
+    torch_optimizer = (torch.optim.Adam if optimizer == "adam" else torch.optim.SGD)([reference], lr=2e-3)
+    update = WeightUpdate([weight], optimizer)
+    for k in range(100):
+        # Gradients a thousandfold apart from one step to the next exercise the moments.
+        post = rng.standard_normal((7, 25)).astype(np.float32) * (1e-3 if k % 2 else 1.0)
+        pre = rng.standard_normal((7, 64)).astype(np.float32)
+        reference.grad = torch.from_numpy(-(post.T @ pre) / 7)
+        torch_optimizer.step()
+        update.apply([(post, pre)], 2e-3)
+    assert np.abs(weight - reference.numpy()).max() < 1e-5
+    assert np.abs(weight - reference.numpy()).max() < 1e-2 * np.abs(weight).max()
+
+
+def test_learning_rate_is_torch_cosine_annealing():
+    config = TPCConfig(epochs=50, learning_rate=3e-3, lr_final_fraction=0.05)
+    reference = torch.optim.SGD([torch.zeros(1, requires_grad=True)], lr=config.learning_rate)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(reference, T_max=50, eta_min=3e-3 * 0.05)
+    for epoch in range(50):
+        assert learning_rate(config, epoch) == pytest.approx(reference.param_groups[0]["lr"], rel=1e-9)
+        reference.step()
+        schedule.step()
