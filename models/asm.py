@@ -319,7 +319,15 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
 def weigh_step(
     errors: np.ndarray, calibrations: Sequence[Calibration | None], steps: Sequence[int]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Errors (B, D) of one step of each stream divided by their spreads, and their energies."""
+    """Errors (B, D) of one step of each stream divided by their spreads, and their energies.
+
+    A batch's streams usually share one calibration (one model and recall setting): its
+    tables are then read for every row in one indexing."""
+    first = calibrations[0]
+    if first is not None and all(c is first for c in calibrations):
+        at = np.minimum(steps, len(first.error_std) - 1)
+        weighted = errors / first.error_std[at]
+        return weighted, quadratic(weighted, None if first.error_precision is None else first.error_precision[at])
     width = errors.shape[1]
     # np.array, not np.stack: the same result for equal shapes, at a tenth of the overhead.
     spread = np.array([np.ones(width) if c is None else step_row(c.error_std, t) for c, t in zip(calibrations, steps)])

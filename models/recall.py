@@ -54,23 +54,32 @@ class Recaller:
 
     @classmethod
     def stack(cls, recallers: Sequence["Recaller"]) -> "Recaller":
-        """One batch of recallers of one network and mode, all in the cue or all past it."""
+        """One batch of recallers of one network and mode, all in the cue or all past it.
+
+        The batch shares no array it could change with the recallers: stepping replaces
+        its arrays rather than writing into them, so a batch of one shares its recaller's.
+        """
         first = recallers[0]
         batch = cls(first.net, 0, first.mode, first.cue_steps)
         batch.t = first.t
-        batch.zhat = np.concatenate([r.zhat for r in recallers])
+
+        def joined(arrays: list[np.ndarray]) -> np.ndarray:
+            return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+
+        batch.zhat = joined([r.zhat for r in recallers])
         if first.context is not None:
-            batch.context = np.concatenate([r.context for r in recallers])
+            batch.context = joined([r.context for r in recallers])
         if all(r.next_prior is not None for r in recallers):
-            batch.next_prior = np.concatenate([r.next_prior for r in recallers])
-            batch.next_expected = np.concatenate([r.next_expected for r in recallers])
+            batch.next_prior = joined([r.next_prior for r in recallers])
+            batch.next_expected = joined([r.next_expected for r in recallers])
         return batch
 
     def advance_as(self, batch: "Recaller", i: int) -> None:
         """Take the state of row i of ``batch``, stacked from this recaller and stepped once
-        (copies, so the batch's arrays are free to go; the rows' steps may differ past the cue)."""
+        (copies of a larger batch's rows, so that its arrays are free to go; the rows' steps
+        may differ past the cue)."""
         def row(a: np.ndarray | None) -> np.ndarray | None:
-            return None if a is None else a[i : i + 1].copy()
+            return a if a is None or len(a) == 1 else a[i : i + 1].copy()
 
         self.zhat, self.context, self.t = row(batch.zhat), row(batch.context), self.t + 1
         self.next_prior, self.next_expected = row(batch.next_prior), row(batch.next_expected)
