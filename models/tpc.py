@@ -8,11 +8,12 @@ W_C c is optional: the tPC with inputs of the temporal predictive coding literat
 what the episode's first observation says of its context (cube pose, goal, obstacle). Without
 context channels the term is absent and the energy is the paper's.
 
-torch holds the parameters and the optimiser. The relaxation of z (eq. 2) runs on
-numpy views of the same memory: it is a loop of tiny operations (K=100 gradient steps, or two
-Gauss-Newton steps, compiled in models/kernels.py), where torch's per-call overhead (~3 us)
-costs about three times numpy's, and no autograd is needed because the learning rules
-(eqs. 3-4) are local Hebbian products written out below.
+torch holds the parameters (what checkpoints store). The relaxation of z (eq. 2) and the
+learning (models/train.py) run on numpy views of the same memory: they are loops of tiny
+operations (K=100 gradient steps, or two Gauss-Newton steps, and Adam, compiled in
+models/kernels.py), where torch's per-call overhead (~3 us) costs about three times numpy's,
+and no autograd is needed because the learning rules (eqs. 3-4) are local Hebbian products
+written out below.
 """
 
 from __future__ import annotations
