@@ -265,3 +265,20 @@ def test_learning_rate_is_torch_cosine_annealing():
         assert learning_rate(config, epoch) == pytest.approx(reference.param_groups[0]["lr"], rel=1e-9)
         reference.step()
         schedule.step()
+
+
+@pytest.mark.parametrize("mode", ["offline", "online"])
+def test_a_step_with_non_finite_outputs_leaves_the_stream_as_it_was(trained, skills, mode):
+    """A batch of one shares its recaller's arrays: a failed step must still leave them untouched."""
+    _, test = skills
+    episode = test.data[0]
+    failed, clean = trained.stream(mode), trained.stream(mode)
+    failed.step(episode[0])
+    clean.step(episode[0])
+    with pytest.raises(FloatingPointError):
+        failed.step(np.full_like(episode[1], 1e200))  # finite in float64, not in the network's float32
+    assert failed.t == clean.t == 1
+    for x in episode[1:4]:
+        a, b = failed.step(x), clean.step(x)
+        np.testing.assert_array_equal(a.prediction, b.prediction)
+        assert a.energy == b.energy
