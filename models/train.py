@@ -34,22 +34,22 @@ class WeightUpdate:
 
     def __init__(self, weights: Sequence[np.ndarray], optimizer: Optimizer) -> None:
         self.weights = list(weights)
-        self.adam = optimizer == "adam"
         self.grads = [np.empty_like(w) for w in self.weights]
-        self.moments = [(np.zeros_like(w), np.zeros_like(w)) for w in self.weights]
+        # Adam's first and second moments per weight; None: plain SGD keeps no state.
+        self.moments = [(np.zeros_like(w), np.zeros_like(w)) if optimizer == "adam" else None for w in self.weights]
         self.steps = 0
 
     def apply(self, terms: Sequence[tuple[np.ndarray, np.ndarray]], rate: float) -> None:
         """Descend the energy along the Hebbian terms (post, pre) of each weight at ``rate``:
         the gradient of a weight is -post^T pre / B."""
         self.steps += 1
-        for weight, grad, (post, pre), (mean, square) in zip(self.weights, self.grads, terms, self.moments):
+        for weight, grad, (post, pre), moments in zip(self.weights, self.grads, terms, self.moments):
             np.matmul((post * np.float32(-1.0 / len(post))).T, pre, out=grad)
-            if self.adam:
-                adam_step(weight, grad, mean, square, rate, self.steps)
-            else:
+            if moments is None:
                 grad *= np.float32(rate)
                 weight -= grad
+            else:
+                adam_step(weight, grad, *moments, rate, self.steps)
 
 
 def learning_rate(config: TPCConfig, epoch: int) -> float:
@@ -129,8 +129,8 @@ def train(
         validation = _checked(validation, net.obs_size, "validation sequences")
     best = (np.inf, net.config.epochs - 1, None)
     rng = np.random.default_rng(net.config.seed)
-    weights = [w.numpy() for w in net.parameters]  # views: updated in place, the tensors with them
-    update = WeightUpdate(weights, net.config.optimizer)
+    # numpy views of the parameters: updated in place, the tensors with them.
+    update = WeightUpdate([w.numpy() for w in net.parameters], net.config.optimizer)
     history: list[float] = []
     bar = tqdm(range(net.config.epochs), desc="training", unit="epoch", disable=not progress)
     for epoch in bar:
@@ -141,13 +141,13 @@ def train(
         if validation is not None and ((epoch + 1) % eval_every == 0 or epoch + 1 == net.config.epochs):
             error = recall_error(net, validation)
             if error < best[0]:
-                best = (error, epoch, [w.copy() for w in weights])
+                best = (error, epoch, [w.copy() for w in update.weights])
             bar.set_postfix(energy=f"{energy:.4g}", held_out=f"{error:.4g}", refresh=False)
         else:
             bar.set_postfix(energy=f"{energy:.4g}", refresh=False)
         if on_epoch is not None:
             on_epoch(epoch, energy)
     if best[2] is not None:
-        for weight, kept in zip(weights, best[2]):
+        for weight, kept in zip(update.weights, best[2]):
             np.copyto(weight, kept)
     return history, best[1]
