@@ -24,6 +24,7 @@ from models.scoring import StepScore
 JOINT_PREFIX = "joint"
 ThresholdKind = Literal["step", "per_step", "episode"]
 THRESHOLD_KINDS: tuple[str, ...] = ("step", "per_step", "episode")
+_TABLES = {"step": "thresholds", "per_step": "step_thresholds", "episode": "episode_thresholds"}  # in Calibration
 
 
 def joint_channels(channel_names: Sequence[str]) -> list[int]:
@@ -49,15 +50,14 @@ class FaultDecision:
     energy: float
     threshold: float
     isolated_joint: str | None  # name of the joint channel with the largest |error|
-    ranked_channels: list[tuple[str, float]]  # (name, |weighted error|), largest first
+    ranked_channels: list[str]  # every channel's name, largest |weighted error| first
+    ranked_errors: list[float]  # their |weighted error|s, in that order
 
 
 def threshold_for(calibration: Calibration, fpr: float, step: int, kind: ThresholdKind = "episode") -> float:
-    tables = {"step": calibration.thresholds, "per_step": calibration.step_thresholds,
-              "episode": calibration.episode_thresholds}
-    if kind not in tables:
+    if kind not in _TABLES:
         raise ValueError(f"threshold kind must be one of {THRESHOLD_KINDS}, got {kind!r}")
-    table = tables[kind]
+    table = getattr(calibration, _TABLES[kind])
     if fpr not in table:
         raise KeyError(f"no threshold at false-positive rate {fpr}; calibrated: {sorted(table)}")
     if kind == "per_step":
@@ -75,27 +75,30 @@ def isolated_joint(weighted_errors: np.ndarray, channel_names: Sequence[str]) ->
     return np.abs(weighted_errors[..., list(joints)]).argmax(axis=-1)
 
 
-def isolate(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> tuple[str | None, list[tuple[str, float]]]:
-    """The isolated joint's name (None without joint channels) and every channel ranked by |error|."""
-    isolated, ranked = isolate_rows(np.asarray(weighted_errors)[None], channel_names)
-    return isolated[0], ranked[0]
+def isolate(
+    weighted_errors: np.ndarray, channel_names: Sequence[str]
+) -> tuple[str | None, list[str], list[float]]:
+    """The isolated joint's name (None without joint channels), and every channel's name and
+    |error|, largest first."""
+    isolated, ranked, errors = isolate_rows(np.asarray(weighted_errors)[None], channel_names)
+    return isolated[0], ranked[0], errors[0]
 
 
 def isolate_rows(
     weighted_errors: np.ndarray, channel_names: Sequence[str]
-) -> tuple[list[str | None], list[list[tuple[str, float]]]]:
+) -> tuple[list[str | None], list[list[str]], list[list[float]]]:
     """``isolate`` for each row of (B, D) errors at once: the service decides a batch of
     sessions' steps together, and one sort of the batch costs what one row's did."""
     names = tuple(channel_names)
     magnitude = np.abs(weighted_errors)
     order = np.argsort(-magnitude, axis=1, kind="stable")
-    ranked_names = _name_array(names)[order].tolist()
-    ranked = [list(zip(n, m)) for n, m in zip(ranked_names, np.take_along_axis(magnitude, order, 1).tolist())]
+    ranked = _name_array(names)[order].tolist()
+    errors = np.take_along_axis(magnitude, order, 1).tolist()
     joints = _joint_index(names)
     if not joints:
-        return [None] * len(ranked), ranked
+        return [None] * len(ranked), ranked, errors
     isolated = [names[joints[j]] for j in isolated_joint(weighted_errors, names).tolist()]
-    return isolated, ranked
+    return isolated, ranked, errors
 
 
 def decide_rows(
@@ -108,11 +111,11 @@ def decide_rows(
     """``decide`` for a batch of steps, each with its own calibration, rate and threshold kind."""
     if not scores:
         return []
-    isolated, ranked = isolate_rows(np.array([s.weighted_errors for s in scores]), channel_names)
+    isolated, ranked, errors = isolate_rows(np.array([s.weighted_errors for s in scores]), channel_names)
     decisions = []
-    for s, cal, fpr, kind, joint, channels in zip(scores, calibrations, fprs, kinds, isolated, ranked):
+    for s, cal, fpr, kind, joint, names, sizes in zip(scores, calibrations, fprs, kinds, isolated, ranked, errors):
         threshold = threshold_for(cal, fpr, s.step, kind)
-        decisions.append(FaultDecision(s.energy > threshold, s.energy, threshold, joint, channels))
+        decisions.append(FaultDecision(s.energy > threshold, s.energy, threshold, joint, names, sizes))
     return decisions
 
 

@@ -78,11 +78,16 @@ class Recaller:
         """Take the state of row i of ``batch``, stacked from this recaller and stepped once
         (copies of a larger batch's rows, so that its arrays are free to go; the rows' steps
         may differ past the cue)."""
-        def row(a: np.ndarray | None) -> np.ndarray | None:
-            return a if a is None or len(a) == 1 else a[i : i + 1].copy()
-
-        self.zhat, self.context, self.t = row(batch.zhat), row(batch.context), self.t + 1
-        self.next_prior, self.next_expected = row(batch.next_prior), row(batch.next_expected)
+        self.t += 1
+        if len(batch.zhat) == 1:  # a batch of one shares this recaller's arrays already
+            self.zhat, self.context = batch.zhat, batch.context
+            self.next_prior, self.next_expected = batch.next_prior, batch.next_expected
+            return
+        row = slice(i, i + 1)
+        self.zhat = batch.zhat[row].copy()
+        self.context = None if batch.context is None else batch.context[row].copy()
+        self.next_prior = None if batch.next_prior is None else batch.next_prior[row].copy()
+        self.next_expected = None if batch.next_expected is None else batch.next_expected[row].copy()
 
     @property
     def infers_now(self) -> bool:

@@ -34,8 +34,8 @@ def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
     )
 
 
-def _named(session: Session, values: np.ndarray) -> dict[str, float]:
-    return dict(zip(session.channel_names, values.tolist()))
+def _named(names: tuple[str, ...], values: np.ndarray) -> dict[str, float]:
+    return dict(zip(names, values.tolist()))
 
 
 def _timed(session: Session, o: StepOutcome) -> dict[str, Any]:
@@ -44,15 +44,15 @@ def _timed(session: Session, o: StepOutcome) -> dict[str, Any]:
 
 
 def _predict(session: Session, o: StepOutcome) -> dict[str, Any]:
-    s = o.score
-    return {"prediction": _named(session, s.prediction), "expected": _named(session, s.expected),
-            "errors": _named(session, s.weighted_errors)}
+    s, names = o.score, session.channel_names
+    return {"prediction": _named(names, s.prediction), "expected": _named(names, s.expected),
+            "errors": _named(names, s.weighted_errors)}
 
 
 def _fault(session: Session, o: StepOutcome) -> dict[str, Any]:
     d = o.decision
-    return {"fault": bool(d.fault), "threshold": d.threshold, "fpr": session.fpr, "isolated_joint": d.isolated_joint,
-            "ranked_channels": [{"channel": c, "error": e} for c, e in d.ranked_channels]}
+    return {"fault": d.fault, "threshold": d.threshold, "fpr": session.fpr, "isolated_joint": d.isolated_joint,
+            "ranked_channels": [{"channel": c, "error": e} for c, e in zip(d.ranked_channels, d.ranked_errors)]}
 
 
 def predict_payload(session: Session, o: StepOutcome) -> dict[str, Any]:

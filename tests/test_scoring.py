@@ -53,11 +53,12 @@ def test_a_batch_is_isolated_and_ranked_as_each_row_alone(rng):
     names = ("joint1", "joint2", "joint3", "force_x", "force_y")
     errors = rng.standard_normal((6, 5))
     errors[0] = [0.5, -0.5, 0.1, 3.0, 0.5]  # ties keep channel order; the force leads, joint1 is isolated
-    isolated, ranked = isolate_rows(errors, names)
-    for row, joint, channels in zip(errors, isolated, ranked):
+    isolated, ranked, sizes = isolate_rows(errors, names)
+    for row, joint, channels, size in zip(errors, isolated, ranked, sizes):
         by_size = sorted(range(5), key=lambda i: -abs(row[i]))  # sorted() is stable
-        assert channels == [(names[i], abs(row[i])) for i in by_size]
+        assert channels == [names[i] for i in by_size]
+        assert size == [abs(row[i]) for i in by_size]
         assert joint == names[max(range(3), key=lambda i: abs(row[i]))]
-    assert [c for c, _ in ranked[0]] == ["force_x", "joint1", "joint2", "force_y", "joint3"]
+    assert ranked[0] == ["force_x", "joint1", "joint2", "force_y", "joint3"]
     assert isolated[0] == "joint1"
-    assert isolate(errors[3], names) == (isolated[3], ranked[3])
+    assert isolate(errors[3], names) == (isolated[3], ranked[3], sizes[3])
