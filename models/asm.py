@@ -9,7 +9,9 @@ this class; it is what a checkpoint stores.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+import math
+from collections.abc import Mapping
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -264,9 +266,10 @@ class SkillStream:
         if raw.shape != (len(names),):
             got = raw.shape[0] if raw.ndim == 1 else f"shape {raw.shape}"
             raise ValueError(f"observation: has {got} values, expected {len(names)} values ({', '.join(names)})")
-        if not np.isfinite(raw).all():
+        if not math.isfinite(raw.dot(raw)):  # a NaN or inf makes it so (as do values past ~1e154)
             bad = [names[i] for i in np.flatnonzero(~np.isfinite(raw))]
-            raise ValueError(f"observation: NaN or inf in channel(s) {bad}; values must be finite")
+            if bad:
+                raise ValueError(f"observation: NaN or inf in channel(s) {bad}; values must be finite")
         return raw
 
     def step(self, observation: Sequence[float] | np.ndarray | Mapping[str, float]) -> StepScore:
