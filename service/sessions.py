@@ -9,6 +9,7 @@ client, so that one client can neither exhaust the server's memory nor lock othe
 import logging
 import secrets
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -90,6 +91,7 @@ class SessionStore:
         self.per_client = per_client
         self.idle_s = idle_s
         self._sessions: dict[str, Session] = {}
+        self._per_client: Counter[str] = Counter()  # open sessions by client, kept with ``_sessions``
 
     def __len__(self) -> int:
         return len(self._sessions)
@@ -101,7 +103,7 @@ class SessionStore:
         """A 429 naming the cap reached: the client's own quota, or the server's total."""
         wait = (f"delete finished sessions (DELETE /sessions/{{id}}) or wait for idle ones to expire "
                 f"after {self.idle_s:g} s")
-        mine = sum(s.client == client for s in self._sessions.values())
+        mine = self._per_client[client]
         if mine >= self.per_client:
             raise TooManySessions(f"client {client} has {mine} sessions open, its quota is {self.per_client}: {wait}")
         if len(self._sessions) >= self.cap:
@@ -110,6 +112,7 @@ class SessionStore:
     def add(self, session: Session) -> None:
         self.check_room(session.client)
         self._sessions[session.id] = session
+        self._per_client[session.client] += 1
 
     def get(self, session_id: str) -> Session:
         session = self._sessions.get(session_id)
@@ -120,13 +123,19 @@ class SessionStore:
 
     def pop(self, session_id: str) -> Session:
         session = self.get(session_id)
-        del self._sessions[session_id]
+        self._remove(session)
         return session
 
     def pop_idle(self, now: float | None = None) -> list[Session]:
         now = time.monotonic() if now is None else now
         idle = [s for s in self._sessions.values() if now - s.last_used > self.idle_s]
         for s in idle:
-            del self._sessions[s.id]
+            self._remove(s)
             log.info("session %s expired after %.0f s idle", s.id, self.idle_s)
         return idle
+
+    def _remove(self, session: Session) -> None:
+        del self._sessions[session.id]
+        self._per_client[session.client] -= 1
+        if not self._per_client[session.client]:
+            del self._per_client[session.client]

@@ -26,6 +26,7 @@ from service.app import create_app
 from service.auth import HEADER
 from service.cli import app as cli_app
 from service.embedded import start_embedded
+from service.errors import TooManySessions
 from service.sessions import Session, SessionStore
 from service.settings import Settings
 from sim.channels import CHANNEL_NAMES
@@ -308,6 +309,10 @@ def test_idle_sessions_expire():
     store.add(session)
     assert store.pop_idle(now=session.last_used + 5) == []
     assert store.pop_idle(now=session.last_used + 11) == [session] and "a" not in store
+    for sid in "bc":  # the expired session no longer counts against its client's quota
+        store.add(Session(sid, "m", None, "r"))  # type: ignore[arg-type]
+    with pytest.raises(TooManySessions, match="quota is 2"):
+        store.add(Session("d", "m", None, "r"))  # type: ignore[arg-type]
 
 
 def test_api_key_enforced_and_expiry_on_a_keyed_server(model_dir, tmp_path, episodes):
