@@ -4,7 +4,14 @@ The service runs under uvicorn in a subprocess (so the client does not share its
 GIL) with a paper-sized model (H=256, K=100, 25 channels) trained briefly on the
 built-in synthetic skills. Measured: /healthz and /predict round trips over HTTP with
 one client, websocket steps with one client, and the steps per second of 64 concurrent
-websocket sessions (where the runner micro-batches). Prints one JSON object last.
+websocket sessions (where the runner micro-batches), timed once all 64 are connected
+(``fleet_connect_ms`` is the connecting). Prints one JSON object last.
+
+The fleet is also run, in the same run, against a bare websocket endpoint under the same
+uvicorn and Starlette that answers each message with a fixed reply of a step reply's size
+(``echo_fleet_steps_per_s``): ``fleet_vs_echo`` is the share of the transport's own
+throughput that the service keeps, a ratio that moves less than absolute numbers when the
+machine is shared.
 
 With ``--record`` the service is measured twice in the same run, without recording
 (the reference) and with it, and the keys ``*_vs_no_record`` are the ratios (the
@@ -13,7 +20,7 @@ machine may be shared: absolute numbers move, same-run ratios less).
 (its process and the recorder's) over recorded sessions opened, stepped 15 times and
 closed, after a warm-up: the slope through five readings.
 
-    python benchmarks/bench_service.py [--record] [--steps 400] [--sessions 1000]
+    python benchmarks/bench_service.py [--record] [--steps 400] [--fleet-steps 150] [--sessions 1000]
 """
 
 import runtime  # noqa: F401  (first: one BLAS thread, no display)
@@ -27,12 +34,14 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
 import numpy as np
 import orjson
 import websockets
+from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 
 from models import checkpoint
 from models.asm import NeuralASM
@@ -40,6 +49,8 @@ from models.config import FAST
 from models.synthetic import make_skills
 from recordings.recorder import POLL_S
 
+HERE = Path(__file__).parent
+ECHO_PADDING = 3350  # the reply is then ~3.4 kB, a 25-channel step reply's size
 CHANNELS = tuple(f"joint{i}" for i in range(1, 8)) + tuple(f"ch{i}" for i in range(18))
 
 
@@ -71,15 +82,20 @@ def start_server(folder: Path, port: int, record: bool) -> subprocess.Popen:
            "--max-sessions-per-client", "128",
            "--record" if record else "--no-record"]
     proc = subprocess.Popen(cmd)
+    wait_until_up(proc, f"http://127.0.0.1:{port}/healthz")
+    return proc
+
+
+def wait_until_up(proc: subprocess.Popen, url: str) -> None:
     deadline = time.monotonic() + 300  # importing torch on a loaded machine can take a while
     while time.monotonic() < deadline and proc.poll() is None:
         try:
-            if httpx.get(f"http://127.0.0.1:{port}/healthz").status_code == 200:
-                return proc
+            if httpx.get(url).status_code == 200:
+                return
         except httpx.TransportError:
             time.sleep(0.2)
     proc.kill()
-    raise RuntimeError(f"service did not start (exit code {proc.poll()})")
+    raise RuntimeError(f"server did not start (exit code {proc.poll()})")
 
 
 def http_latencies(url: str, episodes: np.ndarray, steps: int) -> dict[str, float]:
@@ -107,12 +123,17 @@ def http_latencies(url: str, episodes: np.ndarray, steps: int) -> dict[str, floa
     return result
 
 
-async def ws_session(url: str, episodes: np.ndarray, steps: int, seed: int) -> tuple[list[float], list[int]]:
-    """One client's steps, each sent after the previous reply. The clients share this process's
-    core with each other, so they use orjson: parsing the ~3 kB replies is not the service's time."""
+async def ws_session(
+    url: str, episodes: np.ndarray, steps: int, seed: int, connected: asyncio.Barrier | None = None
+) -> tuple[list[float], list[int]]:
+    """One client's steps, each sent after the previous reply (the first once every client of
+    ``connected`` is connected). The clients share this process's core with each other, so
+    they use orjson: parsing the ~3 kB replies is not the service's time."""
     times, batches = [], []
     async with websockets.connect(url) as ws:
         await ws.recv()
+        if connected is not None:
+            await connected.wait()
         k = 0
         for i in range(steps):
             if k == 0:
@@ -176,12 +197,61 @@ def rss_growth(url: str, pid: int, episodes: np.ndarray, sessions: int, samples:
     return float(np.polyfit(done, rss, 1)[0]) * 1000
 
 
-async def fleet(url: str, episodes: np.ndarray, sessions: int, steps: int) -> tuple[float, float]:
+@dataclass(frozen=True)
+class Fleet:
+    steps_per_s: float  # from the moment every session is connected
+    mean_batch: float
+    connect_ms: float  # opening the connections, all at once
+
+
+async def fleet(url: str, episodes: np.ndarray, sessions: int, steps: int) -> Fleet:
+    """``sessions`` clients stepping episodes at once. Timed once all are connected: a robot
+    keeps its connection, and 64 handshakes at once would otherwise weigh on a short run."""
+    connected = asyncio.Barrier(sessions + 1)
     start = time.perf_counter()
-    results = await asyncio.gather(*(ws_session(url, episodes, steps, s) for s in range(sessions)))
-    elapsed = time.perf_counter() - start
+    clients = [asyncio.create_task(ws_session(url, episodes, steps, s, connected)) for s in range(sessions)]
+    await connected.wait()
+    stepping = time.perf_counter()
+    results = await asyncio.gather(*clients)
+    elapsed = time.perf_counter() - stepping
     batches = [b for _, bs in results for b in bs]
-    return sessions * steps / elapsed, float(np.mean(batches))
+    return Fleet(sessions * steps / elapsed, float(np.mean(batches)), (stepping - start) * 1e3)
+
+
+def echo_app() -> FastAPI:
+    """The transport alone: answers every message with a fixed reply of a step reply's size."""
+    app = FastAPI()
+    reply = orjson.dumps({"type": "step", "batch_size": 1, "padding": "x" * ECHO_PADDING}).decode()
+
+    @app.websocket("/stream")
+    async def stream(ws: WebSocket) -> None:
+        await ws.accept()
+        await ws.send_text(reply)
+        try:
+            while True:
+                await ws.receive_text()
+                await ws.send_text(reply)
+        except WebSocketDisconnect:
+            pass
+
+    return app
+
+
+def echo_fleet(episodes: np.ndarray, steps: int) -> float:
+    """The fleet's steps per second against ``echo_app``, served like the service (uvicorn,
+    no per-message compression, a process of its own)."""
+    port = free_port()
+    cmd = [sys.executable, "-m", "uvicorn", "--factory", "bench_service:echo_app", "--app-dir", str(HERE),
+           "--port", str(port), "--ws-per-message-deflate", "false", "--log-level", "warning"]
+    proc = subprocess.Popen(cmd)
+    try:
+        wait_until_up(proc, f"http://127.0.0.1:{port}/docs")
+        url = f"ws://127.0.0.1:{port}/stream"
+        asyncio.run(fleet(url, episodes, 64, 20))  # warm-up
+        return asyncio.run(fleet(url, episodes, 64, steps)).steps_per_s
+    finally:
+        proc.terminate()
+        proc.wait(30)
 
 
 def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Namespace) -> dict[str, float]:
@@ -192,8 +262,10 @@ def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Nam
         ws_url = f"ws://127.0.0.1:{port}/stream"
         ws_times, _ = asyncio.run(ws_session(ws_url, episodes, args.steps, 0))
         result["ws_p50_ms"], result["ws_p99_ms"] = percentiles(ws_times[10:])
-        result["fleet_steps_per_s"], result["fleet_mean_batch"] = asyncio.run(
-            fleet(ws_url, episodes, 64, args.fleet_steps))
+        asyncio.run(fleet(ws_url, episodes, 64, 20))  # warm-up: the first sessions, the allocator's pools
+        stepped = asyncio.run(fleet(ws_url, episodes, 64, args.fleet_steps))
+        result.update(fleet_steps_per_s=stepped.steps_per_s, fleet_mean_batch=stepped.mean_batch,
+                      fleet_connect_ms=stepped.connect_ms)
         if record:
             result["rss_growth_mb_per_1000_sessions"] = rss_growth(ws_url, proc.pid, episodes, args.sessions)
     finally:
@@ -205,7 +277,7 @@ def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Nam
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=400, help="steps per latency measurement")
-    parser.add_argument("--fleet-steps", type=int, default=60, help="steps per session in the fleet")
+    parser.add_argument("--fleet-steps", type=int, default=150, help="steps per session in the fleet")
     parser.add_argument("--sessions", type=int, default=1000, help="recorded sessions for the memory growth")
     parser.add_argument("--record", action="store_true", help="let the service record every session")
     args = parser.parse_args()
@@ -220,6 +292,8 @@ def main() -> None:
                 result[f"{key}_vs_no_record"] = result[key] / reference[key]
         else:
             result = measure(folder, episodes, False, args)
+            result["echo_fleet_steps_per_s"] = echo_fleet(episodes, args.fleet_steps)
+            result["fleet_vs_echo"] = result["fleet_steps_per_s"] / result["echo_fleet_steps_per_s"]
     result.update(record=args.record, hidden_size=FAST.hidden_size, inference_steps=FAST.inference_steps)
     print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in result.items()}))
 
