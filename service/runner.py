@@ -1,12 +1,18 @@
-"""The one thread where models run, off the event loop, micro-batching concurrent steps.
+"""Where models run: steps micro-batched on the event loop, other jobs in one worker thread.
 
-Handlers never touch a model: they queue a job and await its future. The runner takes
-whatever is waiting, computes all step jobs of distinct sessions together (one forward
-relaxation per model, recall setting and phase, through ``models.asm.step_streams``,
-which also decides each step) and runs other jobs (opening and
-closing sessions, which touch recordings) in arrival order between them. One thread
-keeps torch and BLAS at one intra-op thread, keeps each session's steps in order and
-gives the non-thread-safe MCAP writers a single owner.
+Handlers never touch a model: they queue a step and await its future. The steps queued
+while the loop reads its ready messages are computed together in one loop callback: all
+steps of distinct sessions at once, one forward relaxation per model, recall setting and
+phase (``models.asm.step_streams``, which also decides each step). On the loop rather than
+in a thread: a batch's Python holds the GIL either way, and a second thread contending for
+it, and for the cores with the clients, cost 64 websocket sessions a sixth of their
+throughput and of the server's CPU per step (``benchmarks/bench_service.py``, interleaved).
+
+What may take long or block runs in arrival order in one worker thread: compiling the
+kernels, loading or building models, opening and closing sessions' recordings, and
+handing recorded steps to the recorder (whose queue is bounded). A job first computes the
+steps queued before it, so it comes after them: a session's close after its last
+recorded step. The worker is the recordings' single owner.
 """
 
 import asyncio
@@ -33,18 +39,15 @@ T = TypeVar("T")
 
 
 @dataclass
-class _Job:
+class _Call:
     loop: asyncio.AbstractEventLoop
     future: "asyncio.Future[Any]"
-
-
-@dataclass
-class _Call(_Job):
     fn: Callable[[], Any]
 
 
 @dataclass
-class _Step(_Job):
+class _Step:
+    future: "asyncio.Future[StepOutcome]"
     session: Session
     x: np.ndarray
 
@@ -72,24 +75,27 @@ def _settle(future: "asyncio.Future[Any]", result: Any, error: BaseException | N
 class Runner:
     def __init__(self, recorder: RecorderProcess | None = None) -> None:
         self.recorder = recorder
-        self._jobs: "queue.SimpleQueue[Any]" = queue.SimpleQueue()
+        self._jobs: "queue.SimpleQueue[_Call | StepBatch | object]" = queue.SimpleQueue()
         self._thread = threading.Thread()  # not started: steps are refused until ``start``
+        self._pending: list[_Step] = []
 
     def start(self) -> None:
-        """Start the thread; again after ``stop`` when an app is started anew."""
+        """Start the worker; again after ``stop`` when an app is started anew."""
         if not self._thread.is_alive():
-            self._thread = threading.Thread(target=self._serve, name="nasm-runner", daemon=True)
+            self._thread = threading.Thread(target=self._work, name="nasm-worker", daemon=True)
             self._thread.start()
 
     def stop(self, timeout: float = 10.0) -> None:
-        """Finish the queued jobs, then end the thread."""
+        """Compute the queued steps, finish the queued jobs, then end the worker."""
         if self._thread.is_alive():
+            self._flush()
             self._jobs.put(_STOP)
             self._thread.join(timeout)
 
     async def call(self, fn: Callable[[], T]) -> T:
         if not self._thread.is_alive():  # shutting down: e.g. closing a session's files
             return fn()
+        self._flush()
         loop = asyncio.get_running_loop()
         future: asyncio.Future[T] = loop.create_future()
         self._jobs.put(_Call(loop, future, fn))
@@ -100,38 +106,28 @@ class Runner:
             raise ShuttingDown("the service is shutting down; retry against a running one")
         loop = asyncio.get_running_loop()
         future: asyncio.Future[StepOutcome] = loop.create_future()
-        self._jobs.put(_Step(loop, future, session, x))
+        self._pending.append(_Step(future, session, x))
+        if len(self._pending) == 1:
+            loop.call_soon(self._flush)
         return await future
 
-    def _serve(self) -> None:
-        torch.set_num_threads(1)  # per thread (NOTES.md)
-        while True:
-            jobs = [self._jobs.get()]
-            while not self._jobs.empty():
-                jobs.append(self._jobs.get_nowait())
-            stop = _STOP in jobs
-            self._run([j for j in jobs if j is not _STOP])
-            if stop:
-                return
-
-    def _run(self, jobs: list[_Job]) -> None:
-        steps: list[_Step] = []
-        for job in jobs:
-            if isinstance(job, _Step):
-                steps.append(job)
+    def _work(self) -> None:
+        torch.set_num_threads(1)  # per thread (building a model trains it here)
+        while (job := self._jobs.get()) is not _STOP:
+            if isinstance(job, StepBatch):
+                self._record(job)
                 continue
-            self._steps(steps)
-            steps = []
             assert isinstance(job, _Call)
             try:
                 result, error = job.fn(), None
             except Exception as exc:
                 result, error = None, exc
             job.loop.call_soon_threadsafe(_settle, job.future, result, error)
-        self._steps(steps)
 
-    def _steps(self, steps: list[_Step]) -> None:
-        """Rounds of distinct sessions: a session's second queued step waits for its first."""
+    def _flush(self) -> None:
+        """Compute the queued steps in rounds of distinct sessions (a session's second queued
+        step waits for its first)."""
+        steps, self._pending = self._pending, []
         while steps:
             round_: dict[int, _Step] = {}
             later: list[_Step] = []
@@ -154,7 +150,7 @@ class Runner:
         except Exception as exc:  # a bug, not a client mistake: fail these steps, keep serving
             log.exception("step batch failed")
             for j in jobs:
-                j.loop.call_soon_threadsafe(_settle, j.future, None, exc)
+                _settle(j.future, None, exc)
             return
         elapsed_ms = (time.perf_counter() - start) * 1e3
         for job, outcome in zip(jobs, results):
@@ -162,20 +158,22 @@ class Runner:
                 error = BadObservation(
                     "observation: values so far outside the training data that the model's outputs are not finite"
                 )
-                job.loop.call_soon_threadsafe(_settle, job.future, None, error)
+                _settle(job.future, None, error)
                 continue
             assert outcome.decision is not None  # sessions always have a false-positive rate
-            result = StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs))
-            job.loop.call_soon_threadsafe(_settle, job.future, result, None)
-        if self.recorder is not None:  # after answering: recording is not on the latency path
+            _settle(job.future, StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs)), None)
+        if self.recorder is not None:
             live = self.recorder.generation  # a replaced recorder child has no files for older sessions
             recorded = [(j, o) for j, o in zip(jobs, results) if o is not None and j.session.recording is not None
                         and j.session.recording.generation == live]
             if recorded:
-                try:
-                    self.recorder.write(step_batch(recorded))  # type: ignore[arg-type]
-                except Exception:  # a recorder in trouble costs these steps' records, never the service
-                    log.exception("recording a batch of %d steps failed", len(recorded))
+                self._jobs.put(step_batch(recorded))  # type: ignore[arg-type]
+
+    def _record(self, batch: StepBatch) -> None:
+        try:
+            self.recorder.write(batch)  # type: ignore[union-attr]
+        except Exception:  # a recorder in trouble costs these steps' records, never the service
+            log.exception("recording a batch of %d steps failed", len(batch.keys))
 
 
 def step_batch(recorded: list[tuple[_Step, StreamStep]]) -> StepBatch:
