@@ -27,6 +27,7 @@ from service.auth import HEADER
 from service.cli import app as cli_app
 from service.embedded import start_embedded
 from service.errors import TooManySessions
+from service.runner import Runner
 from service.sessions import Session, SessionStore
 from service.settings import Settings
 from sim.channels import CHANNEL_NAMES
@@ -138,6 +139,26 @@ def test_batched_step_equals_single_steps(reference, episodes):
                         threshold = reference.calibration(mode, 1).episode_thresholds[0.01]
                         assert result.decision.threshold == threshold
                         assert result.decision.fault == (result.score.energy > threshold)
+
+
+def test_runner_jobs_come_after_the_steps_queued_before_them(reference, episodes):
+    """What closes a recording must see the session's last step: a job queued behind
+    pending steps (an HTTP DELETE racing a /predict) runs once they are computed."""
+    runner = Runner()
+    session = Session("s", "panda", reference.stream("online", 1, fpr=0.01), "r")
+
+    async def race() -> tuple[int, int, int]:
+        step = asyncio.ensure_future(runner.step(session, episodes[0, 0]))
+        await asyncio.sleep(0)  # the step is queued, its batch not yet computed
+        queued = session.stream.t
+        seen_by_job = await runner.call(lambda: session.stream.t)
+        return queued, seen_by_job, (await step).score.step
+
+    runner.start()
+    try:
+        assert asyncio.run(race()) == (0, 1, 0)
+    finally:
+        runner.stop()
 
 
 def test_websocket_episode_and_its_recordings(server, episodes):
