@@ -12,7 +12,12 @@ What may take long or block runs in arrival order in one worker thread: compilin
 kernels, loading or building models, opening and closing sessions' recordings, and
 handing recorded steps to the recorder (whose queue is bounded). A job first computes the
 steps queued before it, so it comes after them: a session's close after its last
-recorded step. The worker is the recordings' single owner.
+recorded step. The worker is the recordings' single owner. Recorded steps are answered
+once the worker has handed them to the recorder, and while it hands over one batch the
+next recorded steps wait and gather into the next: a server that outruns its recorder
+is slowed to its pace (its sessions wait, the loop does not), in batches as large as
+waiting makes them, instead of piling steps, and the session openings behind them, into
+the worker's queue.
 """
 
 import asyncio
@@ -60,6 +65,15 @@ class StepOutcome:
     batch_size: int
 
 
+@dataclass
+class _Write:
+    """Recorded steps for the recorder, answered once handed over."""
+
+    loop: asyncio.AbstractEventLoop
+    batch: StepBatch
+    answers: list[tuple["asyncio.Future[StepOutcome]", StepOutcome]]
+
+
 _STOP = object()
 
 
@@ -75,9 +89,11 @@ def _settle(future: "asyncio.Future[Any]", result: Any, error: BaseException | N
 class Runner:
     def __init__(self, recorder: RecorderProcess | None = None) -> None:
         self.recorder = recorder
-        self._jobs: "queue.SimpleQueue[_Call | StepBatch | object]" = queue.SimpleQueue()
+        self._jobs: "queue.SimpleQueue[_Call | _Write | object]" = queue.SimpleQueue()
         self._thread = threading.Thread()  # not started: steps are refused until ``start``
         self._pending: list[_Step] = []
+        self._held: list[_Step] = []  # recorded steps waiting for the batch before to be handed over
+        self._writing = False  # a batch of recorded steps is with the worker
 
     def start(self) -> None:
         """Start the worker; again after ``stop`` when an app is started anew."""
@@ -88,14 +104,14 @@ class Runner:
     def stop(self, timeout: float = 10.0) -> None:
         """Compute the queued steps, finish the queued jobs, then end the worker."""
         if self._thread.is_alive():
-            self._flush()
+            self._flush(held=True)
             self._jobs.put(_STOP)
             self._thread.join(timeout)
 
     async def call(self, fn: Callable[[], T]) -> T:
         if not self._thread.is_alive():  # shutting down: e.g. closing a session's files
             return fn()
-        self._flush()
+        self._flush(held=True)
         loop = asyncio.get_running_loop()
         future: asyncio.Future[T] = loop.create_future()
         self._jobs.put(_Call(loop, future, fn))
@@ -106,16 +122,21 @@ class Runner:
             raise ShuttingDown("the service is shutting down; retry against a running one")
         loop = asyncio.get_running_loop()
         future: asyncio.Future[StepOutcome] = loop.create_future()
-        self._pending.append(_Step(future, session, x))
-        if len(self._pending) == 1:
-            loop.call_soon(self._flush)
+        job = _Step(future, session, x)
+        if self._writing and session.recording is not None:
+            self._held.append(job)
+        else:
+            self._pending.append(job)
+            if len(self._pending) == 1:
+                loop.call_soon(self._flush)
         return await future
 
     def _work(self) -> None:
         torch.set_num_threads(1)  # per thread (building a model trains it here)
         while (job := self._jobs.get()) is not _STOP:
-            if isinstance(job, StepBatch):
-                self._record(job)
+            if isinstance(job, _Write):
+                self._record(job.batch)
+                job.loop.call_soon_threadsafe(self._handed_over, job.answers)
                 continue
             assert isinstance(job, _Call)
             try:
@@ -124,10 +145,12 @@ class Runner:
                 result, error = None, exc
             job.loop.call_soon_threadsafe(_settle, job.future, result, error)
 
-    def _flush(self) -> None:
-        """Compute the queued steps in rounds of distinct sessions (a session's second queued
-        step waits for its first)."""
+    def _flush(self, held: bool = False) -> None:
+        """Compute the queued steps (with ``held``, the held recorded ones too) in rounds of
+        distinct sessions (a session's second queued step waits for its first)."""
         steps, self._pending = self._pending, []
+        if held:
+            steps, self._held = steps + self._held, []
         while steps:
             round_: dict[int, _Step] = {}
             later: list[_Step] = []
@@ -153,6 +176,9 @@ class Runner:
                 _settle(j.future, None, exc)
             return
         elapsed_ms = (time.perf_counter() - start) * 1e3
+        live = None if self.recorder is None else self.recorder.generation  # a replaced child lacks older files
+        recorded: list[tuple[_Step, StreamStep]] = []
+        answers: list[tuple[asyncio.Future[StepOutcome], StepOutcome]] = []
         for job, outcome in zip(jobs, results):
             if outcome is None:
                 error = BadObservation(
@@ -161,13 +187,24 @@ class Runner:
                 _settle(job.future, None, error)
                 continue
             assert outcome.decision is not None  # sessions always have a false-positive rate
-            _settle(job.future, StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs)), None)
-        if self.recorder is not None:
-            live = self.recorder.generation  # a replaced recorder child has no files for older sessions
-            recorded = [(j, o) for j, o in zip(jobs, results) if o is not None and j.session.recording is not None
-                        and j.session.recording.generation == live]
-            if recorded:
-                self._jobs.put(step_batch(recorded))  # type: ignore[arg-type]
+            answer = StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs))
+            recording = job.session.recording
+            if recording is not None and recording.generation == live:
+                recorded.append((job, outcome))
+                answers.append((job.future, answer))
+            else:
+                _settle(job.future, answer, None)
+        if recorded:
+            self._writing = True
+            self._jobs.put(_Write(jobs[0].future.get_loop(), step_batch(recorded), answers))
+
+    def _handed_over(self, answers: list[tuple["asyncio.Future[StepOutcome]", StepOutcome]]) -> None:
+        """On the loop, once the worker has handed a batch to the recorder: answer its steps
+        and compute the recorded steps that waited meanwhile."""
+        for future, outcome in answers:
+            _settle(future, outcome, None)
+        self._writing = False
+        self._flush(held=True)
 
     def _record(self, batch: StepBatch) -> None:
         try:
