@@ -5,8 +5,8 @@ while the loop reads its ready messages are computed together in one loop callba
 steps of distinct sessions at once, one forward relaxation per model, recall setting and
 phase (``models.asm.step_streams``, which also decides each step). On the loop rather than
 in a thread: a batch's Python holds the GIL either way, and a second thread contending for
-it, and for the cores with the clients, cost 64 websocket sessions a sixth of their
-throughput and of the server's CPU per step (``benchmarks/bench_service.py``, interleaved).
+it, and for the cores with the clients, cost 64 websocket sessions a fifth of their
+throughput at 30 % more server CPU per step (``benchmarks/bench_service.py``, interleaved).
 
 What may take long or block runs in arrival order in one worker thread: compiling the
 kernels, loading or building models, opening and closing sessions' recordings, and
@@ -98,6 +98,7 @@ class Runner:
     def start(self) -> None:
         """Start the worker; again after ``stop`` when an app is started anew."""
         if not self._thread.is_alive():
+            self._writing = False  # a hand-over the last loop did not see answered
             self._thread = threading.Thread(target=self._work, name="nasm-worker", daemon=True)
             self._thread.start()
 
