@@ -6,7 +6,8 @@ steps of distinct sessions at once, one forward relaxation per model, recall set
 phase (``models.asm.step_streams``, which also decides each step). On the loop rather than
 in a thread: a batch's Python holds the GIL either way, and a second thread contending for
 it, and for the cores with the clients, cost 64 websocket sessions a fifth of their
-throughput at 30 % more server CPU per step (``benchmarks/bench_service.py``, interleaved).
+throughput at 30 % more server CPU per step (``benchmarks/bench_service.py``, interleaved
+runs; when the shared machine ran slow, no difference).
 
 What may take long or block runs in arrival order in one worker thread: compiling the
 kernels, loading or building models, opening and closing sessions' recordings, and
