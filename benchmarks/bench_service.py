@@ -218,6 +218,13 @@ async def fleet(url: str, episodes: np.ndarray, sessions: int, steps: int) -> Fl
     return Fleet(sessions * steps / elapsed, float(np.mean(batches)), (stepping - start) * 1e3)
 
 
+def warm_fleet(url: str, episodes: np.ndarray, steps: int) -> Fleet:
+    """64 sessions, measured after a 20-step fleet has warmed the server (its first sessions,
+    the allocator's pools)."""
+    asyncio.run(fleet(url, episodes, 64, 20))
+    return asyncio.run(fleet(url, episodes, 64, steps))
+
+
 def echo_app() -> FastAPI:
     """The transport alone: answers every message with a fixed reply of a step reply's size."""
     app = FastAPI()
@@ -246,9 +253,7 @@ def echo_fleet(episodes: np.ndarray, steps: int) -> float:
     proc = subprocess.Popen(cmd)
     try:
         wait_until_up(proc, f"http://127.0.0.1:{port}/docs")
-        url = f"ws://127.0.0.1:{port}/stream"
-        asyncio.run(fleet(url, episodes, 64, 20))  # warm-up
-        return asyncio.run(fleet(url, episodes, 64, steps)).steps_per_s
+        return warm_fleet(f"ws://127.0.0.1:{port}/stream", episodes, steps).steps_per_s
     finally:
         proc.terminate()
         proc.wait(30)
@@ -262,8 +267,7 @@ def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Nam
         ws_url = f"ws://127.0.0.1:{port}/stream"
         ws_times, _ = asyncio.run(ws_session(ws_url, episodes, args.steps, 0))
         result["ws_p50_ms"], result["ws_p99_ms"] = percentiles(ws_times[10:])
-        asyncio.run(fleet(ws_url, episodes, 64, 20))  # warm-up: the first sessions, the allocator's pools
-        stepped = asyncio.run(fleet(ws_url, episodes, 64, args.fleet_steps))
+        stepped = warm_fleet(ws_url, episodes, args.fleet_steps)
         result.update(fleet_steps_per_s=stepped.steps_per_s, fleet_mean_batch=stepped.mean_batch,
                       fleet_connect_ms=stepped.connect_ms)
         if record:

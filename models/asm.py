@@ -8,9 +8,9 @@ this class; it is what a checkpoint stores.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np

@@ -94,12 +94,12 @@ class Runner:
         self._thread = threading.Thread()  # not started: steps are refused until ``start``
         self._pending: list[_Step] = []
         self._held: list[_Step] = []  # recorded steps waiting for the batch before to be handed over
-        self._writing = False  # a batch of recorded steps is with the worker
+        self._writes_out = 0  # batches of recorded steps with the worker, not yet handed over
 
     def start(self) -> None:
         """Start the worker; again after ``stop`` when an app is started anew."""
         if not self._thread.is_alive():
-            self._writing = False  # a hand-over the last loop did not see answered
+            self._writes_out = 0  # hand-overs the last loop did not see answered
             self._thread = threading.Thread(target=self._work, name="nasm-worker", daemon=True)
             self._thread.start()
 
@@ -125,7 +125,7 @@ class Runner:
         loop = asyncio.get_running_loop()
         future: asyncio.Future[StepOutcome] = loop.create_future()
         job = _Step(future, session, x)
-        if self._writing and session.recording is not None:
+        if self._writes_out and session.recording is not None:
             self._held.append(job)
         else:
             self._pending.append(job)
@@ -197,7 +197,7 @@ class Runner:
             else:
                 _settle(job.future, answer, None)
         if recorded:
-            self._writing = True
+            self._writes_out += 1
             self._jobs.put(_Write(jobs[0].future.get_loop(), step_batch(recorded), answers))
 
     def _handed_over(self, answers: list[tuple["asyncio.Future[StepOutcome]", StepOutcome]]) -> None:
@@ -205,8 +205,9 @@ class Runner:
         and compute the recorded steps that waited meanwhile."""
         for future, outcome in answers:
             _settle(future, outcome, None)
-        self._writing = False
-        self._flush(held=True)
+        self._writes_out -= 1
+        if not self._writes_out:
+            self._flush(held=True)
 
     def _record(self, batch: StepBatch) -> None:
         try:
