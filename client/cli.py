@@ -12,7 +12,6 @@ from client.run import MODES, falling_object, fault_spec, run_client
 from client.transport import TRANSPORTS, ServiceError, ServiceLost
 from recordings import DEFAULT_DIR
 from runtime.home import home_path
-from experiments.correction.config import CORRECTION
 from sim.config import CONTROLLERS, SIM
 from sim.skills import SKILLS
 
@@ -34,12 +33,12 @@ def client(
     fault_joint: int | None = typer.Option(None, min=1, max=7, help="fault: joint 1..7 (give all three fault options or none)"),
     fault_time: float | None = typer.Option(None, help="fault: time in s, on the 0.5 s grid"),
     fault_overshoot: float | None = typer.Option(None, help="fault: overshoot in degrees"),
-    drop: bool = typer.Option(False, "--falling-object", help=f"drop a box on the elbow at {CORRECTION.release_s:g} s, "
+    drop: bool = typer.Option(False, "--falling-object", help=f"drop a box on the elbow at {SIM.hit.release_s:g} s, "
                               "during the carry (the correction experiment's hit)", metavar=""),
     hit_momentum: float | None = typer.Option(None, help=f"the falling box's momentum in kg m/s (default "
-                                              f"{CORRECTION.demo_momentum:g}: a "
-                                              f"{CORRECTION.demo_momentum / CORRECTION.speed_m_s:g} kg box at "
-                                              f"{CORRECTION.speed_m_s:g} m/s); needs --falling-object"),
+                                              f"{SIM.hit.demo_momentum:g}: a "
+                                              f"{SIM.hit.demo_momentum / SIM.hit.speed_m_s:g} kg box at "
+                                              f"{SIM.hit.speed_m_s:g} m/s); needs --falling-object"),
     controller: Controller = typer.Option(SIM.controller, help="joint controller: stiff position servos (the IK "
                                           "plan, as in the training data) or compliant joint impedance (the memory's "
                                           "recalled plan, monitored by the model calibrated for compliant control)"),

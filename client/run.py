@@ -4,7 +4,7 @@ simulated and streamed.
 Under stiff control (the default) an episode is the demonstrator's IK plan, as every data set
 is. Under compliant control it is the memory's recalled plan (the correction experiment's
 setting), corrected or not, and the session names the monitor calibrated for compliant
-control (``experiments.correction.served``), the one the correction's gate also uses."""
+control (``pipelines.compliant``), the one the correction's gate also uses."""
 
 from __future__ import annotations
 
@@ -12,20 +12,17 @@ import contextlib
 from pathlib import Path
 from typing import Callable, Iterator
 
-from client.compliant import compliant_episode
 from client.stream import stream_episode
 from client.summary import EpisodeSummary, closing_lines, say, summary_line
 from client.transport import TRANSPORTS, ServiceError, check_url, served_digest
-from experiments.correction.config import CORRECTION
-from experiments.correction.pipeline import hit
-from experiments.correction.served import digest_of, ensure_compliant_model
 from models import checkpoint
 from models.asm import NeuralASM
 from models.config import SCORING
+from pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
 from recordings import DEFAULT_DIR
 from runtime.home import home_path
 from sim.config import CONTROLLERS, SIM
-from sim.disturbances import FallingObject
+from sim.disturbances import FallingObject, elbow_hit
 from sim.episode import Episode
 from sim.faults import FaultSpec
 from sim.runner import run_episode
@@ -46,15 +43,15 @@ def fault_spec(joint: int | None, time_s: float | None, overshoot_deg: float | N
 
 def falling_object(drop: bool, momentum_kg_m_s: float | None = None) -> FallingObject | None:
     """The hit ``--falling-object`` drops: the correction experiment's box on the elbow during the
-    carry, of ``--hit-momentum`` (default ``CORRECTION.demo_momentum``, a hit the monitor flags)."""
+    carry, of ``--hit-momentum`` (default ``SIM.hit.demo_momentum``, a hit the monitor flags)."""
     if momentum_kg_m_s is not None and not drop:
         raise ValueError("--hit-momentum needs --falling-object")
     if not drop:
         return None
-    momentum = CORRECTION.demo_momentum if momentum_kg_m_s is None else momentum_kg_m_s
+    momentum = SIM.hit.demo_momentum if momentum_kg_m_s is None else momentum_kg_m_s
     if not momentum > 0:
         raise ValueError(f"--hit-momentum must be > 0 kg m/s, got {momentum}")
-    return hit(CORRECTION, momentum)
+    return elbow_hit(momentum)
 
 
 def _compliant_monitor(models_dir: Path, quiet: bool) -> tuple[Path, NeuralASM]:

@@ -92,8 +92,11 @@ def stream_episode(
         if not reconnect:
             raise
         conn = _reconnect(open_session, 0, summary, quiet)
+    # The service's own .rrd of the session logs the fault events; the client's then does not,
+    # so the merged view says each event once.
+    service_logs_events = any(k.split("#")[0] == "rrd" for k in summary.service_recordings)
     with EpisodeRecorder(run_id, names, folder=out, recording_id=recording_id, metadata=metadata,
-                         step_period_s=period, joints=joint_channels(names)) as rec:
+                         step_period_s=period, joints=joint_channels(names), events=not service_logs_events) as rec:
         summary.recordings = {k: str(p) for k, p in rec.paths.items()}
         try:
             next_row = 0

@@ -6,7 +6,7 @@ from typing import Iterator
 
 import numpy as np
 
-from recordings.records import WorldRecord, Workcell
+from recordings.records import Workcell, WorldRecord
 from sim.episode import Episode
 from sim.panda import dh_frames
 from sim.scene import BOX_HALF, CUBE_HALF, TABLE_CENTER, TABLE_HALF

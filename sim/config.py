@@ -129,6 +129,20 @@ class CorrectionGains:
 
 
 @dataclass(frozen=True)
+class ElbowHit:
+    """The falling-object hit (`sim.disturbances.elbow_hit`): a box dropped from `drop_height_m`
+    above the elbow (link 4) at `speed_m_s` during the carry (the cube is in the hand from 2.5 s
+    to 6.0 s), its mass setting the momentum (mass x speed)."""
+
+    speed_m_s: float = 2.0
+    release_s: float = 4.0
+    drop_height_m: float = 0.05
+    # The client demo's hit (`nasm client --falling-object`): the compliant arm alone drops the
+    # cube on one skill there, and the correction places it.
+    demo_momentum: float = 40.0
+
+
+@dataclass(frozen=True)
 class Seeds:
     """Disjoint seed ranges, so no fault episode ever reuses a demonstration's variation."""
 
@@ -168,6 +182,7 @@ class SimConfig:
     # every data set was generated with) or the compliant joint impedance (`impedance`).
     controller: ControllerKind = "stiff"
     correction: CorrectionGains = field(default_factory=CorrectionGains)
+    hit: ElbowHit = field(default_factory=ElbowHit)
     seeds: Seeds = field(default_factory=Seeds)
     varied: VariedTask = field(default_factory=VariedTask)
     success_tolerance_m: float = 0.01

@@ -77,8 +77,8 @@ def make_effect(spec: FallingObject | None) -> list[FallingObjectEffect]:
     return [] if spec is None else [FallingObjectEffect(spec)]
 
 
-def elbow_hit(momentum_kg_m_s: float, speed_m_s: float = 2.0, release_s: float = 4.0,
-              drop_height_m: float = 0.05) -> FallingObject:
+def elbow_hit(momentum_kg_m_s: float, speed_m_s: float = SIM.hit.speed_m_s, release_s: float = SIM.hit.release_s,
+              drop_height_m: float = SIM.hit.drop_height_m) -> FallingObject:
     """A box dropped just above the elbow (link 4) during the carry, its mass setting the momentum.
 
     The reactive-correction experiment's hit family: from about 30 kg m/s the box comes to rest

@@ -1,7 +1,7 @@
 """The client's falling-object demo under compliant control, corrected and not.
 
 A small model is trained on stiff demonstrations and its compliant monitor calibrated the
-served way (``experiments.correction.served``, fewer seeds). The small model recalls
+served way (``pipelines.compliant``, fewer seeds). The small model recalls
 pick_right_place_left well enough to place the cube undisturbed; with it, the 40 kg m/s elbow
 hit at seed 42 is flagged at the first observation after it, and the compliant arm alone
 leaves the cube 15 mm off its target while the corrected one places it (5 mm): measured
@@ -23,13 +23,14 @@ from client.summary import summary_line
 from client.transport import ServiceError
 from experiments.correction.config import CORRECTION
 from experiments.correction.metrics import first_hit_step
-from experiments.correction.served import COMPLIANT_NAME, ensure_compliant_model
 from models import checkpoint
 from models.asm import NeuralASM
+from pipelines.compliant import COMPLIANT_NAME, MonitorSeeds, ensure_compliant_model
 from recordings.readers import read_mcap
 from service.embedded import start_embedded
 from service.registry import ModelRegistry
 from service.settings import Settings
+from sim.config import SIM
 
 SKILL, SEED = "pick_right_place_left", 42
 UNDISTURBED_SEED = 44  # 44 and 45; the small model's recall misses the cube at 43 and is flagged there
@@ -41,7 +42,7 @@ runner = CliRunner()
 def model_dir(tmp_path_factory: pytest.TempPathFactory, small_panda_model: NeuralASM) -> Path:
     folder = tmp_path_factory.mktemp("models")
     checkpoint.save(small_panda_model, folder / "panda.safetensors")
-    ensure_compliant_model(folder, CORRECTION.with_(served_monitor_seeds=6), progress=False)
+    ensure_compliant_model(folder, MonitorSeeds(per_split=6), progress=False)
     return folder
 
 
@@ -74,13 +75,13 @@ def test_cli_passes_the_demo_options_on(monkeypatch, tmp_path):
                                  "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
     hit = seen["args"][3]
-    assert (hit.mass_kg * hit.speed_m_s, hit.target_link, hit.release_s) == (30.0, 4, CORRECTION.release_s)
+    assert (hit.mass_kg * hit.speed_m_s, hit.target_link, hit.release_s) == (30.0, 4, SIM.hit.release_s)
     assert seen["kwargs"] == {"controller": "compliant", "correct": True}
 
 
 def test_falling_object_defaults_to_the_demo_hit():
     hit = falling_object(True)
-    assert hit.mass_kg * hit.speed_m_s == CORRECTION.demo_momentum and falling_object(False) is None
+    assert hit.mass_kg * hit.speed_m_s == SIM.hit.demo_momentum and falling_object(False) is None
 
 
 def test_corrected_demo_flags_the_hit_in_both_recordings_and_places_the_cube(model_dir, tmp_path):

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from experiments.correction.config import CORRECTION
-from experiments.correction.metrics import deviation_deg, detection, first_hit_step
+from experiments.correction.metrics import detection, deviation_deg, first_hit_step
+from pipelines.compliant import MonitorSeeds
 from sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS
 from sim.config import SIM, CorrectionGains
 from sim.control import PlanCorrection, anchor_plan, plan_from_recall
@@ -176,7 +177,7 @@ def test_a_small_run_writes_the_results_contract(tmp_path):
     from experiments.correction.pipeline import fit_model, run_correction
     from experiments.correction.report import write_json, write_markdown
 
-    config = CORRECTION.with_(n_seeds=1, momenta=(40.0,), monitor_seeds=3, epochs=40)
+    config = CORRECTION.with_(n_seeds=1, momenta=(40.0,), monitor=MonitorSeeds(per_split=3), epochs=40)
     result = run_correction(fit_model(config), config, progress=False)
     write_json(result, tmp_path / "correction.json")
     write_markdown(result, tmp_path / "correction.md")
@@ -191,7 +192,7 @@ def test_a_small_run_writes_the_results_contract(tmp_path):
     assert (tmp_path / "correction.png").stat().st_size > 10_000
 
 
-@pytest.mark.parametrize("first", [CORRECTION.selection_seeds[0] + 5, CORRECTION.monitor_seed - 10])
+@pytest.mark.parametrize("first", [CORRECTION.selection_seeds[0] + 5, CORRECTION.monitor.first - 10])
 def test_test_seeds_may_not_overlap_the_selection_or_monitor_seeds(first):
     with pytest.raises(ValueError, match="overlap"):
         CORRECTION.with_(test_seed=first)

@@ -24,13 +24,11 @@ def correction(
 ) -> None:
     """A box hits the arm carrying the cube, under stiff and compliant control, with and without
     the memory's correction; writes correction.json, correction.md and correction.png."""
-    import torch
 
     from experiments.correction.figures import write_figure
     from experiments.correction.pipeline import fit_model, run_correction
     from experiments.correction.report import write_json, write_markdown
 
-    torch.set_num_threads(1)
     try:
         config = CORRECTION.with_(n_seeds=seeds, test_seed=first_seed, epochs=epochs)
     except ValueError as exc:

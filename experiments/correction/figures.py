@@ -36,7 +36,7 @@ def write_figure(result: Result, path: Path) -> None:
     for (controller, c), ep in sorted(result.examples.items()):
         axes[2].plot(ep.t_hi, deviation_deg(ep), color=COLOURS[(controller, c)], label=f"{controller}, {c}")
     axes[2].axhline(result.config.band_deg, color="k", ls=":", lw=1, label="recovery band")
-    axes[2].axvline(result.config.release_s, color="k", ls="--", lw=0.8)
+    axes[2].axvline(result.config.hit.release_s, color="k", ls="--", lw=0.8)
     axes[2].axvline(result.config.deadline_s, color="k", ls="-.", lw=0.8)
     momentum = result.config.momenta[len(result.config.momenta) // 2]
     axes[2].set(xlabel="time (s)", ylabel="max_j |q_j - q_plan,j| (deg)", yscale="log",

@@ -29,7 +29,7 @@ def run_metrics(episode: Episode, config: CorrectionConfig) -> dict:
     dev, t = deviation_deg(episode), episode.t_hi
     late = float(dev[t >= config.deadline_s - 1e-9].max())
     return {
-        "peak_dev_deg": float(dev[t >= config.release_s].max()),
+        "peak_dev_deg": float(dev[t >= config.hit.release_s].max()),
         "late_dev_deg": late,
         "cube_error_m": float(episode.cube_error_m),
         "placed": bool(episode.success),
@@ -39,7 +39,7 @@ def run_metrics(episode: Episode, config: CorrectionConfig) -> dict:
 
 def first_hit_step(config: CorrectionConfig) -> int:
     """The first observation step that can see the hit (observations are taken before a block's ticks)."""
-    return int(np.floor(config.release_s * SIM.timing.observation_hz + 1e-9)) + 1
+    return int(np.floor(config.hit.release_s * SIM.timing.observation_hz + 1e-9)) + 1
 
 
 def detection(energies: np.ndarray, threshold: float, config: CorrectionConfig) -> dict:

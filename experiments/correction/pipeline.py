@@ -6,7 +6,8 @@
    `sim.control.execute_recalled` anchors its grasp and place to the scene and executes it.
 3. Per controller, calibrate the monitor (offline recall, precision-weighted energy, the
    whole-episode threshold at `fpr`) on undisturbed executions of recalled plans under that
-   controller: precisions on one split of seeds, thresholds on another.
+   controller: precisions on one split of seeds, thresholds on another. The correction's gate
+   is the served decision (`pipelines.compliant.ServedMonitor`), as in the client's demo.
 4. Per test seed, controller and correction (none / corrected): the undisturbed twin, then one
    run per hit momentum; a run the simulator rejects counts as not recovered, never dropped.
 """
@@ -22,16 +23,14 @@ import numpy as np
 from experiments.correction.config import CorrectionConfig
 from experiments.correction.metrics import detection, run_metrics
 from models.asm import NeuralASM
-from models.calibration import Calibration
 from models.config import FAST
 from models.fault import threshold_for
-from models.scoring import energy
+from pipelines.compliant import ServedMonitor, calibrated_for, recall_plan, skill_of
 from sim.channels import CHANNEL_NAMES
-from sim.config import SIM
-from sim.control import Detector, PlanCorrection, execute_recalled
+from sim.control import PlanCorrection, execute_recalled
 from sim.disturbances import FallingObject, elbow_hit
 from sim.episode import Episode
-from sim.runner import SimulationError, first_observation, run_episode
+from sim.runner import SimulationError, run_episode
 from sim.skills import SKILLS
 
 CORRECTIONS: tuple[str, ...] = ("none", "corrected")
@@ -48,59 +47,34 @@ class Result:
     seconds: float = 0.0
 
 
-def skill_of(index: int) -> str:
-    return SKILLS[index % len(SKILLS)]
-
-
 def fit_model(config: CorrectionConfig, progress: bool = False) -> NeuralASM:
     demos = [run_episode(skill, seed) for skill in SKILLS for seed in range(10)]
-    held_out = [run_episode(skill_of(i), config.monitor_seed + 2 * config.monitor_seeds + i) for i in range(20)]
+    held_out = [run_episode(skill_of(i), config.monitor.last + 1 + i) for i in range(20)]
     preset = FAST if config.epochs is None else dataclasses.replace(FAST, epochs=config.epochs)
     return NeuralASM.fit(np.stack([e.observations for e in demos]), CHANNEL_NAMES, preset, progress=progress,
                          validation=np.stack([e.observations for e in held_out]),
                          labels=np.array([e.skill for e in demos]))
 
 
-def recall(model: NeuralASM, skill: str, seed: int) -> np.ndarray:
-    """The memory's (15, 25) sequence cued from the episode's first observation (before any motion)."""
-    return model.recall(first_observation(skill, seed)[None, None], SIM.timing.n_steps)[0]
+def monitor_for(model: NeuralASM, config: CorrectionConfig, controller: str) -> NeuralASM:
+    """The network calibrated on undisturbed executions of recalled plans under `controller`."""
+    return calibrated_for(model, controller, config.monitor, (config.monitor_mode,), (config.fpr,))
 
 
-def undisturbed(model: NeuralASM, config: CorrectionConfig, controller: str) -> tuple[np.ndarray, np.ndarray]:
-    """Observations of undisturbed, uncorrected executions of recalled plans under `controller`:
-    the precision split, then the threshold split, `config.monitor_seeds` seeds each."""
-    def normal(first: int) -> np.ndarray:
-        seeds = range(first, first + config.monitor_seeds)
-        return np.stack([execute_recalled(recall(model, skill_of(s), s), skill_of(s), s, None, controller).observations
-                         for s in seeds])
-    return normal(config.monitor_seed), normal(config.monitor_seed + config.monitor_seeds)
-
-
-def calibrate_monitor(model: NeuralASM, config: CorrectionConfig, controller: str) -> Calibration:
-    """Precisions and thresholds from undisturbed executions of recalled plans under `controller`."""
-    precision, thresholds = undisturbed(model, config, controller)
-    return model.calibrate(precision, thresholds, config.monitor_mode, 1, fprs=(config.fpr,),
-                           source=f"undisturbed recalled plans, {controller} control")
-
-
-def energies(model: NeuralASM, calibration: Calibration, observations: np.ndarray) -> np.ndarray:
-    errors = model.errors(observations[None], calibration.mode, calibration.cue_steps)
-    return energy(errors, calibration.error_std, calibration.error_precision)[0]
+def energies(monitor: NeuralASM, config: CorrectionConfig, observations: np.ndarray) -> np.ndarray:
+    return monitor.score(observations[None], config.monitor_mode, 1).energy[0]
 
 
 def hit(config: CorrectionConfig, momentum: float) -> FallingObject:
-    return elbow_hit(momentum, config.speed_m_s, config.release_s, config.drop_height_m)
-
-
-def monitor(model: NeuralASM, calibration: Calibration, threshold: float) -> Detector:
-    """The memory's fault monitor as the correction's gate: the latest step's energy above the threshold."""
-    return lambda observations: bool(energies(model, calibration, observations)[-1] > threshold)
+    return elbow_hit(momentum, config.hit.speed_m_s, config.hit.release_s, config.hit.drop_height_m)
 
 
 def _run(recalled: np.ndarray, skill: str, seed: int, controller: str, correction: str,
-         disturbance: FallingObject | None, config: CorrectionConfig, detector: Detector) -> Episode | str:
+         disturbance: FallingObject | None, config: CorrectionConfig, monitor: NeuralASM) -> Episode | str:
+    """One execution; corrected runs are gated by a fresh served session of `monitor`."""
     try:
-        hook = PlanCorrection(config.gains, detector if config.gated else None) if correction == "corrected" else None
+        gate = ServedMonitor(monitor, config.monitor_mode, config.fpr) if config.gated else None
+        hook = PlanCorrection(config.gains, gate) if correction == "corrected" else None
         return execute_recalled(recalled, skill, seed, hook, controller, disturbance)
     except SimulationError as exc:
         return repr(exc)
@@ -112,38 +86,38 @@ def run_correction(model: NeuralASM, config: CorrectionConfig, progress: bool = 
     start = time.perf_counter()
     result = Result(config, model={**model.provenance, "epochs": model.config.epochs,
                                    "hidden_size": model.config.hidden_size, "solver": model.config.solver})
-    calibrations = {}
+    monitors = {}
     for controller in config.controllers:
-        cal = calibrations[controller] = calibrate_monitor(model, config, controller)
+        monitor = monitors[controller] = monitor_for(model, config, controller)
+        cal = monitor.calibration(config.monitor_mode, 1)
         result.monitor[controller] = {"threshold": threshold_for(cal, config.fpr, 0, "episode"), "source": cal.source}
     per_seed = len(config.controllers) * (1 + len(CORRECTIONS) * (1 + len(config.momenta)))
     bar = tqdm(total=config.n_seeds * per_seed, desc="correction", disable=not progress)
     for index, seed in enumerate(config.test_seeds):
         skill = skill_of(index)
-        recalled = recall(model, skill, seed)
+        recalled = recall_plan(model, skill, seed)
         for controller in config.controllers:
-            cal, threshold = calibrations[controller], result.monitor[controller]["threshold"]
-            detector = monitor(model, cal, threshold)
+            monitor, threshold = monitors[controller], result.monitor[controller]["threshold"]
             demo = run_episode(skill, seed, controller=controller)
             result.twins.append({"seed": seed, "skill": skill, "controller": controller, "plan": "demonstration",
                                  "correction": "none", "placed": bool(demo.success), "cube_error_m": demo.cube_error_m})
             bar.update(1)
             for correction in CORRECTIONS:
                 key = {"seed": seed, "skill": skill, "controller": controller, "correction": correction}
-                twin = _run(recalled, skill, seed, controller, correction, None, config, detector)
+                twin = _run(recalled, skill, seed, controller, correction, None, config, monitor)
                 if isinstance(twin, Episode):
-                    flags = detection(energies(model, cal, twin.observations), threshold, config)
+                    flags = detection(energies(monitor, config, twin.observations), threshold, config)
                     result.twins.append(key | {"plan": "recalled"} | run_metrics(twin, config)
                                         | {"false_alarm": flags["detected"] or flags["flagged_before_hit"]})
                 else:
                     result.twins.append(key | {"plan": "recalled", "placed": False, "recovered": False, "error": twin})
                 bar.update(1)
                 for momentum in config.momenta:
-                    ep = _run(recalled, skill, seed, controller, correction, hit(config, momentum), config, detector)
-                    row = key | {"momentum": momentum, "mass_kg": momentum / config.speed_m_s, "error": None}
+                    ep = _run(recalled, skill, seed, controller, correction, hit(config, momentum), config, monitor)
+                    row = key | {"momentum": momentum, "mass_kg": momentum / config.hit.speed_m_s, "error": None}
                     if isinstance(ep, Episode):
-                        row |= run_metrics(ep, config) | detection(energies(model, cal, ep.observations), threshold,
-                                                                   config)
+                        row |= run_metrics(ep, config) | detection(energies(monitor, config, ep.observations),
+                                                                   threshold, config)
                         if momentum == config.momenta[len(config.momenta) // 2] and index == 0:
                             result.examples[(controller, correction)] = ep
                     else:

@@ -31,7 +31,7 @@ def summarise(result: Result) -> list[dict]:
             rows.append({
                 "controller": controller,
                 "momentum": float(momentum),
-                "mass_kg": float(momentum / result.config.speed_m_s),
+                "mass_kg": float(momentum / result.config.hit.speed_m_s),
                 "n_seeds": len(plain),
                 "recovery_rate": {c: _mean([r["recovered"] for r in sel[c]]) for c in CORRECTIONS},
                 "placed_rate": {c: _mean([r["placed"] for r in sel[c]]) for c in CORRECTIONS},
@@ -112,7 +112,7 @@ def write_markdown(result: Result, path: Path) -> None:
     path.write_text(f"""# Reactive correction: a box falls on the arm carrying the cube
 
 {cfg.n_seeds} test seeds ({seeds[0]}..{seeds[-1]}, skills alternating) per hit; a box dropped
-{cfg.drop_height_m * 100:g} cm above the elbow (link 4) at {cfg.speed_m_s:g} m/s at t = {cfg.release_s:g} s (the carry),
+{cfg.hit.drop_height_m * 100:g} cm above the elbow (link 4) at {cfg.hit.speed_m_s:g} m/s at t = {cfg.hit.release_s:g} s (the carry),
 its mass setting the momentum. Plan: the Neural ASM's offline recall from the first observation,
 grasp and place anchored to the perceived cube and goal (`sim.control.anchor_plan`). Correction: q* = q_rec + K_i I, I the leaky ({g.leak:g}/s)
 integral of q_rec - q, K_i = {g.ki:g}/s, |K_i I| <= {g.i_max_deg:g} deg and its torque at most the external torque at each joint,
