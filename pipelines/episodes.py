@@ -10,11 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from models.sequences import Sequences
-from runtime.parallel import Backend
+from runtime.parallel import Parallel
 from sim.dataset import generate, load_episodes
 from sim.episode import Episode
 
@@ -43,27 +44,46 @@ class NormalSets:
     normal_test: Sequences  # normal episodes for measured false-positive rates
 
 
+def split_three(normal: Sequences, n_precision: int, n_calibration: int) -> tuple[Sequences, Sequences, Sequences]:
+    """Held-out normals in order: precisions, thresholds, and the rest for measured false alarms."""
+    if n_precision < 1 or n_calibration < 1 or len(normal) < n_precision + n_calibration + 10:
+        raise ValueError(f"need at least {n_precision + n_calibration + 10} held-out normal episodes "
+                         f"({n_precision} precision, {n_calibration} calibration, 10 test), got {len(normal)}")
+    index = np.arange(len(normal))
+    return (normal.take(index[:n_precision]), normal.take(index[n_precision:n_precision + n_calibration]),
+            normal.take(index[n_precision + n_calibration:]))
+
+
 def split_normal(demos: list[Episode], normal_episodes: list[Episode]) -> NormalSets:
+    """The paper benchmark's split: a quarter for precisions, three eighths for thresholds."""
     normal = as_sequences(normal_episodes)
     n = len(normal)
     if n < MIN_HELD_OUT:
         raise ValueError(f"need at least {MIN_HELD_OUT} held-out normal episodes, got {n}")
-    parts = np.array_split(np.arange(n), [n // 4, n // 4 + (3 * n) // 8])
-    return NormalSets(normal.channel_names, as_sequences(demos), *(normal.take(p) for p in parts))
+    return NormalSets(normal.channel_names, as_sequences(demos), *split_three(normal, n // 4, (3 * n) // 8))
 
 
-def ensure_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int, workers: int,
-                backend: Backend = "processes") -> dict[str, list[Episode]]:
+Simulate = Callable[[str, Path], object]  # (set kind, folder) -> writes <folder>/<kind>.mcap
+
+
+def ensure_sets(data_dir: Path, kinds: tuple[str, ...], simulate: Simulate) -> dict[str, list[Episode]]:
     """Load the sets from data_dir, simulating the missing ones."""
     out = {}
     for kind in kinds:
-        path = data_dir / f"{kind}.mcap"
+        path = Path(data_dir) / f"{kind}.mcap"
         if not path.exists():
-            generate(kind, data_dir, workers=workers, n_normal=n_normal, backend=backend)
+            simulate(kind, Path(data_dir))
         out[kind] = load_episodes(path)
     return out
 
 
-def load_normal_sets(data_dir: Path, n_normal: int = 400, workers: int = 2) -> NormalSets:
-    sets = ensure_sets(data_dir, ("demos", "normal"), n_normal, workers)
+def paper_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int = 400,
+               parallel: Parallel = Parallel()) -> dict[str, list[Episode]]:
+    """The paper task's sets (sim/dataset.py), simulated where missing."""
+    return ensure_sets(data_dir, kinds, lambda kind, folder: generate(
+        kind, folder, workers=parallel.workers, n_normal=n_normal, backend=parallel.backend))
+
+
+def load_normal_sets(data_dir: Path, n_normal: int = 400, parallel: Parallel = Parallel()) -> NormalSets:
+    sets = paper_sets(data_dir, ("demos", "normal"), n_normal, parallel)
     return split_normal(sets["demos"], sets["normal"])

@@ -13,6 +13,7 @@ import os
 import signal
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from multiprocessing import get_context
 from itertools import repeat
 from typing import Any, Literal, get_args
@@ -21,6 +22,25 @@ from tqdm.auto import tqdm
 
 Backend = Literal["processes", "ray"]
 BACKENDS: tuple[str, ...] = get_args(Backend)
+
+
+@dataclass(frozen=True)
+class Parallel:
+    """Where independent jobs run: `workers` local processes, or a Ray cluster (`workers`
+    CPUs of a local instance when no cluster is named)."""
+
+    workers: int = 2
+    backend: Backend = "processes"
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.workers < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers}")
+
+    def map(self, fn: Callable[..., Any], args: Sequence[tuple], **options: Any) -> list[Any]:
+        """``parallel_map`` here (options: initializer, desc, unit, progress, chunksize)."""
+        return parallel_map(fn, args, self.workers, self.backend, **options)
 
 
 def parallel_map(

@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from experiments.fault_sweep.data import make_benchmark
-from experiments.fault_sweep.methods import baseline_methods, neural_asm_methods
 from experiments.fault_sweep.figures import write_figures
+from experiments.fault_sweep.methods import baseline_methods
 from experiments.fault_sweep.metrics import FPRS, MAIN_FPR
 from experiments.fault_sweep.report import write_csv, write_json, write_markdown
 from experiments.fault_sweep.run import score_methods, train_models
+from experiments.methods import neural_asm_methods
 from models.config import FAST
 from sim.config import SIM
 from sim.dataset import Job, run_jobs
@@ -41,7 +42,7 @@ def sweep():
                             {"demos": demos, "normal": normal, "faults": faults, "twins": twins}.items()})
     model = train_models(bench, {"nasm": FAST.with_(hidden_size=96, epochs=250)}, {"test": True})["nasm"]
     norm = model.normaliser
-    methods = neural_asm_methods(model, "nasm") + baseline_methods(norm.normalise(bench.normal.demos.data),
+    methods = neural_asm_methods(model, "nasm", "Neural ASM") + baseline_methods(norm.normalise(bench.normal.demos.data),
                                                                   bench.normal.demos.labels)
     return score_methods(bench, methods, norm), model
 

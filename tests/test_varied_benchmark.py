@@ -9,14 +9,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from experiments.methods import Method, neural_asm_methods
 from experiments.varied.ceiling import ceiling, ceiling_markdown
 from experiments.varied.data import make_benchmark
-from experiments.varied.methods import Method, neural_asm_methods, train_neural_asm
+from experiments.varied.methods import train_neural_asm
 from experiments.varied.score import headline, score_all
 from models.config import FAST
 from models.detectors import ConditionalTemplate, PerSkillZScore
+from runtime.parallel import Parallel, parallel_map
 from sim.episode import Episode
-from runtime.parallel import parallel_map
 from sim.varied import VARIED_SKILLS
 from sim.varied_sets import VariedJob, fault_jobs, run_job
 
@@ -118,7 +119,7 @@ def test_a_replicate_keeps_the_context_and_redraws_the_noise():
 
 
 def test_ceiling_oracles_see_what_the_context_explains(bench):
-    result = ceiling(bench, workers=2, alpha=0.1)  # 12 calibration episodes: a 1 % threshold would be infinite
+    result = ceiling(bench, Parallel(2), alpha=0.1)  # 12 calibration episodes: a 1 % threshold would be infinite
     assert sum(result["replicates_failed"].values()) == 0
     replay, mean, start = (result["oracles"][k] for k in ("replay", "conditional_mean", "conditional_mean_given_start"))
     assert mean["held_out_mse"] == pytest.approx(replay["held_out_mse"] / 2, rel=1e-5)

@@ -6,7 +6,6 @@ import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 from pathlib import Path
 
-import torch
 import typer
 
 from experiments.contextual import figures, report
@@ -37,7 +36,6 @@ def contextual(
     if preset not in PRESETS:
         typer.secho(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}", fg="red", err=True)
         raise typer.Exit(2)
-    torch.set_num_threads(1)
     cfg = QUICK if quick else CONTEXTUAL
     cfg = cfg.with_(**{k: v for k, v in (("seeds", seeds), ("epochs", epochs)) if v is not None})
     cfg = cfg.with_(skill_seeds=min(cfg.skill_seeds, cfg.seeds))

@@ -13,7 +13,7 @@ import numpy as np
 
 from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig
 from experiments.contextual.dataset import MOTOR_CHANNELS, channel_names
-from experiments.contextual.tasks import init_worker, separation_task, skills_task
+from experiments.contextual.tasks import separation_task, skills_task
 from models.config import TPCConfig
 from runtime.parallel import Backend, parallel_map
 
@@ -111,7 +111,7 @@ def run_protocol(
     started = time.perf_counter()
     tpc = tpc.with_(epochs=cfg.epochs)
     results = parallel_map(_call, [(fn, args) for fn, args in jobs(cfg, tpc)], workers, backend,
-                           init_worker, desc="contextual", unit="run", progress=progress)
+                           desc="contextual", unit="run", progress=progress)
     summary = summarise(results, cfg)
     summary["setup"] = {
         "protocol": asdict(cfg), "tpc": tpc.to_dict(), "workers": workers, "backend": backend,

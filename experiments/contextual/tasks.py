@@ -8,7 +8,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import torch
 
 from experiments.contextual.config import SKILLS, ContextualConfig
 from experiments.contextual.dataset import HAND_CHANNELS, conditions_data, hand, motor_index
@@ -18,10 +17,6 @@ from models.config import TPCConfig
 from models.normaliser import Normaliser
 from models.tpc import TemporalPC
 from models.train import train
-
-
-def init_worker() -> None:
-    torch.set_num_threads(1)
 
 
 def per_cue(values: np.ndarray, labels: np.ndarray) -> dict[str, Any]:
@@ -34,7 +29,6 @@ def separation_task(
 ) -> dict[str, Any]:
     """Train one model on one participant's demonstrations of one condition and recall
     the 24 test trials from their first step."""
-    init_worker()
     train = conditions_data(seed, cfg, False)[condition]
     test = conditions_data(seed, cfg, True)[condition]
     fitted = fit(model, train, test, tpc.with_(seed=seed), cfg.inference_sweep)
@@ -64,7 +58,6 @@ def skills_task(seed: int, n_skills: int, cfg: ContextualConfig, tpc: TPCConfig)
     compares, which hid the difference between skill counts (1 skill 0.71 +- 0.16 vs 4 skills
     0.53 with noise 0.35, three seeds).
     """
-    init_worker()
     data = lambda n: conditions_data(seed, cfg, False, n, cfg.max_skills)["plan_and_execute"]  # noqa: E731
     normaliser = Normaliser.fit(data(cfg.max_skills).data)
     sequences = normaliser.normalise(data(n_skills).data)

@@ -11,7 +11,7 @@ import typer
 
 from models.config import FAITHFUL
 from runtime.home import home_path
-from runtime.parallel import Backend
+from runtime.parallel import Backend, Parallel
 from sim.cli import Task
 
 # The paper's batch-1 training over 160 varied demonstrations costs ~3 s per epoch here: the
@@ -44,17 +44,15 @@ def faults(
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
 ) -> None:
     """Run the 980-fault sweep (or the varied-task benchmark) against baselines; write JSON, markdown and figures."""
-    if task == Task.varied and ceiling:
-        _ceiling(context.value, out or home_path(f"varied_{context.value}"), data or home_path("data_varied"),
-                 workers, backend)
-        return
-    if task == Task.varied and ablation:
-        _ablation(context.value, out or home_path(f"varied_{context.value}"), data or home_path("data_varied"),
-                  fast_epochs, workers, backend)
-        return
+    parallel = Parallel(workers, backend)
     if task == Task.varied:
-        _varied(context.value, out or home_path(f"varied_{context.value}"), data or home_path("data_varied"),
-                fast_epochs, paper_epochs, workers, backend)
+        out, data = out or home_path(f"varied_{context.value}"), data or home_path("data_varied")
+        if ceiling:
+            _ceiling(context.value, out, data, parallel=parallel)
+        elif ablation:
+            _ablation(context.value, out, data, fast_epochs, parallel=parallel)
+        else:
+            _varied(context.value, out, data, fast_epochs, paper_epochs, parallel=parallel)
         return
     out = out or home_path("fault_sweep")
     data = data or home_path("data")
@@ -63,7 +61,7 @@ def faults(
     from experiments.fault_sweep.run import run_sweep
 
     out.mkdir(parents=True, exist_ok=True)
-    result = run_sweep(data, out, paper_epochs, workers, n_normal, fast_epochs, backend)
+    result = run_sweep(data, out, paper_epochs, n_normal, fast_epochs, parallel=parallel)
     write_json(result, out / "fault_sweep.json")
     write_markdown(result, out / "fault_sweep.md")
     write_csv(result, out / "episodes.csv")
@@ -72,8 +70,8 @@ def faults(
     typer.echo(f"wrote {out}")
 
 
-def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_epochs: int, workers: int,
-            backend: Backend) -> None:
+def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_epochs: int, *,
+            parallel: Parallel) -> None:
     from experiments.varied.report import write_figures, write_json, write_markdown
     from experiments.varied.run import run_varied
     from models.config import ROBUST
@@ -81,7 +79,7 @@ def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_
     start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     fast = ROBUST if fast_epochs is None else ROBUST.with_(epochs=fast_epochs)
-    result = run_varied(data, out, context, fast, min(paper_epochs, VARIED_PAPER_EPOCHS), workers, backend)
+    result = run_varied(data, out, context, fast, min(paper_epochs, VARIED_PAPER_EPOCHS), parallel=parallel)
     write_json(result, out / "fault_sweep.json", time.perf_counter() - start)
     write_markdown(result, out / "fault_sweep.md")
     write_figures(result, out)
@@ -89,21 +87,21 @@ def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_
     typer.echo(f"wrote {out} in {time.perf_counter() - start:.0f} s")
 
 
-def _ablation(context: str, out: Path, data: Path, epochs: int | None, workers: int, backend: Backend) -> None:
+def _ablation(context: str, out: Path, data: Path, epochs: int | None, *, parallel: Parallel) -> None:
     from experiments.varied.ablation import ablation_markdown, run_ablation
 
-    rows = run_ablation(data, context, epochs, workers, backend)
+    rows = run_ablation(data, context, epochs, parallel=parallel)
     out.mkdir(parents=True, exist_ok=True)
     (out / "ablation.json").write_text(json.dumps(rows, indent=1))
     (out / "ablation.md").write_text(ablation_markdown(rows, context))
     typer.echo((out / "ablation.md").read_text())
 
 
-def _ceiling(context: str, out: Path, data: Path, workers: int, backend: Backend) -> None:
+def _ceiling(context: str, out: Path, data: Path, *, parallel: Parallel) -> None:
     from experiments.varied.ceiling import ceiling_markdown, run_ceiling
 
     start = time.perf_counter()
-    result = run_ceiling(data, context, workers, backend)
+    result = run_ceiling(data, context, parallel=parallel)
     result["seconds"] = round(time.perf_counter() - start, 1)
     out.mkdir(parents=True, exist_ok=True)
     (out / "ceiling.json").write_text(json.dumps(result, indent=1))

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from models.sequences import Sequences
-from pipelines.episodes import NormalSets, as_sequences, ensure_sets, split_normal
-from runtime.parallel import Backend
+from pipelines.episodes import NormalSets, as_sequences, paper_sets, split_normal
+from runtime.parallel import Parallel
 from sim.episode import Episode
 
 SETS = ("demos", "normal", "faults", "twins")
@@ -44,6 +44,5 @@ def make_benchmark(sets: dict[str, list[Episode]]) -> Benchmark:
     )
 
 
-def load_benchmark(data_dir: Path, n_normal: int = 400, workers: int = 2,
-                   backend: Backend = "processes") -> Benchmark:
-    return make_benchmark(ensure_sets(data_dir, SETS, n_normal, workers, backend))
+def load_benchmark(data_dir: Path, n_normal: int = 400, *, parallel: Parallel = Parallel()) -> Benchmark:
+    return make_benchmark(paper_sets(data_dir, SETS, n_normal, parallel))

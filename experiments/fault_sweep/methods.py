@@ -8,32 +8,10 @@ to expectations (N, T, D); only the per-skill z-score is allowed to use the labe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
-
 import numpy as np
 
-from models.asm import NeuralASM
+from experiments.methods import Expect, Method
 from models.baselines import LinearOneStep, StepStatistics
-
-Expect = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class Method:
-    name: str
-    family: str  # "neural_asm" or "baseline"
-    expected: Expect
-    # z-score methods: the demonstrations' per-step std of the entry used, the paper's
-    # own weighting (N, T, D). None for predictors.
-    demo_spread: Expect | None = None
-
-
-def neural_asm_methods(model: NeuralASM, label: str) -> list[Method]:
-    def expect(mode: str) -> Expect:
-        return lambda x, _skills: x - model.errors(model.normaliser.denormalise(x), mode, 1)
-
-    return [Method(f"{label}_{mode}", "neural_asm", expect(mode)) for mode in ("offline", "online")]
 
 
 def baseline_methods(demos: np.ndarray, skills: np.ndarray) -> list[Method]:
@@ -49,8 +27,9 @@ def baseline_methods(demos: np.ndarray, skills: np.ndarray) -> list[Method]:
         return lambda x, s: table[np.searchsorted(names, s)][:, : x.shape[1]]
 
     return [
-        Method("zscore_pooled", "baseline", lambda x, _s: pooled.expected(x), lambda x, _s: pooled.spread(x)),
-        Method("zscore_per_skill", "baseline", by_label(library.means), by_label(library.stds)),
-        Method("classic_asm", "baseline", lambda x, _s: library.expected(x), lambda x, _s: library.spread(x)),
-        Method("linear_one_step", "baseline", lambda x, _s: linear.expected(x)),
+        Method("zscore_pooled", "z-score, pooled over skills", False, lambda x, _s: pooled.expected(x),
+               lambda x, _s: pooled.spread(x)),
+        Method("zscore_per_skill", "z-score per true skill", False, by_label(library.means), by_label(library.stds)),
+        Method("classic_asm", "classic ASM", False, lambda x, _s: library.expected(x), lambda x, _s: library.spread(x)),
+        Method("linear_one_step", "linear one-step predictor", False, lambda x, _s: linear.expected(x)),
     ]

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
+from experiments.twins import VISIBLE_K, visible_from, whitened_deviation
 from models.calibration import Thresholds, estimate
 from models.config import SCORING
 from models.fault import isolated_joint, joint_channels
@@ -141,24 +142,19 @@ def evaluate(w: Weighted, channel_names: tuple[str, ...], fault_step: np.ndarray
 
 def ceilings(faults: np.ndarray, twins: np.ndarray, normal: np.ndarray, fault_skills: np.ndarray,
              normal_skills: np.ndarray, channel_names: tuple[str, ...], fault_step: np.ndarray,
-             fault_joint: np.ndarray, k: float = 3.0) -> dict:
+             fault_joint: np.ndarray, k: float = VISIBLE_K) -> dict:
     """What an oracle that knows each fault's no-fault twin could reach (normalised inputs).
 
     Deviation from the twin is whitened by normal variation (per-skill, per-step std of
-    held-out normal episodes). A fault is *visible* when some channel deviates by more
+    held-out normal episodes, `experiments.twins`). A fault is *visible* when some channel deviates by more
     than k normal standard deviations at or after its fault step. The isolation ceiling
     at the fault step counts faults whose own joint deviates most among the joints at
     that step, by more than k standard deviations: a 0-degree overshoot changes nothing
     at its own step, so about 1/7 of the grid cannot be isolated there.
     """
-    sigma = np.ones_like(faults)
-    for skill in np.unique(fault_skills):
-        sigma[fault_skills == skill] = np.maximum(normal[normal_skills == skill].std(axis=0), 1e-3)
-    dev = np.abs(faults - twins) / sigma
+    dev = whitened_deviation(faults, twins, fault_skills, normal, normal_skills)
     rows = np.arange(len(dev))
-    steps = np.arange(dev.shape[1])
-    after = np.where((steps[None] >= fault_step[:, None])[..., None], dev, 0.0)
-    visible = after.max(axis=(1, 2)) > k
+    visible = visible_from(dev, fault_step, k)
     at = dev[rows, fault_step][:, np.array(joint_channels(channel_names))]
     isolable = (at.argmax(axis=1) + 1 == fault_joint) & (at.max(axis=1) > k)
     return {

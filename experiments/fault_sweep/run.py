@@ -15,14 +15,15 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from experiments.fault_sweep.data import Benchmark, load_benchmark
-from experiments.fault_sweep.methods import Method, baseline_methods, neural_asm_methods
+from experiments.fault_sweep.methods import baseline_methods
+from experiments.methods import Method, neural_asm_methods
 from experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
 from pipelines.default_model import provenance_of, train_calibrated
 from models import checkpoint
 from models.asm import NeuralASM
 from models.config import FAITHFUL, FAST, TPCConfig
 from models.normaliser import Normaliser
-from runtime.parallel import Backend
+from runtime.parallel import Parallel
 
 
 @dataclass
@@ -81,9 +82,9 @@ def train_models(bench: Benchmark, configs: dict[str, TPCConfig], provenance: di
     }
 
 
-def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, workers: int = 2,
-              n_normal: int = 400, fast_epochs: int | None = None, backend: Backend = "processes") -> SweepResult:
-    bench = load_benchmark(data_dir, n_normal, workers, backend)
+def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, n_normal: int = 400,
+              fast_epochs: int | None = None, *, parallel: Parallel = Parallel()) -> SweepResult:
+    bench = load_benchmark(data_dir, n_normal, parallel=parallel)
     configs = {
         "nasm": FAST if fast_epochs is None else FAST.with_(epochs=fast_epochs),
         "nasm_paper": FAITHFUL.with_(epochs=paper_epochs),
@@ -92,6 +93,6 @@ def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs
     for label, model in trained.items():
         checkpoint.save(model, out_dir / "models" / f"{label}.safetensors")
     norm = trained["nasm"].normaliser
-    methods = [m for label, model in trained.items() for m in neural_asm_methods(model, label)]
+    methods = [m for label, model in trained.items() for m in neural_asm_methods(model, label, label)]
     methods += baseline_methods(norm.normalise(bench.normal.demos.data), bench.normal.demos.labels)
     return score_methods(bench, methods, norm)

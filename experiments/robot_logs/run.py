@@ -20,12 +20,13 @@ from pathlib import Path
 import typer
 
 from experiments.fault_sweep.data import SETS, make_benchmark
-from experiments.fault_sweep.methods import neural_asm_methods
+from experiments.methods import neural_asm_methods
 from experiments.fault_sweep.run import score_methods, train_models
 from experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
 from logs.sources import load_log_sequences
 from models.config import FAST
-from pipelines.episodes import ensure_sets
+from pipelines.episodes import paper_sets
+from runtime.parallel import Parallel
 from runtime.home import home_path
 from sim.episode import Episode
 
@@ -77,14 +78,14 @@ def main(
 ) -> None:
     """Train from native files and from bags; score both on the 980 faults; write results.{json,md}."""
     start = time.perf_counter()
-    native = ensure_sets(data, SETS, n_normal, workers)
+    native = paper_sets(data, SETS, n_normal, Parallel(workers))
     sources = {"native": native, "bags": through_bags(native, out / "bags", jitter_s)}
     config = FAST if epochs is None else FAST.with_(epochs=epochs)
     results: dict[str, dict] = {}
     for name, sets in sources.items():
         bench = make_benchmark(sets)
         model = train_models(bench, {"nasm": config}, {"source": name})["nasm"]
-        scored = score_methods(bench, neural_asm_methods(model, "nasm"), model.normaliser)
+        scored = score_methods(bench, neural_asm_methods(model, "nasm", "Neural ASM"), model.normaliser)
         results[name] = {m: w["whitened"] for m, w in scored.summary.items()}
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps({"jitter_s": jitter_s, "epochs": config.epochs, "results": results,

@@ -13,11 +13,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.varied.methods import neural_asm_methods, train_neural_asm
+from experiments.methods import neural_asm_methods
+from experiments.varied.methods import train_neural_asm
 from experiments.varied.score import ALPHA, score_all
 from models.asm import NeuralASM
 from models.config import FAST, ROBUST, TPCConfig
-from runtime.parallel import Backend
+from runtime.parallel import Parallel
 from sim.varied import channel_groups
 
 VARIANTS: dict[str, tuple[str, TPCConfig]] = {
@@ -30,12 +31,12 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
 }
 
 
-def run_ablation(data_dir: Path, context: str, epochs: int | None = None, workers: int = 2,
-                 backend: Backend = "processes", alpha: float = ALPHA) -> list[dict]:
+def run_ablation(data_dir: Path, context: str, epochs: int | None = None, *, parallel: Parallel = Parallel(),
+                 alpha: float = ALPHA) -> list[dict]:
     """Every variant of `VARIANTS` on the benchmark's episodes (simulated when missing)."""
     variants = {name: (label, config if epochs is None else config.with_(epochs=epochs))
                 for name, (label, config) in VARIANTS.items()}
-    return ablate(load_varied_benchmark(data_dir, context, workers, backend), variants, alpha)
+    return ablate(load_varied_benchmark(data_dir, context, parallel), variants, alpha)
 
 
 def ablate(bench: VariedBenchmark, variants: dict[str, tuple[str, TPCConfig]], alpha: float = ALPHA,

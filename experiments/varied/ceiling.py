@@ -40,7 +40,7 @@ from models.normaliser import Normaliser
 from models.scoring import energy
 from models.sequences import Sequences
 from pipelines.episodes import as_sequences
-from runtime.parallel import Backend, parallel_map
+from runtime.parallel import Parallel
 from sim.episode import Episode
 from sim.varied import channel_groups, context_columns
 from sim.varied_sets import VariedJob, run_job
@@ -59,7 +59,7 @@ def replicate_jobs(bench: VariedBenchmark, kind: str) -> dict[str, list[VariedJo
             "ood": jobs(bench.ood, out_of_range=True), "faults": jobs(bench.twins)}
 
 
-def simulate_replicates(bench: VariedBenchmark, workers: int = 2, backend: Backend = "processes"
+def simulate_replicates(bench: VariedBenchmark, parallel: Parallel = Parallel()
                         ) -> tuple[VariedBenchmark, dict[str, dict[str, Sequences]], dict[str, int]]:
     """Both kinds of replicates as Sequences of the benchmark's channels, with the benchmark
     restricted to the episodes that have both (a replicate the simulation refuses, at its
@@ -67,7 +67,7 @@ def simulate_replicates(bench: VariedBenchmark, workers: int = 2, backend: Backe
     results = {}
     for kind in REPLICATES:
         for key, jobs in replicate_jobs(bench, kind).items():
-            results[kind, key] = parallel_map(run_job, [(job,) for job in jobs], workers, backend,
+            results[kind, key] = parallel.map(run_job, [(job,) for job in jobs],
                                               desc=f"{kind} replicates, {key}", unit="ep", chunksize=8)
     kept = {key: np.logical_and.reduce([[isinstance(r, Episode) for r in results[kind, key]] for kind in REPLICATES])
             for key in SETS}
@@ -125,12 +125,12 @@ def _scored(bench: VariedBenchmark, errors: dict[str, np.ndarray], alpha: float,
     return {rule: summary(o, bench) for rule, o in outcomes(e, bench.onset, alpha).items()}
 
 
-def ceiling(bench: VariedBenchmark, workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA,
+def ceiling(bench: VariedBenchmark, parallel: Parallel = Parallel(), alpha: float = ALPHA,
             floors: tuple[float, ...] = LOWER_FLOORS) -> dict:
     """Every oracle's summaries (the benchmark's keys, at the scoring's own spread floor),
     held-out error and explained variance; its detection with the spreads floored lower
     (``floors``: how much the floor, not the noise, hides); and the episodes dropped."""
-    bench, reps, dropped = simulate_replicates(bench, workers, backend)
+    bench, reps, dropped = simulate_replicates(bench, parallel)
     norm = Normaliser.fit(bench.demos.data)
     result: dict = {"context": bench.context, "alpha": alpha, "replicates_failed": dropped,
                     "spread_floor": SCORING.error_std_floor, "oracles": {}}
@@ -144,9 +144,9 @@ def ceiling(bench: VariedBenchmark, workers: int = 2, backend: Backend = "proces
     return result
 
 
-def run_ceiling(data_dir: Path, context: str, workers: int = 2, backend: Backend = "processes") -> dict:
+def run_ceiling(data_dir: Path, context: str, *, parallel: Parallel = Parallel()) -> dict:
     """``ceiling`` of the varied benchmark in ``data_dir`` (simulated there when missing)."""
-    return ceiling(load_varied_benchmark(data_dir, context, workers, backend), workers, backend)
+    return ceiling(load_varied_benchmark(data_dir, context, parallel), parallel)
 
 
 def ceiling_markdown(result: dict) -> str:

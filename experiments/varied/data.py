@@ -6,7 +6,7 @@ thresholds) and `test` (measured false alarms). Benign out-of-range normals and 
 only ever scored. Faults pair with their no-fault twins by seed; a fault's `onset` is the first
 step at which it departs from its twin, and it is `visible` when some channel at or after the
 onset departs by more than 3 normal standard deviations (per skill, step and channel, on the
-precision split).
+precision split; `experiments.twins`).
 """
 
 from __future__ import annotations
@@ -16,14 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.twins import onset_steps, visible_from, whitened_deviation
 from models.sequences import Sequences
-from pipelines.episodes import as_sequences
-from runtime.parallel import Backend
+from pipelines.episodes import as_sequences, ensure_sets, split_three
+from runtime.parallel import Parallel
 from sim.episode import Episode
 from sim.varied import channel_names, context_columns
-from sim.varied_sets import VARIED_KINDS, generate
+from sim.varied_sets import VARIED_KINDS, generate, jobs_for
 
-VISIBLE_K = 3.0
 SPLIT = (150, 300)  # precision, calibration; the rest of the normal set is the test split
 
 
@@ -46,20 +46,15 @@ class VariedBenchmark:
     dropped: dict  # set -> episodes the simulation refused (velocity limits, IK)
 
 
-def ensure_varied_sets(data_dir: Path, workers: int, backend: Backend = "processes") -> tuple[dict, dict]:
+def ensure_varied_sets(data_dir: Path, parallel: Parallel = Parallel()) -> tuple[dict, dict]:
     """Load the varied sets from data_dir, simulating missing ones; returns sets and drop counts."""
-    from sim.dataset import load_episodes
-    from sim.varied_sets import jobs_for
-
-    sets, dropped = {}, {}
-    for kind in VARIED_KINDS:
-        path = data_dir / f"{kind}.mcap"
-        if not path.exists():
-            generate(kind, data_dir, workers, backend)
-        sets[kind] = load_episodes(path)
+    sets = ensure_sets(data_dir, VARIED_KINDS, lambda kind, folder: generate(kind, folder, parallel.workers,
+                                                                             parallel.backend))
+    dropped = {}
+    for kind, episodes in sets.items():
         # a demos file may hold any number per skill (nasm demos --n-demos): its seeds say how many
-        sizes = {"n_demos": 1 + max(e.seed for e in sets[kind])} if kind == "demos" else {}
-        dropped[kind] = len(jobs_for(kind, **sizes)) - len(sets[kind])
+        sizes = {"n_demos": 1 + max(e.seed for e in episodes)} if kind == "demos" else {}
+        dropped[kind] = len(jobs_for(kind, **sizes)) - len(episodes)
     return sets, dropped
 
 
@@ -73,37 +68,19 @@ def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict |
     fault_arr = as_sequences(faults, columns)
     twin_arr = as_sequences([twins[e.seed] for e in faults], columns)
     normal = as_sequences(sets["normal"], columns)
-    n_precision, n_calibration = split
-    if len(normal) < n_precision + n_calibration + 10:
-        raise ValueError(f"need at least {n_precision + n_calibration + 10} normal episodes, got {len(normal)}")
-    index = np.arange(len(normal))
-    precision = normal.take(index[:n_precision])
-    onset, visible = departures(fault_arr, twin_arr, precision)
+    precision, calibration, test = split_three(normal, *split)
+    onset = onset_steps(fault_arr.data, twin_arr.data)
+    deviation = whitened_deviation(fault_arr.data, twin_arr.data, fault_arr.labels, precision.data, precision.labels)
+    visible = visible_from(deviation, onset)
     ctx_names = [n for n in kept if n.startswith(("cube_seen", "goal", "post"))]
     return VariedBenchmark(
         context=context, channel_names=kept, context_channels=np.array([kept.index(n) for n in ctx_names]),
-        demos=as_sequences(sets["demos"], columns), precision=precision,
-        calibration=normal.take(index[n_precision:n_precision + n_calibration]),
-        test=normal.take(index[n_precision + n_calibration:]), ood=as_sequences(sets["ood"], columns),
+        demos=as_sequences(sets["demos"], columns), precision=precision, calibration=calibration, test=test,
+        ood=as_sequences(sets["ood"], columns),
         faults=fault_arr, twins=twin_arr, kinds=np.array([e.fault.kind for e in faults]),
         fault_step=np.array([e.fault.step for e in faults]), onset=onset, visible=visible, dropped=dict(dropped or {}))
 
 
-def departures(faults: Sequences, twins: Sequences, normal: Sequences) -> tuple[np.ndarray, np.ndarray]:
-    """Each fault's first step departing from its twin, and whether it ever departs by more
-    than VISIBLE_K normal standard deviations (per skill, step, channel) from then on."""
-    diff = np.abs(faults.data - twins.data)
-    moved = diff.max(axis=2) > 1e-6
-    onset = np.where(moved.any(axis=1), moved.argmax(axis=1), faults.data.shape[1] - 1)
-    sigma = np.ones_like(faults.data)
-    for skill in np.unique(faults.labels):
-        sigma[faults.labels == skill] = np.maximum(normal.data[normal.labels == skill].std(axis=0), 1e-6)
-    steps = np.arange(diff.shape[1])
-    after = np.where((steps[None] >= onset[:, None])[..., None], diff / sigma, 0.0)
-    return onset, after.max(axis=(1, 2)) > VISIBLE_K
-
-
-def load_varied_benchmark(data_dir: Path, context: str, workers: int = 2,
-                          backend: Backend = "processes") -> VariedBenchmark:
-    sets, dropped = ensure_varied_sets(Path(data_dir), workers, backend)
+def load_varied_benchmark(data_dir: Path, context: str, parallel: Parallel = Parallel()) -> VariedBenchmark:
+    sets, dropped = ensure_varied_sets(Path(data_dir), parallel)
     return make_benchmark(sets, context, dropped)

@@ -9,27 +9,14 @@ observations it is cued with.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
-
-import numpy as np
 from tqdm.auto import tqdm
 
+from experiments.methods import Method
 from experiments.varied.data import VariedBenchmark
 from models.asm import NeuralASM
 from models.config import TPCConfig
 from models.detectors import all_detectors
 from models.normaliser import Normaliser
-
-Expect = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class Method:
-    name: str
-    label: str
-    is_neural_asm: bool
-    expected: Expect  # normalised (N, T, D) and skills -> expectation (N, T, D)
 
 
 def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool = True) -> NeuralASM:
@@ -44,13 +31,6 @@ def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool =
         model.calibrate(bench.precision.data, bench.calibration.data, mode, 1,
                         source="held-out normal episodes of the varied task (simulated Panda)")
     return model
-
-
-def neural_asm_methods(model: NeuralASM, name: str, label: str) -> list[Method]:
-    def expect(mode: str) -> Expect:
-        return lambda x, _skills: x - model.errors(model.normaliser.denormalise(x), mode, 1)
-
-    return [Method(f"{name}_{mode}", f"{label}, {mode} recall", True, expect(mode)) for mode in ("offline", "online")]
 
 
 def baseline_methods(bench: VariedBenchmark, norm: Normaliser, seed: int = 0) -> list[Method]:

@@ -15,11 +15,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.varied.methods import Method, baseline_methods, neural_asm_methods, train_neural_asm
+from experiments.methods import Method, neural_asm_methods
+from experiments.varied.methods import baseline_methods, train_neural_asm
 from experiments.varied.score import ALPHA, headline, score_all
 from models import checkpoint
 from models.config import FAITHFUL, ROBUST, TPCConfig
-from runtime.parallel import Backend
+from runtime.parallel import Parallel
 
 FEATURED = "nasm_online"
 
@@ -34,8 +35,8 @@ class VariedResult:
 
 
 def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = ROBUST, paper_epochs: int = 200,
-               workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA) -> VariedResult:
-    bench = load_varied_benchmark(data_dir, context, workers, backend)
+               *, parallel: Parallel = Parallel(), alpha: float = ALPHA) -> VariedResult:
+    bench = load_varied_benchmark(data_dir, context, parallel)
     configs = {"nasm": ("Neural ASM, default (robust preset)", fast),
                "nasm_paper": ("Neural ASM, paper configuration", FAITHFUL.with_(epochs=paper_epochs))}
     methods: list[Method] = []

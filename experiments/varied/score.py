@@ -17,7 +17,7 @@ from sklearn.metrics import roc_auc_score
 from tqdm.auto import tqdm
 
 from experiments.varied.data import VariedBenchmark
-from experiments.varied.methods import Method
+from experiments.methods import Method
 from models.calibration import estimate
 from models.conformal import TimeVaryingThreshold, binomial_interval, episode_threshold, mcnemar_exact
 from models.normaliser import Normaliser

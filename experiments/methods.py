@@ -1,0 +1,40 @@
+"""A monitor as every benchmark here compares it: reduced to what it expects of every step.
+
+Methods work in the Neural ASM's normalised units (z-scored with demonstration statistics),
+so errors, energies and thresholds are computed the same way for every one of them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from models.asm import NeuralASM
+from models.recall import RECALL_MODES
+
+Expect = Callable[[np.ndarray, np.ndarray], np.ndarray]  # normalised (N, T, D) and true skills -> (N, T, D)
+
+
+@dataclass(frozen=True)
+class Method:
+    name: str
+    label: str
+    is_neural_asm: bool
+    expected: Expect
+    # z-score methods: the demonstrations' per-step std of the entry used (N, T, D), the
+    # paper's own weighting. None for predictors.
+    demo_spread: Expect | None = None
+
+    @property
+    def family(self) -> str:
+        return "neural_asm" if self.is_neural_asm else "baseline"
+
+
+def neural_asm_methods(model: NeuralASM, name: str, label: str) -> list[Method]:
+    """The network in each recall mode; it is told neither the skill nor the context."""
+    def expect(mode: str) -> Expect:
+        return lambda x, _skills: x - model.errors(model.normaliser.denormalise(x), mode, 1)
+
+    return [Method(f"{name}_{mode}", f"{label}, {mode} recall", True, expect(mode)) for mode in RECALL_MODES]
