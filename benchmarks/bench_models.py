@@ -35,8 +35,6 @@ from models.tpc import TemporalPC
 from pipelines.episodes import as_sequences
 from sim.dataset import demonstrations, held_out_normal, run_jobs
 
-torch.set_num_threads(1)
-
 
 def reference_epoch_ms(data: np.ndarray, epochs: int = 2) -> float:
     """A plain torch implementation of the paper's training: one sequence at a time, K=100

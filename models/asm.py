@@ -21,6 +21,7 @@ from models.config import FAST, SCORING, Covariance, TPCConfig
 from models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_for
 from models.normaliser import Normaliser
 from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
+from models.sequences import checked_array
 from models.tpc import TemporalPC
 from models.train import train
 
@@ -28,15 +29,7 @@ from models.train import train
 def as_sequences(data: np.ndarray, width: int, what: str = "sequences") -> np.ndarray:
     """Check raw data is (N, T, width) or (T, width) and finite; returns (N, T, width)."""
     arr = np.asarray(data, np.float64)
-    if arr.ndim == 2:
-        arr = arr[None]
-    if arr.ndim != 3 or arr.shape[-1] != width:
-        raise ValueError(f"{what} must have shape (N, T, {width}) or (T, {width}), got {arr.shape}")
-    if arr.shape[1] == 0:
-        raise ValueError(f"{what} have no time steps")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{what} contain NaN or inf")
-    return arr
+    return checked_array(arr[None] if arr.ndim == 2 else arr, what, width)
 
 
 def channel_precision(sequences: np.ndarray, labels: np.ndarray | None, floor: float = 0.05) -> np.ndarray:

@@ -15,6 +15,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from sklearn.model_selection import StratifiedKFold
 
+from models.sequences import checked_array
+
 
 @runtime_checkable
 class Detector(Protocol):
@@ -26,15 +28,6 @@ class Detector(Protocol):
     ) -> "Detector": ...
 
     def expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray: ...
-
-
-def check_sequences(x: np.ndarray, name: str) -> np.ndarray:
-    arr = np.asarray(x, dtype=np.float64)
-    if arr.ndim != 3 or 0 in arr.shape:
-        raise ValueError(f"{name} must be a non-empty (N, T, D) array, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite values")
-    return arr
 
 
 def check_skills(skills: np.ndarray, n: int) -> np.ndarray:
@@ -59,7 +52,7 @@ class DetectorBase:
     def fit(
         self, demos: np.ndarray, skills: np.ndarray, context_channels: Sequence[int], seed: int = 0
     ) -> "DetectorBase":
-        x = check_sequences(demos, "demos")
+        x = checked_array(demos, "demos")
         labels = check_skills(skills, len(x))
         ctx = np.asarray(list(context_channels), dtype=int)
         if ctx.size and (ctx.min() < 0 or ctx.max() >= x.shape[2] or len(set(ctx.tolist())) != ctx.size):
@@ -76,7 +69,7 @@ class DetectorBase:
         """(N, T, D) expectation of every step; T may be shorter than the demonstrations'."""
         if not self.skill_names:
             raise RuntimeError(f"{type(self).__name__} is not fitted: call fit() first")
-        arr = check_sequences(x, "x")
+        arr = checked_array(x, "x")
         labels = check_skills(skills, len(arr))
         if arr.shape[2] != self.dims:
             raise ValueError(f"x has {arr.shape[2]} channels, the detector was fitted on {self.dims}")

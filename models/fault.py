@@ -108,7 +108,7 @@ def decide_rows(
     fprs: Sequence[float],
     kinds: Sequence[ThresholdKind],
 ) -> list[FaultDecision]:
-    """``decide`` for a batch of steps, each with its own calibration, rate and threshold kind."""
+    """The fault decision of each step of a batch, each with its own calibration, rate and threshold kind."""
     if not scores:
         return []
     isolated, ranked, errors = isolate_rows(np.array([s.weighted_errors for s in scores]), channel_names)
@@ -118,12 +118,3 @@ def decide_rows(
         decisions.append(FaultDecision(s.energy > threshold, s.energy, threshold, joint, names, sizes))
     return decisions
 
-
-def decide(
-    score: StepScore,
-    calibration: Calibration,
-    channel_names: Sequence[str],
-    fpr: float = 0.01,
-    kind: ThresholdKind = "episode",
-) -> FaultDecision:
-    return decide_rows([score], [calibration], channel_names, [fpr], [kind])[0]

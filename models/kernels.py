@@ -2,13 +2,12 @@
 Adam update of the weights.
 
 One Gauss-Newton step of one sequence is ~30 small array operations on vectors of 25 and 256
-values; in numpy each costs ~1.5 us of dispatch, far more than its arithmetic. Compiled with
-numba the whole relaxation of a sequence is one call (~10 us for the paper's sizes against
-~100 us in numpy), and a batch is a loop over its sequences, each relaxed alone by explicit
+values, whose dispatch in numpy costs more than their arithmetic. Compiled with numba the
+whole relaxation of a sequence is one call, and a batch is a loop over its sequences, each relaxed alone by explicit
 loops (no BLAS or LAPACK call, whose checks and copies cost more than the arithmetic at these
 sizes), so one stream and 64 streams stepped together get the same z. The kernels use numba's
 numpy error model: the default checks every division for zero, which keeps loops with a
-division from vectorising. The first call in a fresh install compiles (~10 s); the machine
+division from vectorising. The first call in a fresh install compiles; the machine
 code is cached beside this file (or in numba's user cache when that folder is read-only).
 """
 
@@ -46,7 +45,7 @@ def _tanh(x: np.ndarray, out: np.ndarray) -> None:
 def _gram(j: np.ndarray, out: np.ndarray) -> None:
     """out = J J^T for J (D, H): the lower triangle's dot products, mirrored, two rows by two
     columns at a time so that each value loaded serves two products (half a matrix product's
-    work, vectorised: ~3x faster than BLAS at these sizes)."""
+    work, vectorised, without BLAS's per-call checks)."""
     size, hidden = j.shape
     for r in range(0, size, 2):
         r2 = min(r + 1, size - 1)  # an odd last row pairs with itself

@@ -46,15 +46,10 @@ class RecurrentConfig:
 
 @contextmanager
 def _torch_session(seed: int) -> Iterator[None]:
-    """One intra-op thread and a private random stream, both restored afterwards."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seed)
-            yield
-    finally:
-        torch.set_num_threads(threads)
+    """A private random stream, the caller's restored afterwards."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        yield
 
 
 def _held_out_split(skills: np.ndarray, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:

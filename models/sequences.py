@@ -13,6 +13,19 @@ from typing import Any
 import numpy as np
 
 
+def checked_array(data: Any, what: str = "sequences", width: int | None = None,
+                  dtype: type = np.float64) -> np.ndarray:
+    """``data`` as a contiguous, finite, non-empty (N, T, D) array (D = ``width`` if given), or a
+    ValueError naming ``what`` is wrong: every entry point into training and scoring checks here."""
+    arr = np.ascontiguousarray(data, dtype)
+    if arr.ndim != 3 or 0 in arr.shape or (width is not None and arr.shape[-1] != width):
+        raise ValueError(f"{what} must have shape (N, T, {'D' if width is None else width}) with N, T >= 1, "
+                         f"got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{what} contain NaN or inf")
+    return arr
+
+
 @dataclass(frozen=True)
 class Sequences:
     data: np.ndarray  # (N, T, D), original units

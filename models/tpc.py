@@ -11,7 +11,7 @@ context channels the term is absent and the energy is the paper's.
 torch holds the parameters (what checkpoints store). The relaxation of z (eq. 2) and the
 learning (models/train.py) run on numpy views of the same memory: they are loops of tiny
 operations (K=100 gradient steps, or two Gauss-Newton steps, and Adam, compiled in
-models/kernels.py), where torch's per-call overhead (~3 us) costs about three times numpy's,
+models/kernels.py), where torch's per-call overhead would cost more than the arithmetic,
 and no autograd is needed because the learning rules (eqs. 3-4) are local Hebbian products
 written out below.
 """

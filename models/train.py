@@ -16,6 +16,7 @@ from tqdm.auto import tqdm
 from models.config import Optimizer, TPCConfig
 from models.kernels import adam_step
 from models.recall import run
+from models.sequences import checked_array
 from models.tpc import TemporalPC
 
 EpochCallback = Callable[[int, float], None]
@@ -100,15 +101,6 @@ def recall_error(net: TemporalPC, sequences: np.ndarray) -> float:
     return float(np.mean([(e[:, 1:] ** 2).mean() for e in errors]))
 
 
-def _checked(sequences: np.ndarray, width: int, what: str) -> np.ndarray:
-    sequences = np.ascontiguousarray(sequences, np.float32)
-    if sequences.ndim != 3 or sequences.shape[-1] != width:
-        raise ValueError(f"{what} must have shape (N, T, {width}), got {sequences.shape}")
-    if not np.isfinite(sequences).all():
-        raise ValueError(f"{what} contain NaN or inf")
-    return sequences
-
-
 def train(
     net: TemporalPC,
     sequences: np.ndarray,
@@ -124,9 +116,9 @@ def train(
     lowest recall error on them. With ~20 demonstrations the recall error on unseen
     episodes stops improving long before the training energy does.
     """
-    sequences = _checked(sequences, net.obs_size, "sequences")
+    sequences = checked_array(sequences, "sequences", net.obs_size, np.float32)
     if validation is not None:
-        validation = _checked(validation, net.obs_size, "validation sequences")
+        validation = checked_array(validation, "validation sequences", net.obs_size, np.float32)
     best = (np.inf, net.config.epochs - 1, None)
     rng = np.random.default_rng(net.config.seed)
     # numpy views of the parameters: updated in place, the tensors with them.

@@ -10,7 +10,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-import torch
 import typer
 
 from client.cli import client
@@ -29,7 +28,6 @@ from runtime.home import home, home_path
 from service.cli import serve
 from sim.cli import demos
 
-torch.set_num_threads(1)
 app = typer.Typer(help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
                   "models, stream the client and run the experiments.", no_args_is_help=True,
                   pretty_exceptions_show_locals=False)

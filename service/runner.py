@@ -4,10 +4,8 @@ Handlers never touch a model: they queue a step and await its future. The steps 
 while the loop reads its ready messages are computed together in one loop callback: all
 steps of distinct sessions at once, one forward relaxation per model, recall setting and
 phase (``models.asm.step_streams``, which also decides each step). On the loop rather than
-in a thread: a batch's Python holds the GIL either way, and a second thread contending for
-it, and for the cores with the clients, cost 64 websocket sessions a fifth of their
-throughput at 30 % more server CPU per step (``benchmarks/bench_service.py``, interleaved
-runs; when the shared machine ran slow, no difference).
+in a thread: a batch's Python holds the GIL either way, and a second thread would contend
+for it (measured in docs/performance.md).
 
 What may take long or block runs in arrival order in one worker thread: compiling the
 kernels, loading or building models, opening and closing sessions' recordings, and
@@ -31,7 +29,6 @@ from dataclasses import dataclass
 from typing import Any, Callable, TypeVar
 
 import numpy as np
-import torch
 
 from models.asm import StreamStep, step_streams
 from models.fault import FaultDecision
@@ -134,7 +131,6 @@ class Runner:
         return await future
 
     def _work(self) -> None:
-        torch.set_num_threads(1)  # per thread (building a model trains it here)
         while (job := self._jobs.get()) is not _STOP:
             if isinstance(job, _Write):
                 self._record(job.batch)

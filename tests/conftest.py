@@ -7,15 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
 from models import checkpoint
 from models.asm import NeuralASM
 from models.config import FAST
 from models.synthetic import make_skills, split
 from sim.channels import CHANNEL_NAMES
-
-torch.set_num_threads(1)
 
 
 def pytest_configure(config: pytest.Config) -> None:
