@@ -41,7 +41,8 @@ def recover(files: list[Path] = typer.Argument(..., help=".mcap or .rrd files, r
 
 
 def view(
-    run: str = typer.Argument(..., help="a run id (client-...) or one of its .rrd/.mcap files"),
+    run: str | None = typer.Argument(None, help="a run id (client-...) or one of its .rrd/.mcap files; "
+                                     "none: the newest client run"),
     folder: Path = typer.Option(DEFAULT_DIR, help="recordings folder holding the run"),
     screenshot: Path | None = typer.Option(None, help="write a PNG with the real viewer instead of opening it"),
     blueprint: Path | None = typer.Option(None, help="a Rerun .rbl layout to use instead of the recordings' own"),

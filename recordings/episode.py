@@ -41,10 +41,13 @@ class EpisodeRecorder:
         formats: Iterable[str] = FORMATS,
         layout: bool = True,
         joints: Iterable[int] = (),
+        events: bool = True,
     ) -> None:
         """``joints``: indices of the joint-angle channels, drawn observed against expected.
         ``layout=False`` leaves the Rerun layout out of the ``.rrd`` (a file of many that
-        share one, e.g. a service's sessions: see ``recorder``)."""
+        share one, e.g. a service's sessions: see ``recorder``). ``events=False`` leaves the
+        event log to another file of the same recording (the service's, which a client's file
+        is opened with), so the merged view says each event once."""
         names = tuple(channel_names)
         formats = tuple(formats)
         unknown = set(formats) - set(FORMATS)
@@ -57,7 +60,8 @@ class EpisodeRecorder:
         self._writers: list[_Writer] = []
         try:
             if "rrd" in formats:
-                self._writers.append(RerunEpisode(rrd, names, self.recording_id, step_period_s, layout, tuple(joints)))
+                self._writers.append(RerunEpisode(rrd, names, self.recording_id, step_period_s, layout, tuple(joints),
+                                                   events))
                 self.paths["rrd"] = rrd
             if "mcap" in formats:
                 writer = McapEpisode(mcap, names, step_period_s)

@@ -19,8 +19,8 @@ collector thread notices within a second, logs it and starts a new child (which
 recovers the dead one's files); the sessions it was writing are served on, unrecorded.
 If the server dies, the orphaned child closes its files (leaving the markers) and exits.
 
-A session's ``.rrd`` carries no layout of its own (embedding it cost ~3 ms of CPU per
-session, most of what opening a file costs): the child writes it once, as
+A session's ``.rrd`` carries no layout of its own (embedding it is most of what opening
+a file costs): the child writes it once, as
 ``episode.rbl`` in the folder, and a session's file merged with its client's file (same
 recording id) takes the client's.
 """

@@ -12,7 +12,7 @@ Rerun also keeps each thread's current time per stream, forever; ``reset_time`` 
 the entry of the thread that set it, which leaves ~0.2 KB per stream.
 
 The sweep flushes every live stream, so with many files open it costs more than the
-file (~4 ms at 64 open files). A process that opens and closes many files
+file itself. A process that opens and closes many files
 (``recorder``) calls ``defer_freeing()`` once and ``free_dropped_streams()`` now and then.
 """
 
@@ -29,7 +29,7 @@ from recordings.paths import APP_ID
 
 class RrdFile:
     """``rec`` logs to ``path``, which starts with ``blueprint`` as its default layout (if any:
-    embedding it costs ~3 ms of CPU per file, most of the cost of opening one)."""
+    embedding it is most of the cost of opening a file)."""
 
     def __init__(self, path: Path, recording_id: str, blueprint: rrb.Blueprint | None) -> None:
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id)

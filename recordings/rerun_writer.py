@@ -32,8 +32,8 @@ STEP_BATCH = 16  # steps per columnar send and file flush
 
 @lru_cache(maxsize=8)
 def _series_styles(channel_names: tuple[str, ...], joint_names: tuple[str, ...]) -> dict[str, rr.AsComponents]:
-    """The static names and styles of each time-series entity. Built once per channel set: a
-    recorder opening a file per session spent ~1 ms of each opening building these."""
+    """The static names and styles of each time-series entity, built once per channel set (a
+    recorder opens a file per session)."""
     return {
         bp.ENERGY: rr.SeriesLines(names=list(bp.ENERGY_SERIES)),
         bp.MARGIN: rr.SeriesLines(names=list(bp.MARGIN_SERIES), colors=[[31, 119, 180], [214, 39, 40]],
@@ -56,8 +56,10 @@ class RerunEpisode:
         step_period_s: float,
         layout: bool = True,
         joints: tuple[int, ...] = (),
+        events: bool = True,
     ) -> None:
         self.channel_names = channel_names
+        self.events = events  # log fault events as text (False: another file of the recording does)
         self.joints = list(joints)
         self.step_period_s = step_period_s
         self.ee_path: list[np.ndarray] = []
@@ -128,7 +130,8 @@ class RerunEpisode:
                     f"isolated joint: {r.isolated_joint or 'none'}")
         else:
             text = f"step {r.step}: isolated joint now {r.isolated_joint or 'none'}"
-        self.rrd.rec.log(bp.EVENTS, rr.TextLog(text, level="WARN" if not self.flagged else "INFO"))
+        if self.events:
+            self.rrd.rec.log(bp.EVENTS, rr.TextLog(text, level="WARN" if not self.flagged else "INFO"))
         self.flagged, self.flagged_joint = True, r.isolated_joint
         self._mark_faulty_joint()
 

@@ -30,9 +30,18 @@ class RunNotFound(FileNotFoundError):
     pass
 
 
-def run_files(run: str | Path, folder: Path = DEFAULT_DIR) -> list[Path]:
-    """The ``.rrd`` files of ``run``: a run id in ``folder``, or the path of one of its files."""
-    path = Path(run)
+def latest_run(folder: Path = DEFAULT_DIR) -> str:
+    """The id of the newest client run in ``folder``."""
+    runs = sorted(folder.glob("client-*.rrd"), key=lambda p: p.stat().st_mtime)
+    if not runs:
+        raise RunNotFound(f"no client run (client-*.rrd) in {folder}: run nasm client first, or name a run")
+    return runs[-1].stem
+
+
+def run_files(run: str | Path | None, folder: Path = DEFAULT_DIR) -> list[Path]:
+    """The ``.rrd`` files of ``run``: a run id in ``folder``, the path of one of its files, or
+    (None) the newest client run in ``folder``."""
+    path = Path(latest_run(folder) if run is None else run)
     if path.suffix in (".rrd", ".mcap"):
         folder, run_id = path.parent, path.stem
     else:
@@ -59,7 +68,7 @@ def viewer_command(files: list[Path], screenshot: Path | None = None, blueprint:
     return ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", *command]
 
 
-def view(run: str | Path, folder: Path = DEFAULT_DIR, screenshot: Path | None = None,
+def view(run: str | Path | None, folder: Path = DEFAULT_DIR, screenshot: Path | None = None,
          blueprint: Path | None = None) -> list[Path]:
     """Open the run in the viewer (returns when it is closed) or write its screenshot;
     ``blueprint``: a ``.rbl`` layout to use instead of the recordings' own."""

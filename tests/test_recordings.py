@@ -119,6 +119,20 @@ def test_a_run_is_found_from_its_id_or_any_of_its_files(tmp_path):
         run_files("client-3", tmp_path)
 
 
+def test_without_a_run_id_the_newest_client_run_is_found(tmp_path):
+    import os
+
+    from recordings.view import RunNotFound, run_files
+
+    with pytest.raises(RunNotFound, match="no client run"):
+        run_files(None, tmp_path)
+    for age, name in enumerate(["client-new.rrd", "client-old.rrd"]):
+        (tmp_path / name).write_bytes(b"")
+        os.utime(tmp_path / name, (1e9 - age * 100, 1e9 - age * 100))
+    (tmp_path / "service-client-new-s1.rrd").write_bytes(b"")
+    assert run_files(None, tmp_path) == [tmp_path / "client-new.rrd", tmp_path / "service-client-new-s1.rrd"]
+
+
 def test_a_screenshot_without_a_display_runs_under_xvfb(monkeypatch, tmp_path):
     from recordings import view
 
