@@ -1,7 +1,7 @@
 """Response bodies from sessions and step outcomes (named channels, plain floats).
 
-Step payloads are built as plain dicts and serialised by orjson: building ~80 pydantic
-objects per step cost ~150 us, as much as a batched model step. Their shape is the
+Step payloads are built as plain dicts and serialised by orjson: pydantic objects per
+channel would cost as much as the model step itself. Their shape is the
 routes' declared ``response_model`` (tests check both), and the runner has already
 refused non-finite outputs, so nothing can turn into a silent null.
 """

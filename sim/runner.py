@@ -86,7 +86,7 @@ class World:
 
 @lru_cache(maxsize=None)
 def world() -> World:
-    """One compiled workcell per process (compiling costs ~50 ms; resetting is cheap)."""
+    """One compiled workcell per process (compiling costs far more than resetting)."""
     scene = build_scene(SIM.timing.timestep_s)
     physics = mjcf.Physics.from_mjcf_model(scene.root)
     p = scene.panda
