@@ -24,6 +24,8 @@ from client.summary import summary_line
 from sim.faults import FaultSpec
 from sim.skills import SKILLS
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 SKILL = SKILLS[0]
 TEST_SEED = 40  # neither a training nor a calibration seed
 

@@ -32,6 +32,8 @@ from service.registry import ModelRegistry
 from service.settings import Settings
 from sim.config import SIM
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 SKILL, SEED = "pick_right_place_left", 42
 UNDISTURBED_SEED = 44  # 44 and 45; the small model's recall misses the cube at 43 and is flagged there
 HIT_STEP = first_hit_step(CORRECTION)  # 9: the observation at 4.5 s, the first after the 4 s release

@@ -9,6 +9,8 @@ from models.config import FAST
 
 from test_detectors import varied_task
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 CONTEXT_NAMES = ["c0", "c1"]
 NAMES = CONTEXT_NAMES + [f"x{i}" for i in range(6)]
 # Gradient-descent inference: with it the context input lowers the offline error on the moving

@@ -20,6 +20,8 @@ from experiments.contextual.report import PLANNING, expressed, expressed_per_see
 from models.config import PRESETS
 from models.rnn import SensorimotorRNN, SensoryToMotorRNN
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 REDUCED = CONTEXTUAL.with_(seeds=1, skill_seeds=1, demos=12, test_trials=8, epochs=250,
                            start_jitter_m=0.0, inference_sweep=(1, 20, 100), max_skills=2)
 MODELS = ("neural_asm", "s_to_m", "sm_to_sm")

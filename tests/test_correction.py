@@ -44,12 +44,14 @@ def _state(q, target, tick=0, torque=None, external=HEAVY_LOAD):
                         np.zeros((1, N_CHANNELS)), np.asarray(external, float), STIFFNESS)
 
 
+@pytest.mark.slow
 def test_compliant_arm_tracks_the_plan_undisturbed(plan):
     ep = _run(plan, "compliant")
     assert ep.success
     assert deviation_deg(ep).max() < 1.5
 
 
+@pytest.mark.slow
 def test_a_resting_box_holds_the_compliant_arm_off_its_plan_and_the_correction_returns_it(plan):
     stiff = deviation_deg(_run(plan, "stiff", disturbance=RESTING_BOX))
     plain = _run(plan, "compliant", disturbance=RESTING_BOX)
@@ -172,6 +174,7 @@ def test_detection_counts_only_steps_that_can_see_the_hit():
     assert flags["detected"] and flags["detect_step"] == 11 and flags["flagged_before_hit"]
 
 
+@pytest.mark.slow
 def test_a_small_run_writes_the_results_contract(tmp_path):
     from experiments.correction.figures import write_figure
     from experiments.correction.pipeline import fit_model, run_correction

@@ -76,6 +76,7 @@ def test_all_detectors_are_distinct_and_follow_the_protocol():
     assert all(isinstance(d, Detector) and d.label for d in found)
 
 
+@pytest.mark.slow
 def test_shapes_and_causality(detectors, task):
     _, (x, skills) = task
     rng = np.random.default_rng(5)
@@ -109,6 +110,7 @@ def test_without_context_the_templates_are_the_per_skill_mean(task):
         np.testing.assert_allclose(det.fit(demos, skills, []).expected(x, test_skills), mean, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_one_step_predictors_track_a_random_speed():
     demos, skills = varied_task(40, seed=0, speed_spread=0.4)
     x, test_skills = varied_task(60, seed=1, speed_spread=0.4)
@@ -117,6 +119,7 @@ def test_one_step_predictors_track_a_random_speed():
         assert mse(x, fitted(det, demos, skills).expected(x, test_skills)) < 0.5 * template, det.name
 
 
+@pytest.mark.slow
 def test_every_detector_errs_more_on_a_perturbed_episode(detectors, task):
     _, (x, skills) = task
     faulty = x.copy()
@@ -127,6 +130,7 @@ def test_every_detector_errs_more_on_a_perturbed_episode(detectors, task):
         assert np.mean(perturbed > normal) > 0.95 and np.median(perturbed) > 3 * np.median(normal), det.name
 
 
+@pytest.mark.slow
 def test_recurrent_detectors_are_deterministic_given_the_seed(task):
     (demos, skills), (x, test_skills) = task
     config = RecurrentConfig(hidden_size=16, latent_size=2, max_epochs=30, kl_anneal_epochs=10)

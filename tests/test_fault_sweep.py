@@ -19,6 +19,8 @@ from sim.dataset import Job, run_jobs
 from sim.faults import FaultSpec
 from sim.skills import SKILLS
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 FAULTS = [
     (SKILLS[0], FaultSpec(2, 3.0, 15.0)),  # drives the hand into the table
     (SKILLS[1], FaultSpec(4, 2.0, -15.0)),

@@ -25,6 +25,8 @@ from sim.faults import FaultSpec
 from sim.runner import run_episode
 from sim.skills import SKILLS
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 runner = CliRunner()
 TEST_SEED = 40
 

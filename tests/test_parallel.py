@@ -8,6 +8,8 @@ from sim.dataset import Job, run_jobs
 from runtime.parallel import parallel_map
 from sim.skills import SKILLS
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 
 def test_results_come_back_in_order_from_processes():
     args = [(i, 10 - i) for i in range(10)] + [(1, 7, 3)]  # argument tuples of any length

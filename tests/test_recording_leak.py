@@ -7,10 +7,13 @@ rerun-sdk 0.41 kept every closed session's streams alive: ~1.2 MB and four threa
 import os
 
 import numpy as np
+import pytest
 import rerun as rr
 
 from recordings import EpisodeRecorder
 from recordings.records import StepRecord, WorldRecord
+
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
 NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("ee_x", "ee_y", "ee_z")
 WARM_UP, SESSIONS, STEPS = 50, 250, 15

@@ -66,6 +66,7 @@ def test_files_are_closed_on_ctrl_c_and_errors(tmp_path, rng, interrupt):
     assert len(read_mcap(rec.paths["mcap"])["/fault"]) == 3
 
 
+@pytest.mark.slow
 def test_a_crash_leaves_readable_files(tmp_path, rng):
     """Files cut at an arbitrary byte, as by a kill mid-write, still give up their steps."""
     with EpisodeRecorder("run", NAMES, folder=tmp_path) as rec:

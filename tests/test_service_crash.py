@@ -40,6 +40,8 @@ from client import run_client
 from sim.runner import run_episode
 from sim.skills import SKILLS
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 KILL_AFTER_STEP = 8
 WAIT_S = 120.0  # for the service to start, or its recorder to write; a loaded machine is slow
 

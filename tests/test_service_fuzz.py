@@ -9,6 +9,7 @@ server (1,000+ cases, stateful phase included) is the README's schemathesis comm
 import tempfile
 from pathlib import Path
 
+import pytest
 import schemathesis
 from hypothesis import HealthCheck, settings
 
@@ -19,6 +20,8 @@ from models.synthetic import make_skills
 from service.app import create_app
 from service.settings import Settings
 from sim.channels import CHANNEL_NAMES
+
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
 KEY = "fuzz-key"
 _folder = tempfile.TemporaryDirectory(prefix="nasm-fuzz-")  # removed at exit

@@ -20,6 +20,8 @@ from recordings.recover import INTERRUPTED_MARKER, OPEN_MARKER
 from service.embedded import start_embedded
 from service.settings import Settings
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 WAIT_S = 120.0
 
 

@@ -15,6 +15,8 @@ from sim.panda import Q_MAX, Q_MIN, build_panda, dh_forward
 from sim.runner import execute_plan, first_observation, run_episode
 from sim.skills import SKILLS
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 Q_READY = np.array([0, -np.pi / 4, 0, -3 * np.pi / 4, 0, np.pi / 2, np.pi / 4])
 
 

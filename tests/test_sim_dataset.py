@@ -3,13 +3,25 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
-from sim.dataset import demonstrations, faults, held_out_normal, load_episodes, read_episode_set, twins, write_cache, write_mcap
+from sim.dataset import (
+    demonstrations,
+    faults,
+    held_out_normal,
+    load_episodes,
+    read_episode_set,
+    twins,
+    write_cache,
+    write_mcap,
+)
 from sim.disturbances import FallingObject
 from sim.faults import FaultSpec
 from sim.runner import run_episode
 from sim.skills import SKILLS
+
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
 
 def test_seed_sets_are_disjoint_and_twins_match():

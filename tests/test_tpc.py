@@ -81,6 +81,7 @@ def test_predictions_are_in_original_units(trained, skills):
     assert np.abs(trained.recall(shifted[:, :1], 15).mean() - shifted.mean()) > 50
 
 
+@pytest.mark.slow
 def test_same_seed_same_weights_and_predictions(skills):
     train, test = skills
     cfg = SMALL.with_(epochs=20)
@@ -92,6 +93,7 @@ def test_same_seed_same_weights_and_predictions(skills):
     assert not np.array_equal(a.net.w_f, c.net.w_f)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["faithful", "fast"])
 def test_both_modes_learn(skills, name):
     train, test = skills
@@ -171,6 +173,7 @@ def test_gauss_newton_relaxes_a_batch_as_its_sequences_alone(trained, rng):
     assert not np.allclose(together, prior)
 
 
+@pytest.mark.slow
 def test_long_training_5000_epochs_is_finite(skills):
     train, _ = skills
     small = train.data[::10]
@@ -208,6 +211,7 @@ def test_channel_precision_trusts_steady_channels_more(rng):
     assert pi.min() >= 0.05
 
 
+@pytest.mark.slow
 def test_keeping_the_best_held_out_epoch(skills):
     train, test = skills
     cfg = SMALL.with_(epochs=100, lr_final_fraction=1.0, learning_rate=5e-3)
@@ -219,6 +223,7 @@ def test_keeping_the_best_held_out_epoch(skills):
     assert last.provenance["kept_epoch"] == 100
 
 
+@pytest.mark.slow
 def test_training_noise_is_seeded_and_regularises(skills):
     """Noisy training observations give a different but reproducible network that still learns."""
     train, test = skills

@@ -14,6 +14,8 @@ from sim.varied_faults import FORCE_CHANNELS, VariedFault
 from sim.episode import Episode
 from sim.varied_sets import VariedJob, fault_jobs, jobs_for, run_job, run_varied
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 CFG = SIM.varied
 
 

@@ -21,6 +21,8 @@ from sim.episode import Episode
 from sim.varied import VARIED_SKILLS
 from sim.varied_sets import VariedJob, fault_jobs, run_job
 
+pytestmark = pytest.mark.slow  # simulates episodes or trains networks
+
 
 @pytest.fixture(scope="module")
 def bench():
