@@ -79,4 +79,5 @@ def world_update(w: WorldRecord, stamp: Timestamp) -> SceneUpdate | None:
 
 
 def workcell_update(cell: Workcell, stamp: Timestamp) -> SceneUpdate:
-    return SceneUpdate(entities=[_cube(stamp, "table", cell.table_center, cell.table_half_size, drawing.TABLE)])
+    center, half_size = drawing.table_top(cell.table_center, cell.table_half_size)
+    return SceneUpdate(entities=[_cube(stamp, "table", center, half_size, drawing.TABLE)])

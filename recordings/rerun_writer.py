@@ -168,8 +168,9 @@ class RerunEpisode:
         cell = w.workcell
         if cell is not None and cell != self.workcell:
             self.workcell = cell
-            log(bp.TABLE, rr.Boxes3D(centers=[cell.table_center], half_sizes=[cell.table_half_size],
-                                     colors=[drawing.TABLE], fill_mode="solid"), static=True)
+            center, half_size = drawing.table_top(cell.table_center, cell.table_half_size)
+            log(bp.TABLE, rr.Boxes3D(centers=[center], half_sizes=[half_size], colors=[drawing.TABLE],
+                                     fill_mode="solid"), static=True)
         if w.link_positions is not None:
             self.links = np.asarray(w.link_positions, np.float64)
             log(bp.ARM, rr.LineStrips3D([self.links], radii=drawing.LINK_RADIUS, colors=[drawing.ARM]))
