@@ -34,7 +34,7 @@ MARGIN_SERIES = ("log10(energy / threshold)", "threshold")
 SHOWN_ERRORS = 5  # channels drawn in the error view: the largest peaks of the episode
 # Looking at the workcell from the front right, above the table: the whole arm, the cube and
 # the place targets in view (the Panda's base at the origin, the table ahead along +x).
-EYE = rrb.EyeControls3D(position=(1.45, -1.2, 1.1), look_target=(0.35, 0.0, 0.25), eye_up=(0.0, 0.0, 1.0))
+EYE = rrb.EyeControls3D(position=(1.05, -1.45, 0.95), look_target=(0.3, 0.0, 0.3), eye_up=(0.0, 0.0, 1.0))
 
 
 # One layout object per process: each view and container draws a random id when built, and
