@@ -132,3 +132,36 @@ def test_ceiling_oracles_see_what_the_context_explains(bench):
     wrong_cube = mean["episode"]["per_family"]["wrong_cube"]
     assert wrong_cube["visible"] > 0 and wrong_cube["detection_visible"] >= 0.5  # a cube 6-10 cm off the reported pose
     assert set(mean["lower_floors"]) == {"0.01", "0.002"} and "floor 0.002" in ceiling_markdown(result)
+
+
+def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path):
+    """The benchmark's episode rule is the served one: the same model streamed through a real
+    service flags exactly the normal episodes, and detects exactly the faults, the benchmark does."""
+    from client.transport import WebSocketTransport
+    from models import checkpoint
+    from service.embedded import start_embedded
+    from service.settings import Settings
+
+    model = train_neural_asm(bench, FAST.with_(epochs=3, hidden_size=32), progress=False)
+    summaries, outcomes = score_all(bench, neural_asm_methods(model, "nasm", "Neural ASM"), model.normaliser)
+    benchmark = outcomes[("nasm_online", "episode")]
+    checkpoint.save(model, tmp_path / "varied.safetensors")
+    settings = Settings(models_dir=tmp_path, build_default_model=False, record=False)
+
+    def served_flags(episodes: np.ndarray) -> np.ndarray:
+        flags = []
+        with start_embedded(settings) as server:
+            for episode in episodes:
+                ws = WebSocketTransport(server.url, None)
+                try:
+                    ws.start({"model": "varied", "mode": "online", "cue_steps": 1, "fpr": 0.01})
+                    flags.append([ws.step(x.tolist())["fault"] for x in episode])
+                finally:
+                    ws.close()
+        return np.array(flags)
+
+    normal, faults = served_flags(bench.test.data), served_flags(bench.faults.data)
+    np.testing.assert_array_equal(normal.any(axis=1), benchmark.normal_flagged)
+    after_onset = np.arange(faults.shape[1])[None] >= bench.onset[:, None]
+    np.testing.assert_array_equal((faults & after_onset).any(axis=1), benchmark.detected)
+    assert benchmark.detected.any() or benchmark.normal_flagged.any()  # the comparison decided something

@@ -1,7 +1,7 @@
 """Which levers move the Neural ASM on the varied task.
 
 One network per variant of the default configuration, each scored exactly like the benchmark's
-methods (same episodes, same conformal thresholds). Each row also carries the network's one-step
+methods (same episodes, same served episode thresholds). Each row also carries the network's one-step
 error on the held-out precision split: that, never the test episodes, is what a configuration
 to ship is chosen by. Its error on the demonstrations it was trained on says whether a lever
 fails by fitting them too little (a joint error on the demonstrations as large as on new
@@ -66,7 +66,7 @@ def training_errors(model: NeuralASM, bench: VariedBenchmark, mode: str) -> dict
 
 def ablation_markdown(rows: list[dict], context: str) -> str:
     lines = [f"# Neural ASM levers on the varied task ({context} context)", "",
-             f"Episode threshold: split-conformal at {ALPHA:.0%}; detection counts visible faults. "
+             f"Episode threshold: the served one at {ALPHA:.0%}; detection counts visible faults. "
              "Validation MSE: one-step normalised error on the held-out precision split (the selection criterion); "
              "joints: the same on the joint channels, on the training demonstrations and on the validation split.",
              "", "| variant | recall | validation MSE | joints, training / validation | detection | normal FA | benign OOD FA | AUROC |",

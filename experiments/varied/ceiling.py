@@ -10,7 +10,7 @@ Every scored episode (held-out normals, benign out-of-range ones, each fault's t
 simulated again with its context and fault and fresh noise (``VariedJob.replicate``), and once
 more keeping its start posture (``same_start``: what its first observation, the network's cue,
 shows). The oracles, scored exactly like the benchmark's methods (``score.outcomes``: whitened
-energies from the precision split, conformal episode threshold at 1 % on the calibration split):
+energies from the precision split, the served episode threshold at 1 % on the calibration split):
 
 - *replay*: expects an episode to be its replicate (residual ``x - x_rep``). It is realisable
   (the simulator and the true context, hidden speed included), and its residual noise is twice
@@ -152,7 +152,7 @@ def run_ceiling(data_dir: Path, context: str, *, parallel: Parallel = Parallel()
 def ceiling_markdown(result: dict) -> str:
     pct = lambda v: "-" if v is None else f"{100 * v:.1f}"  # noqa: E731
     lines = [f"# Varied task ({result['context']} context): what knowing the exact context allows", "",
-             f"Oracles scored like every method: whitened energies, conformal episode threshold at "
+             f"Oracles scored like every method: whitened energies, the served episode threshold at "
              f"{100 * result['alpha']:g} %. Replicates that failed to simulate (their episodes left out): "
              f"{result['replicates_failed']}.", "",
              "| oracle | held-out error (MSE) | detection (visible) | detection (all) | normal flagged "

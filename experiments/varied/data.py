@@ -1,7 +1,7 @@
 """The varied-task benchmark's episodes as arrays, split so nothing is measured where it was fitted.
 
 Held-out in-range normal episodes split three ways: `precision` (each method's error spreads
-and precision matrices, the time-varying threshold's step scales), `calibration` (the conformal
+and precision matrices, the time-varying threshold's step scales), `calibration` (the episode
 thresholds) and `test` (measured false alarms). Benign out-of-range normals and the faults are
 only ever scored. Faults pair with their no-fault twins by seed; a fault's `onset` is the first
 step at which it departs from its twin, and it is `visible` when some channel at or after the

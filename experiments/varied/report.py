@@ -87,7 +87,7 @@ def write_figures(result: VariedResult, out: Path) -> list[Path]:
                edgecolor="black" if featured else "none", linewidth=1.5 if featured else 0)
     ax.set_xticks(np.arange(len(families)) + 0.4 - width / 2, families, rotation=20)
     ax.set_ylabel("visible faults detected (%)")
-    ax.set_title(f"Varied task ({result.bench.context} context): detection per fault family, conformal 1 % threshold")
+    ax.set_title(f"Varied task ({result.bench.context} context): detection per fault family, served 1 % episode threshold")
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
     paths = [out / "varied_detection_by_family.png"]

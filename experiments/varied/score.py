@@ -2,9 +2,11 @@
 
 Per method: normalised errors on every set; per-step spreads and precision matrices from the
 precision split (the service's own `estimate`), whitened energies; an episode's score is its
-peak energy (for a fault, from its onset on). Thresholds are split-conformal on the
-calibration split at `alpha` (at most that share of normal episodes flagged, in expectation),
-one for the whole episode and one time-varying (per-step scales from the precision split).
+peak energy (for a fault, from its onset on). Thresholds come from the calibration split at
+`alpha`: the episode threshold is the one a checkpoint stores and the service applies
+(`models.calibration.Thresholds`: the peak energy that a share `alpha` of normal episodes
+exceed; at the benchmark's 300 calibration episodes and 1 % it is the split-conformal rank);
+the time-varying one (per-step scales from the precision split) is split-conformal.
 A fault is detected when its energy crosses the threshold at or after its onset.
 """
 
@@ -18,8 +20,8 @@ from tqdm.auto import tqdm
 
 from experiments.varied.data import VariedBenchmark
 from experiments.methods import Method
-from models.calibration import estimate
-from models.conformal import TimeVaryingThreshold, binomial_interval, episode_threshold, mcnemar_exact
+from models.calibration import Thresholds, estimate
+from models.conformal import TimeVaryingThreshold, binomial_interval, mcnemar_exact
 from models.normaliser import Normaliser
 from models.scoring import energy
 from sim.varied import channel_groups
@@ -67,9 +69,9 @@ def _after_onset(e: np.ndarray, onset: np.ndarray) -> np.ndarray:
 
 
 def outcomes(e: dict[str, np.ndarray], onset: np.ndarray, alpha: float = ALPHA) -> dict[str, Outcome]:
-    """Episode-level conformal threshold and time-varying conformal thresholds."""
+    """The served episode threshold and time-varying conformal thresholds."""
     out = {}
-    thr = episode_threshold(e["calibration"].max(axis=1), alpha)
+    thr = Thresholds.of(e["calibration"], alpha).episode
     faults = _after_onset(e["faults"], onset)
     over = faults > thr
     out["episode"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
