@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from runtime.cli import Command, Group
 from client.run import MODES, falling_object, fault_spec, run_client
 from client.transport import TRANSPORTS, ServiceError, ServiceLost
 from recordings import DEFAULT_DIR
@@ -34,7 +35,7 @@ def client(
     fault_time: float | None = typer.Option(None, help="fault: time in s, on the 0.5 s grid"),
     fault_overshoot: float | None = typer.Option(None, help="fault: overshoot in degrees"),
     drop: bool = typer.Option(False, "--falling-object", help=f"drop a box on the elbow at {SIM.hit.release_s:g} s, "
-                              "during the carry (the correction experiment's hit)", metavar=""),
+                              "during the carry (the correction experiment's hit)"),
     hit_momentum: float | None = typer.Option(None, help=f"the falling box's momentum in kg m/s (default "
                                               f"{SIM.hit.demo_momentum:g}: a "
                                               f"{SIM.hit.demo_momentum / SIM.hit.speed_m_s:g} kg box at "
@@ -43,14 +44,14 @@ def client(
                                           "plan, as in the training data) or compliant joint impedance (the memory's "
                                           "recalled plan, monitored by the model calibrated for compliant control)"),
     correct: bool = typer.Option(False, "--correct", help="correct the hit with the memory's prediction error once "
-                                 "the monitor flags it; needs --controller compliant", metavar=""),
+                                 "the monitor flags it; needs --controller compliant"),
     episodes: int = typer.Option(1, min=1, help="number of episodes"),
     url: str | None = typer.Option(None, help="service URL, e.g. http://127.0.0.1:8000; default: start one "
                                                "in-process on a free port"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
     mode: Mode = typer.Option(MODES[0], help="recall mode: offline (the paper's setting) or online"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
-    reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay", metavar=""),
+    reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
     transport: TransportName = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
     models_dir: Path = typer.Option(home_path("models"), help="models folder of the in-process service"),
     json_out: Path | None = typer.Option(None, "--json", help="also write the summaries as JSON here"),
@@ -74,8 +75,8 @@ def client(
         raise _fail("lost the service; the recordings so far are closed and readable", 3)
 
 
-app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
-app.command(help=client.__doc__)(client)
+app = typer.Typer(cls=Group, add_completion=False, pretty_exceptions_enable=False)
+app.command(cls=Command, help=client.__doc__)(client)
 
 if __name__ == "__main__":
     app()

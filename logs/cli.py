@@ -47,7 +47,7 @@ def replay(
     mode: str = typer.Option("offline", help="recall mode: offline or online"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
     transport: str = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
-    reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay", metavar=""),
+    reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
     json_out: Path | None = typer.Option(None, "--json", help="also write the summaries as JSON here"),
 ) -> None:
     """Stream recorded episodes to a running service exactly as the live robot client does."""

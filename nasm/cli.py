@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
+from runtime.cli import Command, Group
 from client.cli import client
 from experiments.contextual.cli import contextual
 from experiments.correction.cli import correction
@@ -28,7 +29,7 @@ from runtime.home import home, home_path
 from service.cli import serve
 from sim.cli import demos
 
-app = typer.Typer(help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
+app = typer.Typer(cls=Group, help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
                   "models, stream the client and run the experiments.", no_args_is_help=True,
                   pretty_exceptions_show_locals=False)
 
@@ -51,7 +52,7 @@ def _check_mode(mode: str) -> None:
         _fail(f"--mode must be one of {', '.join(RECALL_MODES)}, got {mode!r}")
 
 
-@app.command()
+@app.command(cls=Command)
 def train(
     data: str = typer.Argument(SYNTHETIC, help="'synthetic', an .npz of sequences, or an .mcap episode set"),
     out: Path = typer.Option(home_path("models", "model.safetensors"), help="checkpoint to write"),
@@ -78,7 +79,7 @@ def train(
     typer.echo(f"trained on {len(seqs)} sequences; final energy {model.history[-1]:.4g}; wrote {out}")
 
 
-@app.command()
+@app.command(cls=Command)
 def recall(
     model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"),
     data: str = typer.Argument(SYNTHETIC, help="sequences to cue from and compare with"),
@@ -97,14 +98,14 @@ def recall(
     typer.echo(f"{'all':>16}: recall MSE {mse.mean():.4f}")
 
 
-@app.command()
+@app.command(cls=Command)
 def score(
     model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"),
     data: str = typer.Argument(SYNTHETIC, help="sequences to score"),
     mode: str = typer.Option("offline", help="recall mode: offline or online"),
     cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
-    weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)", metavar=""),
-    as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON", metavar=""),
+    weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)"),
+    as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON"),
     mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS 2 bag or LeRobot dataset"),
 ) -> None:
     """Energy of every step of every sequence, and the channel with the largest error."""
@@ -126,7 +127,7 @@ def score(
         )
 
 
-@app.command()
+@app.command(cls=Command)
 def info(model_path: Path | None = typer.Argument(None, help="checkpoint (.safetensors); none: the data home")) -> None:
     """Print a checkpoint's configuration, channels, calibrations and provenance; without one,
     where the data home is (NASM_HOME) and what it holds."""
@@ -152,7 +153,7 @@ def info(model_path: Path | None = typer.Argument(None, help="checkpoint (.safet
 
 
 for command in (demos, faults, correction, contextual, serve, client, view, replay, evaluate):  # each package owns its commands
-    app.command()(command)
+    app.command(cls=Command)(command)
 app.add_typer(recordings_app, name="recordings")
 
 if __name__ == "__main__":

@@ -12,15 +12,16 @@ from pathlib import Path
 
 import typer
 
+from runtime.cli import Command, Group
 from recordings.paths import DEFAULT_DIR
 from recordings.recover import recover as recover_file
 from recordings.view import RunNotFound, view as view_run
 
-app = typer.Typer(help="Tools for the .rrd and .mcap recordings.", no_args_is_help=True,
+app = typer.Typer(cls=Group, help="Tools for the .rrd and .mcap recordings.", no_args_is_help=True,
                   pretty_exceptions_show_locals=False)
 
 
-@app.command()
+@app.command(cls=Command)
 def recover(files: list[Path] = typer.Argument(..., help=".mcap or .rrd files, rewritten in place")) -> None:
     """Rewrite recordings cut short by a crash into valid, indexed files (in place)."""
     failed = 0
@@ -57,7 +58,7 @@ def view(
     typer.echo(f"wrote {screenshot} from {shown}" if screenshot else f"viewed {shown}")
 
 
-app.command()(view)
+app.command(cls=Command)(view)
 
 if __name__ == "__main__":
     app()

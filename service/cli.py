@@ -8,10 +8,11 @@ import typer
 import uvicorn
 from pydantic import ValidationError
 
+from runtime.cli import Command, Group
 from service.embedded import uvicorn_config
 from service.settings import Settings
 
-app = typer.Typer(help="The Neural ASM service.", no_args_is_help=True, pretty_exceptions_show_locals=False)
+app = typer.Typer(cls=Group, help="The Neural ASM service.", no_args_is_help=True, pretty_exceptions_show_locals=False)
 
 
 def _help(name: str) -> str:
@@ -28,14 +29,14 @@ def main() -> None:
     """The Neural ASM service."""
 
 
-@app.command()
+@app.command(cls=Command)
 def serve(
     host: str | None = typer.Option(None, help=_help("host")),
     port: int | None = typer.Option(None, help=_help("port")),
     models_dir: Path | None = typer.Option(None, help=_help("models_dir")),
     default_model: str | None = typer.Option(None, help=_help("default_model")),
     build_default_model: bool | None = typer.Option(
-        None, "--build-default-model/--no-build-default-model", help=_help("build_default_model"), metavar=""
+        None, "--build-default-model/--no-build-default-model", help=_help("build_default_model")
     ),
     api_key: str | None = typer.Option(None, help=_help("api_key") + " (prefer NASM_API_KEY: argv is visible)"),
     max_sessions: int | None = typer.Option(None, help=_help("max_sessions")),
@@ -43,7 +44,7 @@ def serve(
     session_idle_s: float | None = typer.Option(None, help=_help("session_idle_s")),
     max_body_bytes: int | None = typer.Option(None, help=_help("max_body_bytes")),
     recordings_dir: Path | None = typer.Option(None, help=_help("recordings_dir")),
-    record: bool | None = typer.Option(None, "--record/--no-record", help=_help("record"), metavar=""),
+    record: bool | None = typer.Option(None, "--record/--no-record", help=_help("record")),
     default_fpr: float | None = typer.Option(None, help=_help("default_fpr")),
     log_level: str = typer.Option("info", help="uvicorn log level"),
 ) -> None:

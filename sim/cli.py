@@ -10,10 +10,11 @@ from pathlib import Path
 
 import typer
 
+from runtime.cli import Command, Group
 from runtime.home import home_path
 from runtime.parallel import Backend
 
-app = typer.Typer(help="Simulated Panda pick-and-place episode sets.", no_args_is_help=True)
+app = typer.Typer(cls=Group, help="Simulated Panda pick-and-place episode sets.", no_args_is_help=True)
 
 
 class Which(str, Enum):
@@ -28,7 +29,7 @@ class Task(str, Enum):
     varied = "varied"
 
 
-@app.command()
+@app.command(cls=Command)
 def demos(
     task: Task = typer.Option(Task.paper, help="paper: the paper's two fixed skills; varied: four skills whose "
                               "context varies (all its sets: demos, normal, ood, faults, twins)"),

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from runtime.cli import Command, Group
 from experiments.contextual import figures, report
 from experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, QUICK
 from experiments.contextual.dataset import conditions_data
@@ -16,10 +17,10 @@ from models.config import PRESETS
 from runtime.home import home_path
 from runtime.parallel import Backend
 
-app = typer.Typer(help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
+app = typer.Typer(cls=Group, help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
 
 
-@app.command()
+@app.command(cls=Command)
 def contextual(
     out: Path = typer.Option(home_path("contextual"), help="folder for contextual.json/.md and the PNGs"),
     seeds: int | None = typer.Option(None, help="participants (seeds); default 6, 1 with --quick"),
@@ -28,7 +29,7 @@ def contextual(
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
     preset: str = typer.Option(DEFAULT_PRESET, help=f"tPC hyper-parameters, shared by the RNNs (but for the "
                                f"training noise): {', '.join(PRESETS)}"),
-    quick: bool = typer.Option(False, help="reduced protocol: 1 seed, 300 epochs, short K sweep", metavar=""),
+    quick: bool = typer.Option(False, help="reduced protocol: 1 seed, 300 epochs, short K sweep"),
 ) -> None:
     """Neural ASM vs S-to-M and SM-to-SM RNNs on plan & execute / plan only / execute only:
     PEAD (panels E, F), recall error vs inference iterations (G), energy vs number of

@@ -8,13 +8,14 @@ from pathlib import Path
 
 import typer
 
+from runtime.cli import Command, Group
 from experiments.correction.config import CORRECTION
 from runtime.home import home_path
 
-app = typer.Typer()
+app = typer.Typer(cls=Group)
 
 
-@app.command()
+@app.command(cls=Command)
 def correction(
     out: Path = typer.Option(home_path("correction"), help="output folder"),
     seeds: int = typer.Option(24, min=1, help="test seeds per hit (skills alternate)"),

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import typer
 
+from runtime.cli import Command, Group
 from models.config import FAITHFUL
 from runtime.home import home_path
 from runtime.parallel import Backend, Parallel
@@ -18,7 +19,7 @@ from sim.cli import Task
 # varied benchmark caps the paper-configured network's epochs to stay within minutes.
 VARIED_PAPER_EPOCHS = 40
 
-app = typer.Typer()
+app = typer.Typer(cls=Group)
 
 
 class Context(str, Enum):
@@ -26,7 +27,7 @@ class Context(str, Enum):
     hidden = "hidden"
 
 
-@app.command()
+@app.command(cls=Command)
 def faults(
     task: Task = typer.Option(Task.paper, help="paper: the 980 joint locks of the paper's fixed task; varied: "
                               "four skills whose cube, goal, speed and obstacle vary, with nine fault families"),
@@ -36,9 +37,9 @@ def faults(
     paper_epochs: int = typer.Option(FAITHFUL.epochs, help="epochs of the paper-configuration model"),
     fast_epochs: int | None = typer.Option(None, help="override the default model's epochs"),
     ablation: bool = typer.Option(False, "--ablation", help="varied task: train one Neural ASM per lever "
-                                  "(experiments/varied/ablation.py) and write ablation.json and ablation.md", metavar=""),
+                                  "(experiments/varied/ablation.py) and write ablation.json and ablation.md"),
     ceiling: bool = typer.Option(False, "--ceiling", help="varied task: score two oracles that know each episode's "
-                                 "exact context (experiments/varied/ceiling.py); write ceiling.json and ceiling.md", metavar=""),
+                                 "exact context (experiments/varied/ceiling.py); write ceiling.json and ceiling.md"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
     workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
