@@ -40,7 +40,7 @@ def _episode(c: httpx.Client, episode: np.ndarray, steps: int) -> tuple[dict, li
 def test_closing_returns_once_the_files_are_finished(model_dir, tmp_path):
     episode = np.load(model_dir / "episodes.npy")[0]
     with start_embedded(Settings(models_dir=model_dir, recordings_dir=tmp_path)) as srv, \
-            httpx.Client(base_url=srv.url) as c:
+            httpx.Client(base_url=srv.url, timeout=WAIT_S) as c:  # a loaded machine is slow, not wrong
         recorder = srv.server.config.app.state.service.recorder
         for _ in range(3):  # one recorder process serves every session
             info, energies = _episode(c, episode, len(episode))
@@ -58,7 +58,7 @@ def test_closing_returns_once_the_files_are_finished(model_dir, tmp_path):
 def test_a_dead_recorder_is_replaced_and_the_service_serves_on(model_dir, tmp_path):
     episode = np.load(model_dir / "episodes.npy")[0]
     with start_embedded(Settings(models_dir=model_dir, recordings_dir=tmp_path)) as srv, \
-            httpx.Client(base_url=srv.url) as c:
+            httpx.Client(base_url=srv.url, timeout=WAIT_S) as c:  # a loaded machine is slow, not wrong
         recorder = srv.server.config.app.state.service.recorder
         old, _ = _episode(c, episode, 3)
         os.kill(recorder.pid, signal.SIGKILL)
