@@ -21,12 +21,13 @@ from tqdm.auto import tqdm
 from experiments.varied.data import VariedBenchmark
 from experiments.methods import Method
 from models.calibration import Thresholds, estimate
+from models.config import SCORING
 from models.conformal import TimeVaryingThreshold, binomial_interval, mcnemar_exact
 from models.normaliser import Normaliser
 from models.scoring import energy
 from sim.varied import channel_groups
 
-ALPHA = 0.01
+ALPHA = SCORING.default_fpr  # the episode false-alarm rate every method is held to
 SETS = ("precision", "calibration", "test", "ood", "faults")
 
 
