@@ -23,11 +23,13 @@ import pyarrow.parquet as pq
 from logs.errors import LogError
 from logs.mapping import Channel, Mapping
 from logs.recorded import Recorded
-from logs.resample import Stream, resample
+from logs.resample import EpisodeResampler, Group
 
 INFO = Path("meta/info.json")
 TASKS_V2 = Path("meta/tasks.jsonl")
 TASKS_V3 = Path("meta/tasks.parquet")
+EPISODES_V2 = Path("meta/episodes.jsonl")
+EPISODES_V3 = Path("meta/episodes")
 READABLE = ("v2.", "v3.")
 NON_NUMERIC = ("video", "image", "string")
 
@@ -114,34 +116,95 @@ def _data_files(root: Path, template: str) -> list[Path]:
     return files
 
 
-def read_episodes(root: Path, mapping: Mapping) -> Iterator[Recorded]:
-    """Each episode of the dataset (by episode_index), resampled to the model's clock."""
+def declared_episodes(root: Path, info: dict[str, Any]) -> tuple[dict[int, int | None], str]:
+    """The episodes the dataset says it has, with their frame counts where it says them, and where it says so."""
+    try:
+        if (root / EPISODES_V2).exists():
+            rows = [json.loads(line) for line in (root / EPISODES_V2).read_text().splitlines() if line.strip()]
+            return {int(r["episode_index"]): int(r["length"]) for r in rows}, str(EPISODES_V2)
+        files = sorted((root / EPISODES_V3).glob("*/*.parquet"))
+        if files:
+            table = pa.concat_tables([pq.read_table(f, columns=["episode_index", "length"]) for f in files])
+            return dict(zip(map(int, table.column("episode_index").to_pylist()),
+                            map(int, table.column("length").to_pylist()))), f"{EPISODES_V3}/"
+    except (OSError, ValueError, KeyError, TypeError, pa.ArrowException) as exc:
+        raise LogError(f"dataset {root}: cannot read its episode list: {exc}") from None
+    return dict.fromkeys(range(int(info.get("total_episodes", 0))), None), "total_episodes in meta/info.json"
+
+
+def _expected_file(info: dict[str, Any], episode: int) -> str:
+    """The v2.x file of an episode (v3.0 files hold several)."""
+    try:
+        return info["data_path"].format(episode_chunk=episode // int(info.get("chunks_size", 1000)), episode_index=episode)
+    except (KeyError, IndexError, ValueError):
+        return ""
+
+
+def _episode(root: Path, mapping: Mapping, index: list[int | None], rows: dict[str, np.ndarray], number: int,
+             length: int | None, label: str) -> Recorded:
+    what = f"dataset {root.name}, episode {number}"
+    if length is not None and len(rows["timestamp"]) != length:
+        raise LogError(f"{what} has {len(rows['timestamp'])} frames; the dataset declares {length}")
+    group = Group("dataset rows", tuple(mapping.channels), tuple(range(len(mapping.channels))))
+    resampler = EpisodeResampler([group], mapping.timing, what)
+    values = np.stack([rows[ch.feature][:, i or 0] for ch, i in zip(mapping.channels, index)], axis=1)  # type: ignore[index]
+    for t, v in zip(rows["timestamp"].tolist(), values):
+        resampler.add(0, t, values=v)
+    return Recorded(resampler.finish(), label, what, float(rows["timestamp"][0]), number)
+
+
+def _file_rows(path: Path, features: list[str]) -> pa.Table:
+    try:
+        table = pq.read_table(path)
+    except (OSError, pa.ArrowException) as exc:
+        raise LogError(f"cannot read {path}: {exc}") from None
+    missing = [c for c in ("episode_index", "frame_index", "timestamp", *features) if c not in table.column_names]
+    if missing:
+        raise LogError(f"{path} has no column {missing}; its columns: {table.column_names}")
+    return table
+
+
+def read_episodes(root: Path, mapping: Mapping, skip_bad: bool = False) -> Iterator[Recorded | str]:
+    """Each episode of the dataset (by episode_index), read file by file and resampled to the
+    model's clock; checked against the episodes the dataset declares. Strings are warnings."""
     info = read_info(root)
     index = [element(ch, info["features"], root) for ch in mapping.channels]
     features = sorted({ch.feature for ch in mapping.channels if ch.feature})
-    tables = []
+    declared, where = declared_episodes(root, info)
+    tasks = _tasks(root)
+    seen: set[int] = set()
     for path in _data_files(root, info["data_path"]):
         try:
-            table = pq.read_table(path)
-        except (OSError, pa.ArrowException) as exc:
-            raise LogError(f"cannot read {path}: {exc}") from None
-        missing = [c for c in ("episode_index", "frame_index", "timestamp", *features) if c not in table.column_names]
-        if missing:
-            raise LogError(f"{path} has no column {missing}; its columns: {table.column_names}")
-        tables.append(table.select([c for c in ("episode_index", "frame_index", "timestamp", "task_index", *features)
-                                    if c in table.column_names]))
-    table = pa.concat_tables(tables, promote_options="default")
-    episode = table.column("episode_index").to_numpy()
-    order = np.lexsort((table.column("frame_index").to_numpy(), episode))
-    stamps = _matrix(table.column("timestamp"), "timestamp")[order, 0]
-    tasks_of = table.column("task_index").to_numpy()[order] if "task_index" in table.column_names else None
-    columns = {f: _matrix(table.column(f), f)[order] for f in features}
-    episode = episode[order]
-    tasks = _tasks(root)
-    for e in np.unique(episode):
-        rows = np.flatnonzero(episode == e)
-        t = stamps[rows]
-        streams = [Stream(ch, t, columns[ch.feature][rows, i or 0]) for ch, i in zip(mapping.channels, index)]  # type: ignore[index]
-        what = f"dataset {root.name}, episode {int(e)}"
-        label = tasks.get(int(tasks_of[rows[0]]), "unknown") if tasks_of is not None else "unknown"
-        yield Recorded(resample(streams, mapping.timing, what), label, what, float(t[0]))
+            table = _file_rows(path, features)
+        except LogError as exc:
+            if not skip_bad:
+                raise
+            yield f"skipped {path.relative_to(root)}: {exc}"
+            continue
+        episode = table.column("episode_index").to_numpy()
+        order = np.lexsort((table.column("frame_index").to_numpy(), episode))
+        episode = episode[order]
+        columns = {f: _matrix(table.column(f), f)[order] for f in features}
+        columns["timestamp"] = _matrix(table.column("timestamp"), "timestamp")[order, 0]
+        tasks_of = table.column("task_index").to_numpy()[order] if "task_index" in table.column_names else None
+        for e in np.unique(episode):
+            rows = np.flatnonzero(episode == e)
+            number = int(e)
+            seen.add(number)
+            label = tasks.get(int(tasks_of[rows[0]]), "unknown") if tasks_of is not None else "unknown"
+            try:
+                yield _episode(root, mapping, index, {k: v[rows] for k, v in columns.items()}, number,
+                               declared.get(number), label)
+            except LogError as exc:
+                if not skip_bad:
+                    raise LogError(f"{exc} (--skip-bad skips this episode)") from None
+                yield f"skipped episode {number}: {exc}"
+    missing = sorted(set(declared) - seen)
+    for number in missing if skip_bad else []:
+        expected = _expected_file(info, number)
+        yield (f"dataset {root.name}: episode {number} ({where}) has no rows in the data files"
+               + (f" ({expected} is not there)" if expected and not (root / expected).exists() else ""))
+    if missing and not skip_bad:
+        files = [f for f in (_expected_file(info, n) for n in missing) if f and not (root / f).exists()]
+        raise LogError(f"dataset {root.name}: episodes {missing} ({where}) have no rows in the data files"
+                       + (f"; missing files: {files}" if files else "") + " (--skip-bad reads the others)")

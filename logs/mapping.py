@@ -46,7 +46,10 @@ class Episodes(_Strict):
                                                     "one per message on marker_topic; gap: a silence longer than gap_s")
     marker_topic: str | None = None
     gap_s: float | None = Field(None, gt=0)
-    label_topic: str | None = Field(None, description="a std_msgs/msg/String topic whose data names the skill")
+    label_topic: str | None = Field(None, description="a std_msgs/msg/String topic whose data names the skill; "
+                                    "a bag without it is read, its episodes named after the bag (with a warning)")
+    label_tolerance_s: float = Field(0.5, ge=0, description="a label published up to this long before an "
+                                     "episode's first sample still names it")
     stamp: Literal["log", "header"] = Field("log", description="log: the bag's receive time; header: "
                                                    "header.stamp (the log time for messages without a header)")
 
@@ -116,6 +119,9 @@ class Mapping(_Strict):
         if ep is not None and ep.split == "gap" and ep.gap_s is not None and ep.gap_s <= self.timing.gap_limit_s:
             raise ValueError(f"episodes.gap_s ({ep.gap_s}) must exceed timing.max_gap_s ({self.timing.gap_limit_s}): "
                              "a silence that splits episodes cannot also be allowed inside one")
+        if ep is not None and ep.split == "gap" and ep.gap_s is not None and ep.label_tolerance_s >= ep.gap_s:
+            raise ValueError(f"episodes.label_tolerance_s ({ep.label_tolerance_s}) must be below gap_s ({ep.gap_s}): "
+                             "a label before an episode must come after the previous one")
         return self
 
     @property

@@ -13,3 +13,4 @@ class Recorded:
     label: str  # skill name: from a label topic or task, else the bag's or dataset's name
     origin: str  # where it was read, for messages and provenance
     start_s: float  # its first sample, on the source's clock
+    number: int  # its number in the source (bags: in reading order; LeRobot: episode_index)

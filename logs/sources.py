@@ -22,8 +22,10 @@ def source_kind(source: Path) -> Kind:
     return "lerobot" if lerobot.is_dataset(source) else "rosbag"
 
 
-def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "") -> Sequences:
-    """Every episode of ``source`` under ``mapping``; warnings (a damaged bag) go into the provenance."""
+def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", skip_bad: bool = False) -> Sequences:
+    """Every episode of ``source`` under ``mapping``; a bad or missing one is an error, or with
+    ``skip_bad`` a warning. Warnings go into the provenance, and ``episode_numbers`` keeps each
+    episode's number in the source, so that a skipped one shifts no other."""
     path = Path(source)
     if not path.exists():
         raise LogError(f"no bag or dataset at {path}")
@@ -34,19 +36,31 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "") ->
     reader = lerobot.read_episodes if kind == "lerobot" else rosbag.read_episodes
     episodes: list[Recorded] = []
     warnings: list[str] = []
-    for item in reader(path, mapping):
+    for item in reader(path, mapping, skip_bad):
         (warnings if isinstance(item, str) else episodes).append(item)  # type: ignore[arg-type]
     if not episodes:
         raise LogError(f"{path} holds no episode" + (f" ({'; '.join(warnings)})" if warnings else ""))
+    episodes.sort(key=lambda e: e.number)
     provenance = {"source": str(path), "format": kind, "mapping_file": mapping_file, "mapping": mapping.to_dict(),
-                  "episodes": [e.origin for e in episodes], "warnings": warnings}
+                  "episodes": [e.origin for e in episodes], "episode_numbers": [e.number for e in episodes],
+                  "warnings": warnings}
     return Sequences(np.stack([e.data for e in episodes]), np.array([e.label for e in episodes]),
                      mapping.channel_names, provenance=provenance)
 
 
-def load_log_sequences(source: str | Path, mapping_file: str | Path) -> Sequences:
+def load_log_sequences(source: str | Path, mapping_file: str | Path, skip_bad: bool = False) -> Sequences:
     """``read_mapped`` with the mapping read from its file."""
-    return read_mapped(source, load_mapping(mapping_file), str(mapping_file))
+    return read_mapped(source, load_mapping(mapping_file), str(mapping_file), skip_bad)
+
+
+def episode_position(seqs: Sequences, number: int) -> int:
+    """Where episode ``number`` of the source is in ``seqs``, or a LogError saying why it is not there."""
+    numbers = list(seqs.provenance.get("episode_numbers", range(len(seqs.data))))
+    if number in numbers:
+        return numbers.index(number)
+    skipped = [w for w in seqs.provenance.get("warnings", []) if f"episode {number}" in w]
+    raise LogError(f"episode {number} is not among the episodes read from {seqs.provenance.get('source')}"
+                   + (f": {skipped[0]}" if skipped else f" (it has {numbers[0]}..{numbers[-1]})" if numbers else ""))
 
 
 def check_model(seqs: Sequences, channel_names: tuple[str, ...], provenance: dict) -> None:

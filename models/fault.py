@@ -66,6 +66,20 @@ def threshold_for(calibration: Calibration, fpr: float, step: int, kind: Thresho
     return float(table[fpr])
 
 
+def is_fault(energy: float | np.ndarray, threshold: float | np.ndarray) -> bool | np.ndarray:
+    """The decision rule: a step is faulty when its energy is strictly above its threshold. The
+    served step (``decide_rows``) and an episode scored whole (``flag_steps``) both apply it."""
+    return energy > threshold
+
+
+def flag_steps(energies: np.ndarray, calibration: Calibration, fpr: float,
+               kind: ThresholdKind = "episode") -> tuple[np.ndarray, np.ndarray]:
+    """(N, T) flags of whole episodes' energies (N, T) and the (T,) thresholds they were held
+    to: what a session of the service would decide at each step, with the same rule."""
+    thresholds = np.array([threshold_for(calibration, fpr, t, kind) for t in range(energies.shape[-1])])
+    return is_fault(energies, thresholds), thresholds
+
+
 def isolated_joint(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> np.ndarray:
     """Position (0-based, among the joint channels) of the joint with the largest |error|, for
     errors (..., D) of any leading shape: the served decision and the fault sweep use this."""
@@ -115,6 +129,6 @@ def decide_rows(
     decisions = []
     for s, cal, fpr, kind, joint, names, sizes in zip(scores, calibrations, fprs, kinds, isolated, ranked, errors):
         threshold = threshold_for(cal, fpr, s.step, kind)
-        decisions.append(FaultDecision(s.energy > threshold, s.energy, threshold, joint, names, sizes))
+        decisions.append(FaultDecision(bool(is_fault(s.energy, threshold)), s.energy, threshold, joint, names, sizes))
     return decisions
 

@@ -1,20 +1,23 @@
-"""Channel mappings and the log readers: ROS 2 bags (written with mcap-ros2-support's writer, at
-mixed topic rates) and LeRobot datasets (v2.1 and v3.0 layouts) built from simulated Panda
+"""Channel mappings and the log readers: ROS 2 bags in MCAP and sqlite3 storage and ROS 1 bags
+(written with rosbags, at mixed topic rates) and LeRobot datasets (v2.1 and v3.0 layouts) built from simulated Panda
 episodes come back as the episodes' observations; bad input gets one clear error."""
 
 from __future__ import annotations
 
+import shutil
+import sqlite3
 from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap_ros2.writer import Writer
+import yaml
+from rosbags.rosbag2 import StoragePlugin
 
-from experiments.robot_logs.write import (MSGDEFS, bag_mapping, lerobot_mapping, write_bag, write_bag_folders,
+from experiments.robot_logs.write import (START_NS, BagWriter, _write, bag_file, bag_mapping, lerobot_mapping, write_bag, write_bag_folders,
                                           write_lerobot, write_mapping)
 from logs.errors import LogError
 from logs.mapping import check_checkpoint, load_mapping, parse_mapping
-from logs.sources import read_mapped
+from logs.sources import episode_position, read_mapped
 from sim.channels import CHANNEL_NAMES
 from sim.runner import run_episode
 from sim.skills import SKILLS
@@ -34,7 +37,7 @@ def native(episodes):
 
 @pytest.fixture(scope="module")
 def bag(episodes, tmp_path_factory):
-    return write_bag(episodes, tmp_path_factory.mktemp("bag") / "set.mcap", chunk_size=4096)
+    return write_bag(episodes, tmp_path_factory.mktemp("bag") / "set")
 
 
 def _mapping(**changes):
@@ -151,21 +154,17 @@ def test_a_field_of_the_wrong_kind_is_refused(bag, change, message):
 def test_an_episode_too_short_is_refused(bag):
     doc = bag_mapping("marker")
     doc["timing"]["steps"] = 20
-    with pytest.raises(LogError, match=r"episode 0 .* is too short: .* 20 steps of 0.5 s need 9.5 s"):
+    with pytest.raises(LogError, match=r"episode 0 is too short: .* 20 steps of 0.5 s need 9.5 s"):
         read_mapped(bag, parse_mapping(doc, "m"))
 
 
 def _joint_bag(path: Path, stamps_s: list[float]) -> Path:
     """A bag of /joint_states whose header stamps are ``stamps_s``, logged in order."""
-    with open(path, "wb") as f:
-        writer = Writer(f)
-        schema = writer.register_msgdef("sensor_msgs/msg/JointState", MSGDEFS["sensor_msgs/msg/JointState"])
+    with BagWriter(path) as w:
         for i, t in enumerate(stamps_s):
-            ns = int(t * 1e9)
-            writer.write_message("/joint_states", schema, {
-                "header": {"stamp": {"sec": ns // 10**9, "nanosec": ns % 10**9}, "frame_id": ""},
-                "name": ["panda_joint1"], "position": [0.1 * i], "velocity": [], "effort": []}, log_time=i * 10**8)
-        writer.finish()
+            msg = w.message("sensor_msgs/msg/JointState", header=w.header(int(t * 1e9)), name=["panda_joint1"],
+                            position=np.array([0.1 * i]), velocity=np.zeros(0), effort=np.zeros(0))
+            w.write("/joint_states", "sensor_msgs/msg/JointState", i * 10**8, msg)
     return path
 
 
@@ -176,17 +175,37 @@ ONE_JOINT = {"timing": {"period_s": 0.5, "steps": 3, "max_gap_s": 0.3}, "episode
 
 def test_gaps_and_stamps_that_go_back_are_refused(tmp_path):
     mapping = parse_mapping(ONE_JOINT, "m")
-    ok = read_mapped(_joint_bag(tmp_path / "ok.mcap", [0.0, 0.25, 0.5, 0.75, 1.0]), mapping)
+    ok = read_mapped(_joint_bag(tmp_path / "ok", [0.0, 0.25, 0.5, 0.75, 1.0]), mapping)
     np.testing.assert_allclose(ok.data[0, :, 0], [0.0, 0.2, 0.4])
     with pytest.raises(LogError, match=r"no sample between 0.250 s and 1.000 s \(a gap of 0.750 s"):
-        read_mapped(_joint_bag(tmp_path / "gap.mcap", [0.0, 0.25, 1.0, 1.25]), mapping)
+        read_mapped(_joint_bag(tmp_path / "gap", [0.0, 0.25, 1.0, 1.25]), mapping)
     with pytest.raises(LogError, match="time stamps do not increase: sample 2 at 0.100000 s follows sample 1 at 0.250000 s"):
-        read_mapped(_joint_bag(tmp_path / "back.mcap", [0.0, 0.25, 0.1, 0.5, 0.75, 1.0]), mapping)
+        read_mapped(_joint_bag(tmp_path / "back", [0.0, 0.25, 0.1, 0.5, 0.75, 1.0]), mapping)
+
+
+def _small_chunks(bag: Path, path: Path) -> Path:
+    """The bag's MCAP rewritten with 4 kB chunks (as a recorder flushing often leaves it), by the mcap library."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(bag_file(bag), "rb") as src, open(path, "wb") as dst:
+        reader, writer = make_reader(src), Writer(dst, chunk_size=4096)
+        writer.start(profile="ros2")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages():
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding, schemas[schema.id])
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time)
+        writer.finish()
+    return path
 
 
 def test_a_truncated_bag_gives_what_it_can_and_says_so(bag, native, tmp_path):
     cut = tmp_path / "cut.mcap"
-    data = bag.read_bytes()
+    data = _small_chunks(bag, tmp_path / "small.mcap").read_bytes()
     cut.write_bytes(data[: int(len(data) * 0.6)])
     seqs = read_mapped(cut, _mapping())
     warnings = seqs.provenance["warnings"]
@@ -197,11 +216,109 @@ def test_a_truncated_bag_gives_what_it_can_and_says_so(bag, native, tmp_path):
         assert "dropped the last episode" in warnings[1]
 
 
-def test_rosbag2_storage_other_than_mcap_is_refused(tmp_path):
-    (tmp_path / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  storage_identifier: sqlite3\n"
-                                            "  relative_file_paths: [x_0.db3]\n")
-    with pytest.raises(LogError, match="uses 'sqlite3' storage; only MCAP bags"):
-        read_mapped(tmp_path, _mapping())
+@pytest.mark.parametrize("storage", ["sqlite3", "ros1"])
+def test_sqlite3_and_ros1_bags_give_the_episodes_back(episodes, native, tmp_path, storage):
+    path = tmp_path / ("set.bag" if storage == "ros1" else "set")
+    bag = write_bag(episodes, path, storage=storage)
+    for source in (bag, bag_file(bag)):  # the rosbag2 folder and its .db3 alone; the .bag file
+        seqs = read_mapped(source, _mapping())
+        assert seqs.labels.tolist() == [e.skill for e in episodes] and seqs.provenance["warnings"] == []
+        np.testing.assert_allclose(seqs.data, native, atol=1e-9)
+
+
+def test_a_sqlite3_bag_without_message_definitions_is_decoded_with_the_ros2_types(episodes, native, tmp_path):
+    bag = write_bag(episodes[:1], tmp_path / "humble", storage="sqlite3")
+    with sqlite3.connect(bag_file(bag)) as db:  # as ROS 2 Humble's bags: no definitions stored
+        db.execute("DELETE FROM message_definitions")
+    seqs = read_mapped(bag, _mapping())
+    np.testing.assert_allclose(seqs.data, native[:1], atol=1e-9)
+
+
+@pytest.mark.parametrize("suffix", [".mcap", ".db3", ".bag"])
+def test_a_corrupt_bag_file_gives_one_line_naming_it(bag, tmp_path, suffix):
+    broken = tmp_path / f"broken{suffix}"
+    broken.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 64 if suffix == ".mcap" else bytes(range(256)) * 64)
+    with pytest.raises(LogError) as err:
+        read_mapped(broken, _mapping())
+    assert str(broken) in str(err.value) and "holds no episode" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_corrupt_chunk_keeps_the_episodes_before_it(bag, native, tmp_path):
+    data = bytearray(_small_chunks(bag, tmp_path / "small.mcap").read_bytes())
+    middle = int(len(data) * 0.6)
+    data[middle: middle + 2000] = bytes(2000)  # zeros over records in the middle: not a clean cut
+    (tmp_path / "corrupt.mcap").write_bytes(bytes(data))
+    seqs = read_mapped(tmp_path / "corrupt.mcap", _mapping())
+    assert 1 <= len(seqs.data) < 4 and "truncated or damaged" in seqs.provenance["warnings"][0]
+    np.testing.assert_allclose(seqs.data, native[: len(seqs.data)], atol=1e-9)
+
+
+def test_a_label_just_before_the_first_sample_names_the_episode(episodes, tmp_path):
+    folder = tmp_path / "bags"
+    for i, ep in enumerate(episodes[:2]):
+        with BagWriter(folder / f"run{i}") as w:
+            label_ns = START_NS - 10_000_000  # 10 ms before the first sample
+            w.write("/task", "std_msgs/msg/String", label_ns, w.message("std_msgs/msg/String", data=ep.skill))
+            _write(w, [(START_NS, ep)], np.random.default_rng(0), 0.0, label=None)
+    doc = bag_mapping("file")
+    doc["episodes"]["label_topic"] = "/task"
+    seqs = read_mapped(folder, parse_mapping(doc, "m"))
+    assert seqs.labels.tolist() == [e.skill for e in episodes[:2]] and seqs.provenance["warnings"] == []
+    doc["episodes"]["label_tolerance_s"] = 0.005
+    seqs = read_mapped(folder, parse_mapping(doc, "m"))
+    assert seqs.labels.tolist() == ["run0", "run1"]
+    assert seqs.provenance["warnings"][0] == ("bag run0, episode 0: no message on /task in it or up to 0.005 s "
+                                              "before it; named 'run0'")
+
+
+def test_a_bag_without_the_label_topic_is_read_with_a_warning(episodes, tmp_path):
+    folder = write_bag_folders(episodes[:2], tmp_path / "bags", label=None)
+    seqs = read_mapped(folder, parse_mapping(bag_mapping("file"), "m"))
+    assert seqs.labels.tolist() == ["episode_0000", "episode_0001"] and len(seqs.provenance["warnings"]) == 2
+
+
+def test_a_dropout_is_an_error_or_skipped_by_number(episodes, native, tmp_path):
+    folder = tmp_path / "bags"
+    for i, ep in enumerate(episodes[:3]):
+        with BagWriter(folder / f"episode_{i:04d}") as w:
+            _write(w, [(START_NS, ep)], np.random.default_rng(0), 0.0)
+    _dropout(folder / "episode_0001", tmp_path / "dropout", 3.0, 3.6)
+    shutil.rmtree(folder / "episode_0001")
+    (tmp_path / "dropout").rename(folder / "episode_0001")
+    mapping = parse_mapping(bag_mapping("file"), "m")
+    with pytest.raises(LogError, match=r"bag episode_0001, episode 1, topic /.*: no sample between .*--skip-bad"):
+        read_mapped(folder, mapping)
+    seqs = read_mapped(folder, mapping, skip_bad=True)
+    assert seqs.provenance["episode_numbers"] == [0, 2]
+    assert seqs.provenance["warnings"][0].startswith("skipped episode 1: bag episode_0001, episode 1")
+    np.testing.assert_allclose(seqs.data, native[[0, 2]], atol=1e-9)
+    assert episode_position(seqs, 2) == 1
+    with pytest.raises(LogError, match="episode 1 is not among the episodes read .*: skipped episode 1"):
+        episode_position(seqs, 1)
+
+
+def _dropout(src: Path, dst: Path, from_s: float, to_s: float) -> None:
+    """A copy of a bag without its messages logged between ``from_s`` and ``to_s`` after START_NS."""
+    from rosbags.rosbag2 import Reader, Writer
+
+    with Reader(src) as reader, Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest)
+               for c in reader.connections}
+        for c, t, raw in reader.messages():
+            if not START_NS + from_s * 1e9 <= t < START_NS + to_s * 1e9:
+                writer.write(out[c.id], t, raw)
+
+
+def test_metadata_that_declares_more_messages_is_an_error(episodes, tmp_path):
+    folder = write_bag_folders(episodes[:1], tmp_path / "bags")
+    meta = folder / "episode_0000" / "metadata.yaml"
+    doc = yaml.safe_load(meta.read_text())
+    for topic in doc["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        topic["message_count"] += 5
+    meta.write_text(yaml.safe_dump(doc))
+    with pytest.raises(LogError, match=r"bag episode_0000 is missing messages: metadata.yaml declares \d+ messages on"):
+        read_mapped(folder, parse_mapping(bag_mapping("file"), "m"))
+    assert "missing messages" in read_mapped(folder, parse_mapping(bag_mapping("file"), "m"), skip_bad=True).provenance["warnings"][0]
 
 
 # --------------------------------------------------------------------------- LeRobot datasets
@@ -228,3 +345,25 @@ def test_unknown_features_and_names_are_refused(episodes, tmp_path):
         read_mapped(root, parse_mapping(doc, "m"))
     with pytest.raises(LogError, match="mapping's channels read topics"):
         read_mapped(root, _mapping())
+
+
+@pytest.mark.parametrize("version", ["v2.1", "v3.0"])
+def test_a_lerobot_dataset_missing_an_episode_is_an_error_or_skipped_by_number(episodes, native, tmp_path, version):
+    root = write_lerobot(episodes, tmp_path / "ds", version)
+    if version == "v2.1":
+        (root / "data/chunk-000/episode_000002.parquet").unlink()
+        message = r"episodes \[2\] \(meta/episodes.jsonl\) have no rows .*missing files: \['data/chunk-000/episode_000002"
+    else:  # the data file lost episode 2's rows
+        import pyarrow.compute as pc
+        import pyarrow.parquet as pq
+        path = root / "data/chunk-000/file-000.parquet"
+        table = pq.read_table(path)
+        pq.write_table(table.filter(pc.not_equal(table.column("episode_index"), 2)), path)
+        message = r"episodes \[2\] \(meta/episodes/\) have no rows in the data files"
+    mapping = parse_mapping(lerobot_mapping(), "m")
+    with pytest.raises(LogError, match=message):
+        read_mapped(root, mapping)
+    seqs = read_mapped(root, mapping, skip_bad=True)
+    assert seqs.provenance["episode_numbers"] == [0, 1, 3]
+    assert "episode 2" in seqs.provenance["warnings"][0]
+    np.testing.assert_allclose(seqs.data, native[[0, 1, 3]], rtol=1e-6, atol=1e-6)

@@ -2,7 +2,8 @@
 CDR messages from the standard ROS 2 message definitions) and LeRobot datasets, together with
 the channel mappings that read them back.
 
-Bags carry the topics a Panda setup publishes, at rates of their own: ``/joint_states``
+Bags are written with ``rosbags`` in any of the three storages a lab meets: ROS 2 MCAP, ROS 2
+sqlite3 and ROS 1 ``.bag``. They carry the topics a Panda setup publishes, at rates of their own: ``/joint_states``
 (sensor_msgs/msg/JointState, 40 Hz: the seven arm joints from the 40 Hz trace and the two
 fingers), ``/ee_position`` (geometry_msgs/msg/PointStamped, 10 Hz), ``/gripper_closed``
 (std_msgs/msg/Bool, 4 Hz), the finger-pad wrenches ``/left_pad/wrench`` and
@@ -23,26 +24,14 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import yaml
-from mcap_ros2.writer import Writer
+from rosbags.rosbag1 import Writer as Ros1Writer
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
 
 from sim.channels import CHANNEL_NAMES, EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_NAMES, WRENCH_CHANNELS
 from sim.config import SIM
 from sim.episode import Episode
 
-SEP = "\n" + "=" * 80 + "\n"
-_HEADER = ("MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id" + SEP
-           + "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec")
-_VECTOR3 = "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z"
-MSGDEFS = {
-    "sensor_msgs/msg/JointState": ("std_msgs/Header header\nstring[] name\nfloat64[] position\n"
-                                   "float64[] velocity\nfloat64[] effort" + SEP + _HEADER),
-    "geometry_msgs/msg/WrenchStamped": ("std_msgs/Header header\nWrench wrench" + SEP + _HEADER + SEP
-                                        + "MSG: geometry_msgs/Wrench\nVector3 force\nVector3 torque" + SEP + _VECTOR3),
-    "geometry_msgs/msg/PointStamped": ("std_msgs/Header header\nPoint point" + SEP + _HEADER + SEP
-                                       + "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z"),
-    "std_msgs/msg/Bool": "bool data",
-    "std_msgs/msg/String": "string data",
-}
 JOINT_STATE_NAMES = [f"panda_{j}" for j in JOINT_NAMES] + ["panda_finger_joint1", "panda_finger_joint2"]
 RATES_HZ = {"/joint_states": 40.0, "/ee_position": 10.0, "/gripper_closed": 4.0,
             "/left_pad/wrench": 20.0, "/right_pad/wrench": 20.0}
@@ -75,21 +64,75 @@ def _times(hz: float) -> np.ndarray:
     return np.arange(round(SIM.timing.duration_s * hz) + 1) / hz
 
 
-def _header(ns: int) -> dict[str, Any]:
-    return {"stamp": {"sec": ns // 10**9, "nanosec": ns % 10**9}, "frame_id": "panda_link0"}
+STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+STORES = {"ros1": get_typestore(Stores.ROS1_NOETIC), "ros2": get_typestore(Stores.ROS2_HUMBLE)}
 
 
-def _messages(ep: Episode) -> Iterator[tuple[str, float, Any]]:
-    """(topic, time from the episode's start, message without header) of one episode."""
+class BagWriter:
+    """One bag being written with ``rosbags``: ``storage`` mcap or sqlite3 (a rosbag2 folder) or
+    ros1 (a ``.bag`` file); ``definitions=False`` stores no message definitions (as ROS 2 Humble's
+    sqlite3 bags), so readers must know the types themselves."""
+
+    def __init__(self, path: Path, storage: str = "mcap", definitions: bool = True) -> None:
+        self.ros1 = storage == "ros1"
+        self.store = STORES["ros1" if self.ros1 else "ros2"]
+        self.definitions = definitions
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.writer: Any = Ros1Writer(path) if self.ros1 else Writer(path, version=9, storage_plugin=STORAGES[storage])
+        self.writer.open()
+        self.connections: dict[str, Any] = {}
+
+    def __enter__(self) -> "BagWriter":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.writer.close()
+
+    def message(self, kind: str, **fields: Any) -> Any:
+        return self.store.types[kind](**fields)
+
+    def header(self, ns: int) -> Any:
+        stamp = self.message("builtin_interfaces/msg/Time", sec=ns // 10**9, nanosec=ns % 10**9)
+        extra = {"seq": 0} if self.ros1 else {}
+        return self.message("std_msgs/msg/Header", stamp=stamp, frame_id="panda_link0", **extra)
+
+    def write(self, topic: str, kind: str, ns: int, msg: Any) -> None:
+        if topic not in self.connections:
+            no_definition = {} if self.definitions or self.ros1 else {"msgdef": "", "rihs01": "RIHS01_" + "0" * 64}
+            self.connections[topic] = self.writer.add_connection(topic, kind, typestore=self.store, **no_definition)
+        raw = self.store.serialize_ros1(msg, kind) if self.ros1 else self.store.serialize_cdr(msg, kind)
+        self.writer.write(self.connections[topic], ns, raw)
+
+
+def _vector(w: BagWriter, values: Any) -> Any:
+    x, y, z = (float(v) for v in values)
+    return w.message("geometry_msgs/msg/Vector3", x=x, y=y, z=z)
+
+
+def _body(w: BagWriter, topic: str, ns: int, body: dict[str, Any]) -> Any:
+    """The message of one row of ``_messages``."""
+    if topic == "/joint_states":
+        return w.message(TYPES[topic], header=w.header(ns), name=body["name"], position=np.array(body["position"]),
+                         velocity=np.zeros(0), effort=np.zeros(0))
+    if topic == "/ee_position":
+        point = w.message("geometry_msgs/msg/Point", x=float(body["xyz"][0]), y=float(body["xyz"][1]), z=float(body["xyz"][2]))
+        return w.message(TYPES[topic], header=w.header(ns), point=point)
+    if topic == "/gripper_closed":
+        return w.message(TYPES[topic], data=body["data"])
+    wrench = w.message("geometry_msgs/msg/Wrench", force=_vector(w, body["wrench"][:3]), torque=_vector(w, body["wrench"][3:]))
+    return w.message(TYPES[topic], header=w.header(ns), wrench=wrench)
+
+
+def _messages(ep: Episode) -> Iterator[tuple[str, float, dict[str, Any]]]:
+    """(topic, time from the episode's start, fields) of one episode."""
     t = _times(RATES_HZ["/joint_states"])
     fingers = _observed(ep, FINGER_CHANNELS, t)
     arm = np.stack([np.interp(t, ep.t_hi, ep.qpos_hi[:, j]) for j in range(7)], axis=1)
     for k, tk in enumerate(t):
-        yield "/joint_states", tk, {"name": JOINT_STATE_NAMES, "position": [*arm[k], *fingers[k]],
-                                    "velocity": [], "effort": []}
+        yield "/joint_states", tk, {"name": JOINT_STATE_NAMES, "position": [*arm[k], *fingers[k]]}
     t = _times(RATES_HZ["/ee_position"])
-    for tk, (x, y, z) in zip(t, _observed(ep, EE_CHANNELS, t)):
-        yield "/ee_position", tk, {"point": {"x": x, "y": y, "z": z}}
+    for tk, xyz in zip(t, _observed(ep, EE_CHANNELS, t)):
+        yield "/ee_position", tk, {"xyz": xyz}
     t = _times(RATES_HZ["/gripper_closed"])
     steps = np.searchsorted(SIM.timing.step_time(np.arange(len(ep.observations))), t + 1e-9, side="right") - 1
     for tk, k in zip(t, steps):
@@ -100,51 +143,43 @@ def _messages(ep: Episode) -> Iterator[tuple[str, float, Any]]:
         obs_t = SIM.timing.step_time(np.arange(len(pads)))
         w = np.stack([np.interp(t, obs_t, pads[:, cols][:, j]) for j in range(6)], axis=1)
         for tk, row in zip(t, w):
-            yield f"/{side}_pad/wrench", tk, {"wrench": {"force": dict(zip("xyz", row[:3])),
-                                                         "torque": dict(zip("xyz", row[3:]))}}
+            yield f"/{side}_pad/wrench", tk, {"wrench": row}
 
 
-def _write(writer: Writer, episodes: list[tuple[int, Episode]], rng: np.random.Generator, jitter_s: float) -> None:
-    schemas = {topic: writer.register_msgdef(kind, MSGDEFS[kind]) for topic, kind in TYPES.items()}
+def _write(writer: BagWriter, episodes: list[tuple[int, Episode]], rng: np.random.Generator, jitter_s: float,
+           label: str | None = "/episode") -> None:
     for start_ns, ep in episodes:
-        writer.write_message("/episode", schemas["/episode"], {"data": ep.skill}, log_time=start_ns)
+        if label:
+            writer.write(label, TYPES["/episode"], start_ns, writer.message(TYPES["/episode"], data=ep.skill))
         rows = sorted(_messages(ep), key=lambda m: m[1])
         noise = rng.uniform(-jitter_s, jitter_s, len(rows)) if jitter_s else np.zeros(len(rows))
         for (topic, t, body), dt in zip(rows, noise):
             ns = start_ns + int(round((max(t + dt, 0.0)) * 1e9))
-            message = body if topic == "/gripper_closed" else {"header": _header(ns), **body}
-            writer.write_message(topic, schemas[topic], message, log_time=ns, publish_time=ns)
+            writer.write(topic, TYPES[topic], ns, _body(writer, topic, ns, body))
 
 
-def write_bag(episodes: list[Episode], path: Path, jitter_s: float = 0.0, seed: int = 0,
-              chunk_size: int = 1024 * 1024) -> Path:
-    """All episodes in one ``.mcap``, PAUSE_S apart, each opened by an ``/episode`` marker."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+def bag_file(bag: Path) -> Path:
+    """The one storage file of a bag written here (the .bag itself for ROS 1)."""
+    return bag if bag.is_file() else next(p for p in sorted(bag.iterdir()) if p.suffix in (".mcap", ".db3"))
+
+
+def write_bag(episodes: list[Episode], path: Path, jitter_s: float = 0.0, seed: int = 0, storage: str = "mcap",
+              definitions: bool = True) -> Path:
+    """All episodes in one bag, PAUSE_S apart, each opened by an ``/episode`` marker: a rosbag2
+    folder at ``path`` (mcap, sqlite3) or a ROS 1 ``.bag`` file (ros1)."""
     period_ns = int((SIM.timing.duration_s + PAUSE_S) * 1e9)
-    with open(path, "wb") as f:
-        writer = Writer(f, chunk_size=chunk_size)
+    with BagWriter(path, storage, definitions) as writer:
         _write(writer, [(START_NS + i * period_ns, ep) for i, ep in enumerate(episodes)], np.random.default_rng(seed), jitter_s)
-        writer.finish()
     return path
 
 
-def write_bag_folders(episodes: list[Episode], folder: Path, jitter_s: float = 0.0, seed: int = 0) -> Path:
-    """One rosbag2 folder per episode (``metadata.yaml`` + one MCAP file), as ``ros2 bag record`` leaves them."""
+def write_bag_folders(episodes: list[Episode], folder: Path, jitter_s: float = 0.0, seed: int = 0,
+                      storage: str = "mcap", label: str | None = "/episode") -> Path:
+    """One rosbag2 folder per episode (``metadata.yaml`` + one storage file), as ``ros2 bag record`` leaves them."""
     rng = np.random.default_rng(seed)
     for i, ep in enumerate(episodes):
-        bag = folder / f"episode_{i:04d}"
-        bag.mkdir(parents=True, exist_ok=True)
-        with open(bag / f"{bag.name}_0.mcap", "wb") as f:
-            writer = Writer(f)
-            _write(writer, [(START_NS, ep)], rng, jitter_s)
-            writer.finish()
-        info = {"version": 8, "storage_identifier": "mcap", "relative_file_paths": [f"{bag.name}_0.mcap"],
-                "duration": {"nanoseconds": int(SIM.timing.duration_s * 1e9)},
-                "starting_time": {"nanoseconds_since_epoch": START_NS},
-                "topics_with_message_count": [{"topic_metadata": {"name": t, "type": k, "serialization_format": "cdr"}}
-                                              for t, k in TYPES.items()],
-                "compression_format": "", "compression_mode": ""}
-        (bag / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}))
+        with BagWriter(folder / f"episode_{i:04d}", storage) as writer:
+            _write(writer, [(START_NS, ep)], rng, jitter_s, label)
     return folder
 
 
