@@ -59,8 +59,9 @@ def episode_position(seqs: Sequences, number: int) -> int:
     if number in numbers:
         return numbers.index(number)
     skipped = [w for w in seqs.provenance.get("warnings", []) if f"episode {number}" in w]
+    have = f"{numbers[0]}..{numbers[-1]}" if numbers == list(range(numbers[0], numbers[-1] + 1)) else str(numbers)
     raise LogError(f"episode {number} is not among the episodes read from {seqs.provenance.get('source')}"
-                   + (f": {skipped[0]}" if skipped else f" (it has {numbers[0]}..{numbers[-1]})" if numbers else ""))
+                   + (f": {skipped[0]}" if skipped else f" (it has episodes {have})"))
 
 
 def check_model(seqs: Sequences, channel_names: tuple[str, ...], provenance: dict) -> None:

@@ -14,14 +14,16 @@ import typer
 
 from runtime.cli import Command, Group
 from client.cli import client
+from client.replay import replay
 from experiments.contextual.cli import contextual
 from experiments.correction.cli import correction
 from experiments.fault_sweep.cli import faults
-from logs.cli import MAPPING_HELP, evaluate, read_logs, replay
+from logs.cli import MAPPING_HELP, evaluate, read_logs
 from models import checkpoint
 from models.asm import NeuralASM
 from models.config import PRESETS
 from models.recall import RECALL_MODES
+from nasm.calibrate import calibrate
 from nasm.data import SYNTHETIC, load_sequences
 from recordings.cli import app as recordings_app
 from recordings.cli import view
@@ -152,7 +154,7 @@ def info(model_path: Path | None = typer.Argument(None, help="checkpoint (.safet
     typer.echo(json.dumps(summary, indent=2, default=str))
 
 
-for command in (demos, faults, correction, contextual, serve, client, view, replay, evaluate):  # each package owns its commands
+for command in (demos, faults, correction, contextual, serve, client, view, replay, evaluate, calibrate):  # each package owns its commands
     app.command(cls=Command)(command)
 app.add_typer(recordings_app, name="recordings")
 

@@ -1,5 +1,5 @@
-"""``nasm train``/``score``/``evaluate`` with ``--mapping`` and ``nasm replay`` on ROS 2 bags and a
-LeRobot dataset of simulated Panda episodes, against a real service on loopback."""
+"""``nasm train``/``score``/``calibrate``/``evaluate`` with ``--mapping`` and ``nasm replay`` on ROS 2
+bags and a LeRobot dataset of simulated Panda episodes, against a real service on loopback."""
 
 from __future__ import annotations
 
@@ -38,8 +38,10 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     normal = [run_episode(SKILLS[0], TEST_SEED), run_episode(SKILLS[1], TEST_SEED + 1)]
     faults = [run_episode(SKILLS[0], TEST_SEED, fault=FaultSpec(joint=2, time_s=3.0, overshoot_deg=15.0)),
               run_episode(SKILLS[1], TEST_SEED + 1, fault=FaultSpec(joint=4, time_s=2.0, overshoot_deg=-15.0))]
-    return {"demos": write_bag(demos, folder / "demos.mcap", jitter_s=0.002),
-            "normal": write_bag(normal, folder / "normal.mcap"), "faults": write_bag(faults, folder / "faults.mcap"),
+    held_out = [run_episode(s, seed) for s in SKILLS for seed in range(20, 24)]
+    return {"demos": write_bag(demos, folder / "demos", jitter_s=0.002),
+            "normal": write_bag(normal, folder / "normal"), "faults": write_bag(faults, folder / "faults"),
+            "held_out": write_bag(held_out, folder / "held_out", storage="sqlite3"),
             "mapping": write_mapping(bag_mapping("marker"), folder / "mapping.yaml"),
             "lerobot": write_lerobot(demos, folder / "lerobot"),
             "lerobot_mapping": write_mapping(lerobot_mapping(), folder / "lerobot.yaml")}
@@ -150,3 +152,80 @@ def test_evaluate_detects_the_joint_locks_in_a_bag(served, logs, tmp_path):
     assert first["isolated_joint"] is not None and first["isolated_joint"].startswith("joint")
     assert 0.5 <= report["detection_rate"] <= 1.0 and 0.0 <= report["auroc"] <= 1.0
     assert "faulty episodes detected" in result.output
+
+
+@pytest.mark.slow
+def test_calibrate_writes_the_thresholds_evaluate_and_the_service_use(cli_model, logs, tmp_path):
+    out, report = tmp_path / "calibrated.safetensors", tmp_path / "calibration.json"
+    result = _nasm("evaluate", cli_model, logs["normal"], logs["faults"], "--mapping", logs["mapping"])
+    assert result.exit_code == 2 and "calibrate it on held-out normal episodes first (nasm calibrate)" in result.output
+    result = _nasm("calibrate", cli_model, logs["normal"], "--mapping", logs["mapping"], "--out", out)
+    assert result.exit_code == 2 and "at least 2 normal episodes for the precisions and 2 for the thresholds; got 1 and 1" \
+        in result.output and not out.exists()
+    result = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--out", out, "--json", report)
+    assert result.exit_code == 0, result.output
+    model, doc = checkpoint.load(out), json.loads(report.read_text())
+    assert doc["precision_episodes"] == 4 and doc["threshold_episodes"] == 4
+    for mode in ("offline", "online"):
+        cal = model.calibration(mode, 1)
+        assert cal.episode_thresholds[0.01] == doc["modes"][mode]["episode_thresholds"]["0.01"] > 0
+    assert "the thresholds at 0.01, 0.02, 0.03, 0.04, 0.05 are the largest normal peak" in result.output
+    result = _nasm("evaluate", out, logs["normal"], logs["faults"], "--mapping", logs["mapping"])
+    assert result.exit_code == 0 and "episode threshold at 1 % FPR, as the service decides" in result.output
+
+
+@pytest.mark.slow
+def test_calibrate_an_npz_set(cli_model, logs, tmp_path):
+    seqs = read_mapped(logs["held_out"], parse_mapping(bag_mapping("marker"), "m"))
+    np.savez(tmp_path / "normal.npz", sequences=seqs.data, channel_names=np.array(seqs.channel_names))
+    result = _nasm("calibrate", cli_model, tmp_path / "normal.npz", "--out", tmp_path / "m.safetensors")
+    assert result.exit_code == 0, result.output
+    np.savez(tmp_path / "other.npz", sequences=seqs.data[..., :3], channel_names=np.array(seqs.channel_names[:3]))
+    result = _nasm("calibrate", cli_model, tmp_path / "other.npz", "--out", tmp_path / "n.safetensors")
+    assert result.exit_code == 2 and "the model expects" in result.output
+
+
+@pytest.mark.slow
+def test_evaluate_flags_what_the_service_flags(served, logs, tmp_path):
+    server, model_path = served
+    evaluated = tmp_path / "eval.json"
+    assert _nasm("evaluate", model_path, logs["normal"], logs["faults"], "--mapping", logs["mapping"],
+                 "--json", evaluated).exit_code == 0
+    report = json.loads(evaluated.read_text())
+    for name in ("normal", "faults"):
+        replayed = tmp_path / f"{name}.json"
+        result = _nasm("replay", logs[name], "--mapping", logs["mapping"], "--url", server.url, "--out",
+                       tmp_path / "rec", "--json", replayed)
+        assert result.exit_code == 0, result.output
+        served_flags = [s["first_flag_step"] for s in json.loads(replayed.read_text())]
+        assert served_flags == [row["first_flag_step"] for row in report["episodes"][name]]
+
+
+@pytest.mark.slow
+def test_replay_refuses_a_mapping_the_served_model_was_not_trained_on(served, logs, tmp_path):
+    server, _ = served
+    fast = bag_mapping("marker")
+    fast["timing"]["period_s"] = 0.25  # the model's clock is 0.5 s
+    deg = bag_mapping("marker")
+    deg["channels"][0]["units"] = "deg"
+    for doc, message in ((fast, "the mapping resamples to 15 steps of 0.25 s; the model was trained on 15 steps of 0.5 s"),
+                         (deg, "channel joint1 is in 'deg' in the mapping but the model was trained on 'rad'")):
+        result = _nasm("replay", logs["normal"], "--mapping", write_mapping(doc, tmp_path / "m.yaml"), "--url",
+                       server.url, "--out", tmp_path / "rec")
+        assert result.exit_code == 2 and message in result.output
+    result = _nasm("replay", logs["normal"], "--mapping", logs["mapping"], "--url", server.url, "--model", "nope",
+                   "--out", tmp_path / "rec")
+    assert result.exit_code == 2 and "hosts no model 'nope'; it has ['panda']" in result.output
+    assert not (tmp_path / "rec").exists()
+
+
+def test_a_corrupt_bag_is_one_line_and_exit_2(logs, cli_model, tmp_path):
+    for name, body in (("corrupt.mcap", b"\x89MCAP0\r\n" + b"\xff" * 4096), ("corrupt.db3", b"\x00" * 4096)):
+        (tmp_path / name).write_bytes(body)
+        for command in ("score", "replay"):
+            extra = ("--url", "http://127.0.0.1:9") if command == "replay" else ()
+            result = _nasm(command, *(() if command == "replay" else (cli_model,)), tmp_path / name,
+                           "--mapping", logs["mapping"], *extra)
+            assert result.exit_code == 2, result.output
+            assert "Traceback" not in result.output and f"{tmp_path / name}" in result.output
+            assert len([line for line in result.output.splitlines() if line.startswith("error:")]) == 1

@@ -41,7 +41,7 @@ def through_bags(sets: dict[str, list[Episode]], folder: Path, jitter_s: float) 
     mapping = write_mapping(bag_mapping("marker"), folder / "mapping.yaml")
     out = {}
     for i, (kind, episodes) in enumerate(sets.items()):
-        seqs = load_log_sequences(write_bag(episodes, folder / f"{kind}.mcap", jitter_s, seed=i), mapping)
+        seqs = load_log_sequences(write_bag(episodes, folder / kind, jitter_s, seed=i), mapping)
         if [e.skill for e in episodes] != seqs.labels.tolist():
             raise RuntimeError(f"{kind}: the bag's episodes do not come back in order")
         out[kind] = [dataclasses.replace(e, observations=x) for e, x in zip(episodes, seqs.data)]
