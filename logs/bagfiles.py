@@ -111,6 +111,7 @@ def _scan_mcap(path: Path, topics: set[str], read: BagRead) -> Iterator[tuple[st
                     raise LogError(f"{path}: topic {channel.topic} is {channel.message_encoding!r} encoded, not ROS 2 CDR")
                 store = _schema_store(schema.name, schema.encoding, schema.data.decode())
                 decoders[channel.id] = functools.partial(store.deserialize_cdr, typename=schema.name)
+            read.counts[channel.topic] += 1
             yield channel.topic, message.log_time, message.data, decoders[channel.id]
 
 
@@ -127,10 +128,14 @@ def _read_indexed(reader: AnyReader, topics: set[str], read: BagRead,
     connections = [c for c in reader.connections if c.topic in topics]
     for c in connections:
         declared[c.topic] += c.msgcount
-    decoders = {c.id: functools.partial(reader.deserialize, typ=c.msgtype) for c in connections}
+    known = {c.id: (c.topic, functools.partial(reader.deserialize, typ=c.msgtype)) for c in connections}
+    counts = read.counts
     if connections:  # rosbags reads every topic when given none
-        for c, t, raw in reader.messages(connections=connections):
-            yield c.topic, t, raw, decoders[c.id]
+        # one file, one reader: its own generator, without AnyReader's merge of several readers' streams
+        for c, t, raw in reader.readers[0].messages(connections=connections):
+            topic, decode = known[c.id]
+            counts[topic] += 1
+            yield topic, t, raw, decode
 
 
 def read_messages(bag: Bag, topics: set[str], read: BagRead) -> Iterator[tuple[str, int, bytes, Decode]]:
@@ -152,9 +157,7 @@ def read_messages(bag: Bag, topics: set[str], read: BagRead) -> Iterator[tuple[s
                 opened, declared_here = reader, ""
                 messages = _read_indexed(reader, topics, read, declared)
             try:
-                for item in messages:
-                    read.counts[item[0]] += 1
-                    yield item
+                yield from messages
             finally:
                 if opened is not None:
                     opened.close()

@@ -148,8 +148,7 @@ def _episode(root: Path, mapping: Mapping, index: list[int | None], rows: dict[s
     group = Group("dataset rows", tuple(mapping.channels), tuple(range(len(mapping.channels))))
     resampler = EpisodeResampler([group], mapping.timing, what)
     values = np.stack([rows[ch.feature][:, i or 0] for ch, i in zip(mapping.channels, index)], axis=1)  # type: ignore[index]
-    for t, v in zip(rows["timestamp"].tolist(), values):
-        resampler.add(0, t, values=v)
+    resampler.add(0, rows["timestamp"].astype(np.float64), values=values)
     return Recorded(resampler.finish(), label, what, float(rows["timestamp"][0]), number)
 
 

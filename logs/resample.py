@@ -7,14 +7,13 @@ sample and is sampled every ``period_s`` from there, linearly between samples or
 previous one. Time stamps that go backwards and silences longer than ``max_gap_s`` are refused:
 interpolating across them would invent data.
 
-The resampler is fed one sample at a time and keeps only the samples around the next grid
-point, so an hour of a 1 kHz stream costs no more memory than a second of it; a sample is
+The resampler is fed blocks of samples as they are read and keeps only the last sample of each
+stream, so an hour of a 1 kHz stream costs no more memory than a block of it; a sample is
 decoded (``decode``) only when a grid point needs its values.
 """
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -39,26 +38,21 @@ class Group:
         return np.array([c.interpolation == "linear" for c in self.channels])
 
 
-class _Sample:
-    __slots__ = ("t", "payload", "values")
-
-    def __init__(self, t: float, payload: Any, values: np.ndarray | None) -> None:
-        self.t, self.payload, self.values = t, payload, values
-
-
 @dataclass
 class _Stream:
     group: Group
     out: np.ndarray  # (steps, channels) values on the grid
     n: int = 0  # samples seen
     first_t: float = 0.0
-    prev: _Sample | None = None
+    last_t: float = 0.0
+    last: Any = None  # the last sample's payload, or its values once decoded
+    last_decoded: bool = False
     k: int = 0  # next grid point to fill
-    waiting: deque = field(default_factory=deque)  # samples held until the grid is known
+    waiting: list = field(default_factory=list)  # blocks held until the grid is known
 
 
 class EpisodeResampler:
-    """One episode's streams, fed sample by sample (``add``), resampled at ``finish``."""
+    """One episode's streams, fed in blocks of samples (``add``), resampled at ``finish``."""
 
     def __init__(self, groups: list[Group], timing: Timing, what: str,
                  decode: Callable[[int, Any], np.ndarray] | None = None) -> None:
@@ -70,57 +64,92 @@ class EpisodeResampler:
         self.started = 0
         self.latest_first = -np.inf
 
-    def add(self, g: int, t: float, payload: Any = None, values: np.ndarray | None = None) -> None:
-        """Sample of stream ``g`` at ``t`` s: its ``values``, or a ``payload`` decoded if needed."""
-        s = self.streams[g]
-        if s.n:
-            step = t - s.prev.t  # type: ignore[union-attr]
-            if step <= 0:
-                raise LogError(f"{self.what}, {s.group.source}: time stamps do not increase: sample {s.n} at "
-                               f"{t:.6f} s follows sample {s.n - 1} at {s.prev.t:.6f} s")  # type: ignore[union-attr]
-            if step > self.timing.gap_limit_s + EPS_S:
-                raise LogError(f"{self.what}, {s.group.source}: no sample between {s.prev.t:.3f} s and {t:.3f} s "  # type: ignore[union-attr]
-                               f"(a gap of {step:.3f} s; timing.max_gap_s is {self.timing.gap_limit_s:g} s)")
-        else:
-            s.first_t = t
-            self.started += 1
-            self.latest_first = max(self.latest_first, t)
-        s.n += 1
-        sample = _Sample(t, payload, values)
-        if self.grid is not None:
-            self._advance(g, s, sample)
+    def add(self, g: int, t: np.ndarray, payloads: list[Any] | None = None, values: np.ndarray | None = None) -> None:
+        """Samples of stream ``g`` at times ``t`` (s, increasing): their ``values`` (len(t), channels),
+        or ``payloads`` that ``decode`` turns into values when a grid point needs them."""
+        if len(t) == 0:
             return
-        s.waiting.append(sample)
-        s.prev = sample
-        while len(s.waiting) > 1 and s.waiting[1].t <= self.latest_first + EPS_S:
-            s.waiting.popleft()  # the grid starts at or after latest_first: older samples are never needed
+        s = self.streams[g]
+        self._check(s, t)
+        if s.n == 0:
+            s.first_t = float(t[0])
+            self.started += 1
+            self.latest_first = max(self.latest_first, s.first_t)
+        s.n += len(t)
+        if self.grid is not None:
+            self._advance(g, s, t, payloads, values)
+            return
+        s.waiting.append((t, payloads, values))
+        s.last_t = float(t[-1])
         if self.started == len(self.streams):
             self.grid = self.latest_first + self.timing.period_s * np.arange(self.timing.steps)
             for i, other in enumerate(self.streams):
-                held, other.waiting, other.prev = other.waiting, deque(), None
-                for h in held:
-                    self._advance(i, other, h)
+                held, other.waiting = other.waiting, []
+                other.last, other.last_decoded = None, False
+                for block in held:
+                    self._advance(i, other, *block)
 
-    def _values(self, g: int, sample: _Sample) -> np.ndarray:
-        if sample.values is None:
-            assert self.decode is not None
-            sample.values, sample.payload = self.decode(g, sample.payload), None
-        return sample.values
+    def _check(self, s: _Stream, t: np.ndarray) -> None:
+        """Refuse stamps that do not increase and silences longer than max_gap_s, naming the samples."""
+        times = np.concatenate([[s.last_t], t]) if s.n else t
+        base = s.n - 1 if s.n else 0  # the sample number of times[0]
+        step = np.diff(times)
+        bad = np.flatnonzero((step <= 0) | (step > self.timing.gap_limit_s + EPS_S))
+        if not len(bad):
+            return
+        f = int(bad[0])
+        start, end = float(times[f]), float(times[f + 1])
+        if step[f] <= 0:
+            raise LogError(f"{self.what}, {s.group.source}: time stamps do not increase: sample {base + f + 1} at "
+                           f"{end:.6f} s follows sample {base + f} at {start:.6f} s")
+        raise LogError(f"{self.what}, {s.group.source}: no sample between {start:.3f} s and {end:.3f} s "
+                       f"(a gap of {end - start:.3f} s; timing.max_gap_s is {self.timing.gap_limit_s:g} s)")
 
-    def _advance(self, g: int, s: _Stream, cur: _Sample) -> None:
+    def _decoded(self, g: int, payload: Any) -> np.ndarray:
+        assert self.decode is not None
+        return self.decode(g, payload)
+
+    def _advance(self, g: int, s: _Stream, t: np.ndarray, payloads: list[Any] | None,
+                 values: np.ndarray | None) -> None:
+        """Fill the grid points whose following sample is in this block."""
         grid, steps = self.grid, self.timing.steps
-        while s.k < steps and cur.t > grid[s.k] + EPS_S:  # type: ignore[index]
-            prev = s.prev
-            assert prev is not None  # the grid starts at or after every stream's first sample
-            before = self._values(g, prev)
-            if self.linear[g].any():
-                w = min(max((grid[s.k] - prev.t) / (cur.t - prev.t), 0.0), 1.0)  # type: ignore[index]
-                after = self._values(g, cur)
-                s.out[s.k] = np.where(self.linear[g], before + w * (after - before), before)
-            else:
-                s.out[s.k] = before
-            s.k += 1
-        s.prev = cur
+        assert grid is not None
+        have_last = s.last is not None or s.last_decoded
+        times = np.concatenate([[s.last_t], t]) if have_last else t
+        shift = 1 if have_last else 0  # index in times of t[0]
+        cache: dict[int, np.ndarray] = {}
+
+        def at(j: int) -> np.ndarray:  # values of the sample at index j of times
+            if j < shift:
+                if not s.last_decoded:
+                    s.last, s.last_decoded = self._decoded(g, s.last), True
+                return s.last
+            if values is not None:
+                return values[j - shift]
+            if j not in cache:
+                cache[j] = self._decoded(g, payloads[j - shift])  # type: ignore[index]
+            return cache[j]
+
+        if s.k < steps:
+            after = np.searchsorted(times, grid[s.k:] + EPS_S, side="right")
+            linear = self.linear[g]
+            for j in after[after < len(times)].tolist():
+                before = at(j - 1)  # the grid starts at or after every stream's first sample: j >= 1
+                if linear.any():
+                    w = min(max((grid[s.k] - times[j - 1]) / (times[j] - times[j - 1]), 0.0), 1.0)
+                    nxt = at(j)
+                    s.out[s.k] = np.where(linear, before + w * (nxt - before), before)
+                else:
+                    s.out[s.k] = before
+                s.k += 1
+        last = len(times) - 1
+        if values is not None:
+            s.last, s.last_decoded = values[-1], True
+        elif last in cache:
+            s.last, s.last_decoded = cache[last], True
+        else:
+            s.last, s.last_decoded = payloads[-1], False  # type: ignore[index]
+        s.last_t = float(t[-1])
 
     def finish(self) -> np.ndarray:
         """(steps, D) values of the streams on the model's clock, or a LogError saying why not."""
@@ -131,14 +160,14 @@ class EpisodeResampler:
         grid, steps = self.grid, self.timing.steps
         assert grid is not None
         for g, s in enumerate(self.streams):
-            last = s.prev
-            assert last is not None
-            while s.k < steps and grid[s.k] <= last.t + EPS_S:
-                s.out[s.k] = self._values(g, last)
+            while s.k < steps and grid[s.k] <= s.last_t + EPS_S:
+                if not s.last_decoded:
+                    s.last, s.last_decoded = self._decoded(g, s.last), True
+                s.out[s.k] = s.last
                 s.k += 1
         if any(s.k < steps for s in self.streams):
             firsts = [s.first_t for s in self.streams]
-            lasts = [s.prev.t for s in self.streams]  # type: ignore[union-attr]
+            lasts = [s.last_t for s in self.streams]
             start, end = max(firsts), min(lasts)
             late = self.streams[int(np.argmax(firsts))].group.source
             early = self.streams[int(np.argmin(lasts))].group.source

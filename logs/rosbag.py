@@ -32,15 +32,30 @@ def topic_groups(mapping: Mapping) -> list[Group]:
                   tuple(i for i, c in enumerate(mapping.channels) if c.topic == t)) for t in topics]
 
 
+BLOCK = 4096  # samples of a topic handed to the resampler at once
+
+
 @dataclass
 class _Open:
-    """The episode being read."""
+    """The episode being read, with each topic's samples not yet handed to its resampler."""
 
     number: int
     lo: int  # ns: its window's start; samples before it are not its own
     resampler: EpisodeResampler
     label: str | None
+    times: list[list[int]]
+    payloads: list[list[Any]]
     failed: str | None = None
+
+    def flush(self, g: int) -> None:
+        """Hand topic ``g``'s held samples to the resampler (a bad one marks the episode failed)."""
+        times, payloads = self.times[g], self.payloads[g]
+        self.times[g], self.payloads[g] = [], []
+        if self.failed is None:
+            try:
+                self.resampler.add(g, (np.array(times, np.int64) - self.lo) / NS, payloads)
+            except LogError as exc:
+                self.failed = str(exc)
 
 
 class _BagEpisodes:
@@ -76,13 +91,16 @@ class _BagEpisodes:
         if self.recent_label is not None and self.recent_label[0] >= lo - self.split.label_tolerance_s * NS:
             label = self.recent_label[1]
         resampler = EpisodeResampler(self.groups, self.mapping.timing, what, self._decode)  # type: ignore[arg-type]
-        self.current = _Open(self.number, lo, resampler, label)
+        n = len(self.groups)
+        self.current = _Open(self.number, lo, resampler, label, [[] for _ in range(n)], [[] for _ in range(n)])
         self.number += 1
 
     def close(self, last: bool = False) -> None:
         ep, self.current = self.current, None
         if ep is None:
             return
+        for g in range(len(self.groups)):
+            ep.flush(g)
         why = ep.failed
         if why is None:
             try:
@@ -123,21 +141,32 @@ class _BagEpisodes:
         g = self.group_of[topic]
         if g not in self.extract:
             self._decode(g, payload)  # the first message of a topic: a wrong field is refused at once
-        try:
-            ep.resampler.add(g, (t - ep.lo) / NS, payload)
-        except LogError as exc:
-            ep.failed = str(exc)
+        times = ep.times[g]
+        times.append(t)
+        ep.payloads[g].append(payload)
+        if len(times) >= BLOCK:
+            ep.flush(g)
 
     def run(self) -> Iterator[Recorded | str]:
         split, header = self.split, self.split.stamp == "header"
         topics = {c.topic for c in self.mapping.channels if c.topic}
         checked = False
-        for message in read_messages(self.bag, topics | {t for t in (split.marker_topic, split.label_topic) if t},
-                                     self.read):
-            topic, log_time, raw, decode = message
-            if self.read.indexed and not checked:
+        group_of, fast = self.group_of, split.split != "gap" and not header
+        for topic, log_time, raw, decode in read_messages(
+                self.bag, topics | {t for t in (split.marker_topic, split.label_topic) if t}, self.read):
+            if not checked and self.read.indexed:
                 self._check_topics(topics)  # an indexed file names its topics before its messages
                 checked = True
+            ep = self.current
+            if fast and ep is not None and ep.failed is None and log_time >= ep.lo and topic in group_of:
+                g = group_of[topic]
+                if g in self.extract:  # the common case, kept short: a sample held for its topic's next block
+                    times = ep.times[g]
+                    times.append(log_time)
+                    ep.payloads[g].append((raw, decode))
+                    if len(times) >= BLOCK:
+                        ep.flush(g)
+                    continue
             if header or topic not in topics:
                 body: Any = self._message(topic, raw, decode)
                 t = header_stamp(body, log_time) if header else log_time
@@ -154,7 +183,8 @@ class _BagEpisodes:
                     self.current.label = text
             if topic in topics:
                 self.sample(topic, t, payload)
-            yield from self._flush()
+            if self.out:
+                yield from self._flush()
         self._check_topics(topics)
         if self.read.damage:
             yield self.read.damage
