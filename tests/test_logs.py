@@ -216,6 +216,7 @@ def test_a_truncated_bag_gives_what_it_can_and_says_so(bag, native, tmp_path):
         assert "dropped the last episode" in warnings[1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("storage", ["sqlite3", "ros1"])
 def test_sqlite3_and_ros1_bags_give_the_episodes_back(episodes, native, tmp_path, storage):
     path = tmp_path / ("set.bag" if storage == "ros1" else "set")
@@ -226,6 +227,7 @@ def test_sqlite3_and_ros1_bags_give_the_episodes_back(episodes, native, tmp_path
         np.testing.assert_allclose(seqs.data, native, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_a_sqlite3_bag_without_message_definitions_is_decoded_with_the_ros2_types(episodes, native, tmp_path):
     bag = write_bag(episodes[:1], tmp_path / "humble", storage="sqlite3")
     with sqlite3.connect(bag_file(bag)) as db:  # as ROS 2 Humble's bags: no definitions stored
@@ -235,7 +237,7 @@ def test_a_sqlite3_bag_without_message_definitions_is_decoded_with_the_ros2_type
 
 
 @pytest.mark.parametrize("suffix", [".mcap", ".db3", ".bag"])
-def test_a_corrupt_bag_file_gives_one_line_naming_it(bag, tmp_path, suffix):
+def test_a_corrupt_bag_file_gives_one_line_naming_it(tmp_path, suffix):
     broken = tmp_path / f"broken{suffix}"
     broken.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 64 if suffix == ".mcap" else bytes(range(256)) * 64)
     with pytest.raises(LogError) as err:
@@ -243,6 +245,7 @@ def test_a_corrupt_bag_file_gives_one_line_naming_it(bag, tmp_path, suffix):
     assert str(broken) in str(err.value) and "holds no episode" in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.slow
 def test_a_corrupt_chunk_keeps_the_episodes_before_it(bag, native, tmp_path):
     data = bytearray(_small_chunks(bag, tmp_path / "small.mcap").read_bytes())
     middle = int(len(data) * 0.6)
@@ -253,6 +256,7 @@ def test_a_corrupt_chunk_keeps_the_episodes_before_it(bag, native, tmp_path):
     np.testing.assert_allclose(seqs.data, native[: len(seqs.data)], atol=1e-9)
 
 
+@pytest.mark.slow
 def test_a_label_just_before_the_first_sample_names_the_episode(episodes, tmp_path):
     folder = tmp_path / "bags"
     for i, ep in enumerate(episodes[:2]):
@@ -271,12 +275,14 @@ def test_a_label_just_before_the_first_sample_names_the_episode(episodes, tmp_pa
                                               "before it; named 'run0'")
 
 
+@pytest.mark.slow
 def test_a_bag_without_the_label_topic_is_read_with_a_warning(episodes, tmp_path):
     folder = write_bag_folders(episodes[:2], tmp_path / "bags", label=None)
     seqs = read_mapped(folder, parse_mapping(bag_mapping("file"), "m"))
     assert seqs.labels.tolist() == ["episode_0000", "episode_0001"] and len(seqs.provenance["warnings"]) == 2
 
 
+@pytest.mark.slow
 def test_a_dropout_is_an_error_or_skipped_by_number(episodes, native, tmp_path):
     folder = tmp_path / "bags"
     for i, ep in enumerate(episodes[:3]):
@@ -309,6 +315,7 @@ def _dropout(src: Path, dst: Path, from_s: float, to_s: float) -> None:
                 writer.write(out[c.id], t, raw)
 
 
+@pytest.mark.slow
 def test_metadata_that_declares_more_messages_is_an_error(episodes, tmp_path):
     folder = write_bag_folders(episodes[:1], tmp_path / "bags")
     meta = folder / "episode_0000" / "metadata.yaml"
@@ -347,6 +354,7 @@ def test_unknown_features_and_names_are_refused(episodes, tmp_path):
         read_mapped(root, _mapping())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("version", ["v2.1", "v3.0"])
 def test_a_lerobot_dataset_missing_an_episode_is_an_error_or_skipped_by_number(episodes, native, tmp_path, version):
     root = write_lerobot(episodes, tmp_path / "ds", version)

@@ -219,6 +219,7 @@ def test_replay_refuses_a_mapping_the_served_model_was_not_trained_on(served, lo
     assert not (tmp_path / "rec").exists()
 
 
+@pytest.mark.slow
 def test_a_corrupt_bag_is_one_line_and_exit_2(logs, cli_model, tmp_path):
     for name, body in (("corrupt.mcap", b"\x89MCAP0\r\n" + b"\xff" * 4096), ("corrupt.db3", b"\x00" * 4096)):
         (tmp_path / name).write_bytes(body)
