@@ -151,22 +151,21 @@ class _BagEpisodes:
         split, header = self.split, self.split.stamp == "header"
         topics = {c.topic for c in self.mapping.channels if c.topic}
         checked = False
-        group_of, fast = self.group_of, split.split != "gap" and not header
+        fast = split.split != "gap" and not header
+        hold, lo = self._hold(fast)
         for topic, log_time, raw, decode in read_messages(
                 self.bag, topics | {t for t in (split.marker_topic, split.label_topic) if t}, self.read):
             if not checked and self.read.indexed:
                 self._check_topics(topics)  # an indexed file names its topics before its messages
                 checked = True
-            ep = self.current
-            if fast and ep is not None and ep.failed is None and log_time >= ep.lo and topic in group_of:
-                g = group_of[topic]
-                if g in self.extract:  # the common case, kept short: a sample held for its topic's next block
-                    times = ep.times[g]
-                    times.append(log_time)
-                    ep.payloads[g].append((raw, decode))
-                    if len(times) >= BLOCK:
-                        ep.flush(g)
-                    continue
+            held = hold.get(topic)
+            if held is not None and log_time >= lo:  # the common case, kept short: held for the topic's next block
+                held[0].append(log_time)
+                held[1].append((raw, decode))
+                if len(held[0]) >= BLOCK:
+                    held[2].flush(held[3])
+                    hold, lo = self._hold(fast)
+                continue
             if header or topic not in topics:
                 body: Any = self._message(topic, raw, decode)
                 t = header_stamp(body, log_time) if header else log_time
@@ -183,6 +182,7 @@ class _BagEpisodes:
                     self.current.label = text
             if topic in topics:
                 self.sample(topic, t, payload)
+            hold, lo = self._hold(fast)
             if self.out:
                 yield from self._flush()
         self._check_topics(topics)
@@ -195,6 +195,15 @@ class _BagEpisodes:
             if not self.skip_bad:
                 raise LogError(f"{missing} (--skip-bad keeps what was read)")
             yield missing
+
+    def _hold(self, fast: bool) -> tuple[dict[str, tuple[list[int], list[Any], _Open, int]], int]:
+        """Where a sample of each checked topic goes while nothing else can happen to it (no gap split,
+        header stamps or failure): the open episode's lists, and its window's start."""
+        ep = self.current
+        if not fast or ep is None or ep.failed is not None:
+            return {}, 0
+        return {topic: (ep.times[g], ep.payloads[g], ep, g) for topic, g in self.group_of.items()
+                if g in self.extract}, ep.lo
 
     def _after_gap(self, t: int) -> bool:
         """A gap split's silence lies between the last sample and ``t``: ``t`` belongs to the next episode."""

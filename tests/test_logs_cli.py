@@ -154,7 +154,6 @@ def test_evaluate_detects_the_joint_locks_in_a_bag(served, logs, tmp_path):
     assert "faulty episodes detected" in result.output
 
 
-@pytest.mark.slow
 def test_calibrate_writes_the_thresholds_evaluate_and_the_service_use(cli_model, logs, tmp_path):
     out, report = tmp_path / "calibrated.safetensors", tmp_path / "calibration.json"
     result = _nasm("evaluate", cli_model, logs["normal"], logs["faults"], "--mapping", logs["mapping"])
@@ -174,7 +173,6 @@ def test_calibrate_writes_the_thresholds_evaluate_and_the_service_use(cli_model,
     assert result.exit_code == 0 and "episode threshold at 1 % FPR, as the service decides" in result.output
 
 
-@pytest.mark.slow
 def test_calibrate_an_npz_set(cli_model, logs, tmp_path):
     seqs = read_mapped(logs["held_out"], parse_mapping(bag_mapping("marker"), "m"))
     np.savez(tmp_path / "normal.npz", sequences=seqs.data, channel_names=np.array(seqs.channel_names))
@@ -185,7 +183,6 @@ def test_calibrate_an_npz_set(cli_model, logs, tmp_path):
     assert result.exit_code == 2 and "the model expects" in result.output
 
 
-@pytest.mark.slow
 def test_evaluate_flags_what_the_service_flags(served, logs, tmp_path):
     server, model_path = served
     evaluated = tmp_path / "eval.json"
@@ -201,7 +198,6 @@ def test_evaluate_flags_what_the_service_flags(served, logs, tmp_path):
         assert served_flags == [row["first_flag_step"] for row in report["episodes"][name]]
 
 
-@pytest.mark.slow
 def test_replay_refuses_a_mapping_the_served_model_was_not_trained_on(served, logs, tmp_path):
     server, _ = served
     fast = bag_mapping("marker")
@@ -219,7 +215,6 @@ def test_replay_refuses_a_mapping_the_served_model_was_not_trained_on(served, lo
     assert not (tmp_path / "rec").exists()
 
 
-@pytest.mark.slow
 def test_a_corrupt_bag_is_one_line_and_exit_2(logs, cli_model, tmp_path):
     for name, body in (("corrupt.mcap", b"\x89MCAP0\r\n" + b"\xff" * 4096), ("corrupt.db3", b"\x00" * 4096)):
         (tmp_path / name).write_bytes(body)
