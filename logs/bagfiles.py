@@ -21,7 +21,9 @@ from typing import Any, Callable, Iterator
 
 import yaml
 from mcap.reader import NonSeekingReader
-from rosbags.highlevel import AnyReader
+from rosbags.interfaces import MessageDefinitionFormat
+from rosbags.rosbag1 import Reader as Ros1Reader
+from rosbags.rosbag2 import Reader as Ros2Reader
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -31,6 +33,7 @@ METADATA = "metadata.yaml"  # rosbag2's description of a bag folder
 SUFFIXES = (".mcap", ".db3", ".bag")
 STORAGES = {"mcap": ".mcap", "sqlite3": ".db3"}
 DEFAULT_STORE = Stores.ROS2_HUMBLE  # messages of bags that store no definitions (Humble's sqlite3)
+DEFAULT_STORE_ROS1 = Stores.ROS1_NOETIC
 
 Decode = Callable[[bytes], Any]
 
@@ -89,10 +92,10 @@ def find_bags(source: Path) -> list[Bag]:
 
 
 @functools.lru_cache(maxsize=64)
-def _schema_store(name: str, encoding: str, text: str) -> Typestore:
-    """A type store for one MCAP schema (the default store for a schema without a definition)."""
+def _schema_store(name: str, encoding: str, text: str, ros1: bool = False) -> Typestore:
+    """A type store for one stored definition; without one (empty text), the ROS LTS store."""
     if not text.strip():
-        return get_typestore(DEFAULT_STORE)
+        return get_typestore(DEFAULT_STORE_ROS1 if ros1 else DEFAULT_STORE)
     store = get_typestore(Stores.EMPTY)
     store.register(get_types_from_idl(text) if encoding == "ros2idl" else get_types_from_msg(text, name))
     return store
@@ -115,24 +118,35 @@ def _scan_mcap(path: Path, topics: set[str], read: BagRead) -> Iterator[tuple[st
             yield channel.topic, message.log_time, message.data, decoders[channel.id]
 
 
-def _open(path: Path) -> AnyReader:
-    reader = AnyReader([path], default_typestore=get_typestore(DEFAULT_STORE))
+Reader = Ros1Reader | Ros2Reader
+
+
+def _open(path: Path) -> Reader:
+    reader: Reader = Ros1Reader(path) if path.suffix == ".bag" else Ros2Reader(path)
     reader.open()
     return reader
 
 
-def _read_indexed(reader: AnyReader, topics: set[str], read: BagRead,
+def _decoder(c: Any, ros1: bool) -> Decode:
+    """Decode a connection's messages with its own definition, or the LTS types if it stores none."""
+    fmt, text = c.msgdef.format, c.msgdef.data
+    store = _schema_store(c.msgtype, "ros2idl" if fmt == MessageDefinitionFormat.IDL else "ros2msg",
+                          "" if fmt == MessageDefinitionFormat.NONE else text, ros1)
+    return functools.partial(store.deserialize_ros1 if ros1 else store.deserialize_cdr, typename=c.msgtype)
+
+
+def _read_indexed(reader: Reader, topics: set[str], read: BagRead,
                   declared: Counter) -> Iterator[tuple[str, int, bytes, Decode]]:
     read.types.update({c.topic: c.msgtype for c in reader.connections})
     read.indexed = True
     connections = [c for c in reader.connections if c.topic in topics]
     for c in connections:
         declared[c.topic] += c.msgcount
-    known = {c.id: (c.topic, functools.partial(reader.deserialize, typ=c.msgtype)) for c in connections}
+    ros1 = isinstance(reader, Ros1Reader)
+    known = {c.id: (c.topic, _decoder(c, ros1)) for c in connections}
     counts = read.counts
     if connections:  # rosbags reads every topic when given none
-        # one file, one reader: its own generator, without AnyReader's merge of several readers' streams
-        for c, t, raw in reader.readers[0].messages(connections=connections):
+        for c, t, raw in reader.messages(connections=connections):
             topic, decode = known[c.id]
             counts[topic] += 1
             yield topic, t, raw, decode

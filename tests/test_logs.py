@@ -228,10 +228,12 @@ def test_sqlite3_and_ros1_bags_give_the_episodes_back(episodes, native, tmp_path
 
 
 @pytest.mark.slow
-def test_a_sqlite3_bag_without_message_definitions_is_decoded_with_the_ros2_types(episodes, native, tmp_path):
-    bag = write_bag(episodes[:1], tmp_path / "humble", storage="sqlite3")
-    with sqlite3.connect(bag_file(bag)) as db:  # as ROS 2 Humble's bags: no definitions stored
-        db.execute("DELETE FROM message_definitions")
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_a_bag_without_message_definitions_is_decoded_with_the_ros2_types(episodes, native, tmp_path, storage):
+    bag = write_bag(episodes[:1], tmp_path / "bare", storage=storage, definitions=storage == "sqlite3")
+    if storage == "sqlite3":
+        with sqlite3.connect(bag_file(bag)) as db:  # as ROS 2 Humble's bags: no definitions stored
+            db.execute("DELETE FROM message_definitions")
     seqs = read_mapped(bag, _mapping())
     np.testing.assert_allclose(seqs.data, native[:1], atol=1e-9)
 
