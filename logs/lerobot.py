@@ -7,6 +7,10 @@
 ``frame_index`` and ``timestamp`` (s from the episode's start); episodes are cut by
 ``episode_index`` in either layout. Skill names come from the task of the episode's first
 frame (``meta/tasks.jsonl`` in v2.x, ``meta/tasks.parquet`` in v3.0).
+
+Files are read one at a time. What was read is checked against the episodes the dataset
+declares (``meta/episodes.jsonl``, ``meta/episodes/``, or ``total_episodes``) and their frame
+counts: a missing or short episode is an error, or with ``skip_bad`` a warning naming it.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ channel, in which units, at which step period, and which channels are joints.
 A mapping is TOML (``.toml``, read with tomllib) or YAML (``.yaml``/``.yml``); both hold the
 same tables, checked here with one schema so that a typo is refused with the table, the
 channel and the reason rather than turning into a silently wrong model. See
-``examples/panda_ros2.toml`` and README "Your robot's logs".
+``examples/panda_ros2.toml`` and docs/robot_logs.md.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ class Timing(_Strict):
 
 
 class Episodes(_Strict):
-    """How a ROS 2 bag is cut into episodes and where their time stamps and skill names come from."""
+    """How a bag is cut into episodes and where their time stamps and skill names come from."""
 
     split: Literal["file", "marker", "gap"] = Field("file", description="file: one episode per bag; marker: "
                                                     "one per message on marker_topic; gap: a silence longer than gap_s")
@@ -80,7 +80,7 @@ class Channel(_Strict):
     @model_validator(mode="after")
     def _consistent(self) -> "Channel":
         if (self.topic is None) == (self.feature is None):
-            raise ValueError("give either topic (a ROS 2 bag) or feature (a LeRobot dataset)")
+            raise ValueError("give either topic (a bag) or feature (a LeRobot dataset)")
         if self.topic is not None and not self.field:
             raise ValueError("a topic channel needs field, e.g. 'position' or 'wrench.force.x'")
         if self.feature is not None and self.field is not None:
@@ -101,7 +101,7 @@ class Channel(_Strict):
 class Mapping(_Strict):
     description: str = ""
     timing: Timing
-    episodes: Episodes | None = Field(None, description="ROS 2 bags only")
+    episodes: Episodes | None = Field(None, description="bags only")
     channels: list[Channel] = Field(min_length=1)
 
     @model_validator(mode="after")
@@ -114,7 +114,7 @@ class Mapping(_Strict):
         if len(kinds) > 1:
             raise ValueError("channels mix topics and features: one mapping reads one kind of source")
         if "lerobot" in kinds and self.episodes is not None:
-            raise ValueError("[episodes] is for ROS 2 bags; a LeRobot dataset's episodes come from episode_index")
+            raise ValueError("[episodes] is for bags; a LeRobot dataset's episodes come from episode_index")
         ep = self.episodes
         if ep is not None and ep.split == "gap" and ep.gap_s is not None and ep.gap_s <= self.timing.gap_limit_s:
             raise ValueError(f"episodes.gap_s ({ep.gap_s}) must exceed timing.max_gap_s ({self.timing.gap_limit_s}): "

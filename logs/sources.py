@@ -31,7 +31,7 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
         raise LogError(f"no bag or dataset at {path}")
     kind = source_kind(path)
     if kind != mapping.kind:
-        raise LogError(f"{path} is a {'LeRobot dataset' if kind == 'lerobot' else 'ROS 2 bag source'} but the "
+        raise LogError(f"{path} is a {'LeRobot dataset' if kind == 'lerobot' else 'bag source'} but the "
                        f"mapping's channels read {'features' if mapping.kind == 'lerobot' else 'topics'}")
     reader = lerobot.read_episodes if kind == "lerobot" else rosbag.read_episodes
     episodes: list[Recorded] = []

@@ -377,3 +377,12 @@ def test_a_lerobot_dataset_missing_an_episode_is_an_error_or_skipped_by_number(e
     assert seqs.provenance["episode_numbers"] == [0, 1, 3]
     assert "episode 2" in seqs.provenance["warnings"][0]
     np.testing.assert_allclose(seqs.data, native[[0, 1, 3]], rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_the_lerobot_example_mapping_reads_a_panda_dataset(episodes, native, tmp_path):
+    root = write_lerobot(episodes[:2], tmp_path / "ds", "v2.1")
+    seqs = read_mapped(root, load_mapping(EXAMPLE.with_name("panda_lerobot.toml")))
+    picks = [CHANNEL_NAMES.index(n) for n in (*CHANNEL_NAMES[:7], "finger_left", "finger_right")]
+    assert seqs.channel_names == tuple(CHANNEL_NAMES[i] for i in picks)
+    np.testing.assert_allclose(seqs.data, native[:2][..., picks], rtol=1e-6, atol=1e-6)
