@@ -14,6 +14,7 @@ import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import dataclasses
 import json
+import shutil
 import time
 from pathlib import Path
 
@@ -41,6 +42,7 @@ def through_bags(sets: dict[str, list[Episode]], folder: Path, jitter_s: float) 
     mapping = write_mapping(bag_mapping("marker"), folder / "mapping.yaml")
     out = {}
     for i, (kind, episodes) in enumerate(sets.items()):
+        shutil.rmtree(folder / kind, ignore_errors=True)  # this run's own bag of an earlier run: rosbags writes new bags only
         seqs = load_log_sequences(write_bag(episodes, folder / kind, jitter_s, seed=i), mapping)
         if [e.skill for e in episodes] != seqs.labels.tolist():
             raise RuntimeError(f"{kind}: the bag's episodes do not come back in order")
