@@ -18,7 +18,7 @@ import typer
 
 from client.stream import stream_episode
 from client.summary import EpisodeSummary, summary_line
-from client.transport import TRANSPORTS, HttpTransport, ServiceError, ServiceLost
+from client.transport import ServiceError, ServiceLost, TRANSPORTS, served_models
 from logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
 from logs.errors import LogError
 from logs.sources import check_model, episode_position
@@ -48,11 +48,7 @@ def replay_episode(seqs: Sequences, i: int, url: str, api_key: str | None, mode:
 
 def served_model(url: str, api_key: str | None, name: str | None) -> dict[str, Any]:
     """The service's ``/models`` entry of the model ``name`` (None: its default), or a LogError."""
-    t = HttpTransport(url, api_key)
-    try:
-        models: list[dict[str, Any]] = t._request("GET", "/models")  # type: ignore[assignment]  # a JSON list
-    finally:
-        t.close()
+    models = served_models(url, api_key)
     entry = next((m for m in models if (m.get("name") == name if name else m.get("default"))), None)
     if entry is None:
         have = [m.get("name") for m in models if m.get("status") == "ok"]

@@ -157,13 +157,18 @@ class HttpTransport:
         self.client.close()
 
 
-def served_digest(url: str, api_key: str | None, name: str) -> str | None:
-    """The tensor digest of the model ``name`` the service hosts (None: it hosts none by that name)."""
+def served_models(url: str, api_key: str | None) -> list[dict[str, Any]]:
+    """The service's ``GET /models``: every checkpoint it hosts or refused, with its provenance."""
     t = HttpTransport(url, api_key)
     try:
-        models: list[dict[str, Any]] = t._request("GET", "/models")  # type: ignore[assignment]  # a JSON list
+        return t._request("GET", "/models")  # type: ignore[return-value]  # a JSON list
     finally:
         t.close()
+
+
+def served_digest(url: str, api_key: str | None, name: str) -> str | None:
+    """The tensor digest of the model ``name`` the service hosts (None: it hosts none by that name)."""
+    models = served_models(url, api_key)
     return next((m.get("digest") for m in models if m.get("name") == name and m.get("status") == "ok"), None)
 
 

@@ -18,7 +18,7 @@ from client.replay import replay
 from experiments.contextual.cli import contextual
 from experiments.correction.cli import correction
 from experiments.fault_sweep.cli import faults
-from logs.cli import MAPPING_HELP, evaluate, read_logs
+from logs.cli import MAPPING_HELP, SKIP_BAD_HELP, evaluate, read_logs
 from models import checkpoint
 from models.asm import NeuralASM
 from models.config import PRESETS
@@ -62,7 +62,8 @@ def train(
     epochs: int | None = typer.Option(None, help="override the preset's epochs"),
     hidden: int | None = typer.Option(None, help="override the preset's hidden size"),
     seed: int = typer.Option(0, help="seed of the weights and the training order"),
-    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS 2 bag or LeRobot dataset"),
+    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS bag or LeRobot dataset"),
+    skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
 ) -> None:
     """Train a Neural ASM on demonstrations and write a checkpoint."""
     if preset not in PRESETS:
@@ -72,7 +73,7 @@ def train(
         config = config.with_(epochs=epochs)
     if hidden is not None:
         config = config.with_(hidden_size=hidden)
-    seqs = read_logs(data, mapping) if mapping else load_sequences(data)
+    seqs = read_logs(data, mapping, skip_bad=skip_bad) if mapping else load_sequences(data)
     provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs)}
     if seqs.seeds is not None:
         provenance["seeds"] = seqs.seeds.tolist()
@@ -108,12 +109,13 @@ def score(
     cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
     weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)"),
     as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON"),
-    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS 2 bag or LeRobot dataset"),
+    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS bag or LeRobot dataset"),
+    skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
 ) -> None:
     """Energy of every step of every sequence, and the channel with the largest error."""
     _check_mode(mode)
     model = _load_model(model_path)
-    seqs = read_logs(data, mapping, model) if mapping else load_sequences(data)
+    seqs = read_logs(data, mapping, model, skip_bad) if mapping else load_sequences(data)
     try:
         result = model.score(seqs.data, mode, cue_steps, weighted)
     except (KeyError, ValueError) as exc:

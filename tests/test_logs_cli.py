@@ -96,6 +96,20 @@ def test_train_from_a_lerobot_dataset(logs, tmp_path):
     assert checkpoint.load(out).provenance["format"] == "lerobot"
 
 
+def test_train_skips_a_missing_episode_only_when_told(tmp_path):
+    episodes = [run_episode(s, seed) for s in SKILLS for seed in range(2)]
+    dataset = write_lerobot(episodes, tmp_path / "lerobot", "v2.1")
+    (dataset / "data/chunk-000/episode_000002.parquet").unlink()
+    logs = {"lerobot_mapping": write_mapping(lerobot_mapping(), tmp_path / "lerobot.yaml")}
+    out = tmp_path / "skipped.safetensors"
+    refused = _nasm("train", dataset, "--mapping", logs["lerobot_mapping"], "--epochs", 2, "--hidden", 8, "--out", out)
+    assert refused.exit_code == 2 and not out.exists()
+    result = _nasm("train", dataset, "--mapping", logs["lerobot_mapping"], "--epochs", 2, "--hidden", 8, "--out", out,
+                   "--skip-bad")
+    assert result.exit_code == 0, result.output
+    assert "episode 2" in result.output and checkpoint.load(out).provenance["sequences"] == len(episodes) - 1
+
+
 @pytest.fixture(scope="module")
 def served(logs, tmp_path_factory):
     """A calibrated model trained from the demonstration bag, hosted by an in-process service."""
