@@ -30,6 +30,20 @@ def onset_steps(faults: np.ndarray, twins: np.ndarray) -> np.ndarray:
     return np.where(moved.any(axis=1), moved.argmax(axis=1), faults.shape[1] - 1)
 
 
+CONSEQUENCES: tuple[str, ...] = ("consequential", "deviating", "invisible", "unattributed")
+
+
+def consequences(fault_success: np.ndarray, twin_success: np.ndarray, visible: np.ndarray) -> np.ndarray:
+    """Each fault by what it did, as robot failure detectors are scored: *consequential* when the
+    task fails (the cube ends beyond the success tolerance) where its twin succeeded, *deviating*
+    when it is visible but the task succeeds, *invisible* when neither, *unattributed* when the
+    twin failed too (the task was lost without the fault). The simulator reports no collisions,
+    so a strike that still places the cube is not consequential here."""
+    label = np.where(visible, "deviating", "invisible")
+    label = np.where(twin_success & ~fault_success, "consequential", label)
+    return np.where(twin_success, label, "unattributed")
+
+
 def visible_from(deviation: np.ndarray, first_step: np.ndarray, k: float = VISIBLE_K) -> np.ndarray:
     """Whether some channel departs by more than k normal standard deviations at or after `first_step`."""
     steps = np.arange(deviation.shape[1])

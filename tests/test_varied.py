@@ -120,3 +120,18 @@ def test_sets_use_disjoint_seeds_and_fault_specs_are_checked():
         VariedFault("explode", 3)
     with pytest.raises(ValueError, match="fault step"):
         VariedFault("drift", 0)
+
+
+def test_a_fault_is_consequential_only_when_its_task_fails_where_its_twin_placed():
+    from experiments.twins import consequences
+    from sim.varied_sets import fault_jobs
+
+    jobs = fault_jobs()
+    lock_misses, lock_twin_misses, slow_drift = jobs[0], jobs[3], jobs[321]  # a -5 deg lock; a 0.83 deg/s drift
+    assert (lock_misses.fault.kind, lock_twin_misses.fault.kind, slow_drift.fault.kind) == ("lock", "lock", "drift")
+    pairs = [(run_job(j), run_job(replace(j, fault=None))) for j in (lock_misses, lock_twin_misses, slow_drift)]
+    fault_ok, twin_ok = (np.array([ep.success for ep in side]) for side in zip(*pairs))
+    labels = consequences(fault_ok, twin_ok, visible=np.array([True, True, True]))
+    # the lock leaves the cube ~11 cm off; its twin's own run misses by 1 cm too; the drift still places
+    assert labels.tolist() == ["consequential", "unattributed", "deviating"]
+    assert consequences(np.array([True]), np.array([True]), np.array([False])).tolist() == ["invisible"]

@@ -76,6 +76,22 @@ def test_headline_follows_the_contract(bench, tmp_path):
     assert s["detection"] == pytest.approx(detected[bench.visible].mean())
     assert s["detection_all_faults"] == pytest.approx(detected.mean())
     assert np.isclose(sum(f["n"] for f in s["per_family"].values()), len(bench.faults))
+    # consequential faults: the task failed where the twin placed; scored by the same rule
+    failed = bench.consequence == "consequential"
+    c = s["consequential"]
+    assert c["n"] == failed.sum() and set(bench.consequence) <= {"consequential", "deviating", "invisible", "unattributed"}
+    if failed.any():
+        assert c["detection"] == pytest.approx(detected[failed].mean()) and 0.0 <= c["auroc"] <= 1.0
+    from experiments.varied.report import write_json, write_markdown
+    from experiments.varied.run import VariedResult
+
+    result = VariedResult(bench, summaries, outcomes, h, {})
+    write_json(result, tmp_path / "fault_sweep.json", 1.0)
+    write_markdown(result, tmp_path / "fault_sweep.md")
+    facts = json.loads((tmp_path / "fault_sweep.json").read_text())["benchmark"]
+    assert sum(facts["consequences"].values()) == len(bench.faults)
+    table = (tmp_path / "fault_sweep.md").read_text()
+    assert "Scored by consequence" in table and table.count("\n| ") >= 3 * len(methods)
 
 
 def test_the_service_hosts_a_varied_model(bench, tmp_path):

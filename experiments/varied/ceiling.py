@@ -85,8 +85,9 @@ def _keep(bench: VariedBenchmark, kept: dict[str, np.ndarray]) -> VariedBenchmar
     f = kept["faults"]
     return replace(bench, precision=bench.precision.take(kept["precision"]),
                    calibration=bench.calibration.take(kept["calibration"]), test=bench.test.take(kept["test"]),
-                   ood=bench.ood.take(kept["ood"]), faults=bench.faults.take(f), twins=bench.twins.take(f),
-                   kinds=bench.kinds[f], fault_step=bench.fault_step[f], onset=bench.onset[f], visible=bench.visible[f])
+                   ood=bench.ood.take(kept["ood"]), ood_success=bench.ood_success[kept["ood"]], faults=bench.faults.take(f),
+                   twins=bench.twins.take(f), kinds=bench.kinds[f], fault_step=bench.fault_step[f], onset=bench.onset[f],
+                   visible=bench.visible[f], consequence=bench.consequence[f])
 
 
 def oracle_errors(bench: VariedBenchmark, reps: dict[str, dict[str, Sequences]], norm: Normaliser

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.twins import onset_steps, visible_from, whitened_deviation
+from experiments.twins import consequences, onset_steps, visible_from, whitened_deviation
 from models.sequences import Sequences
 from pipelines.episodes import as_sequences, ensure_sets, split_three
 from runtime.parallel import Parallel
@@ -43,6 +43,8 @@ class VariedBenchmark:
     fault_step: np.ndarray  # (F,) nominal start step of the fault
     onset: np.ndarray  # (F,) first step departing from the twin
     visible: np.ndarray  # (F,) bool
+    consequence: np.ndarray  # (F,) experiments.twins.CONSEQUENCES
+    ood_success: np.ndarray  # (N_ood,) bool: the benign out-of-range run placed its cube
     dropped: dict  # set -> episodes the simulation refused (velocity limits, IK)
 
 
@@ -72,13 +74,16 @@ def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict |
     onset = onset_steps(fault_arr.data, twin_arr.data)
     deviation = whitened_deviation(fault_arr.data, twin_arr.data, fault_arr.labels, precision.data, precision.labels)
     visible = visible_from(deviation, onset)
+    consequence = consequences(np.array([e.success for e in faults]), np.array([twins[e.seed].success for e in faults]),
+                               visible)
     ctx_names = [n for n in kept if n.startswith(("cube_seen", "goal", "post"))]
     return VariedBenchmark(
         context=context, channel_names=kept, context_channels=np.array([kept.index(n) for n in ctx_names]),
         demos=as_sequences(sets["demos"], columns), precision=precision, calibration=calibration, test=test,
         ood=as_sequences(sets["ood"], columns),
         faults=fault_arr, twins=twin_arr, kinds=np.array([e.fault.kind for e in faults]),
-        fault_step=np.array([e.fault.step for e in faults]), onset=onset, visible=visible, dropped=dict(dropped or {}))
+        fault_step=np.array([e.fault.step for e in faults]), onset=onset, visible=visible, consequence=consequence,
+        ood_success=np.array([e.success for e in sets["ood"]]), dropped=dict(dropped or {}))
 
 
 def load_varied_benchmark(data_dir: Path, context: str, parallel: Parallel = Parallel()) -> VariedBenchmark:

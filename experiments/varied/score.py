@@ -25,6 +25,7 @@ from models.config import SCORING
 from models.conformal import TimeVaryingThreshold, binomial_interval, mcnemar_exact
 from models.normaliser import Normaliser
 from models.scoring import energy
+from sim.config import SIM
 from sim.varied import channel_groups
 
 ALPHA = SCORING.default_fpr  # the episode false-alarm rate every method is held to
@@ -41,6 +42,7 @@ class Outcome:
     normal_flagged: np.ndarray  # (N_test,) bool
     ood_flagged: np.ndarray  # (N_ood,) bool
     normal_score: np.ndarray  # (N_test,)
+    ood_score: np.ndarray  # (N_ood,)
 
 
 def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> tuple[dict[str, np.ndarray], dict]:
@@ -77,13 +79,13 @@ def outcomes(e: dict[str, np.ndarray], onset: np.ndarray, alpha: float = ALPHA) 
     over = faults > thr
     out["episode"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
                              faults.max(axis=1) / thr, e["test"].max(axis=1) > thr, e["ood"].max(axis=1) > thr,
-                             e["test"].max(axis=1) / thr)
+                             e["test"].max(axis=1) / thr, e["ood"].max(axis=1) / thr)
     tv = TimeVaryingThreshold().fit(e["precision"], e["calibration"], alpha)
     rel = {k: e[k] / tv.thresholds[: e[k].shape[1]] for k in ("test", "ood", "faults")}
     over = _after_onset(rel["faults"], onset) > 1.0
     out["time_varying"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
                                   _after_onset(rel["faults"], onset).max(axis=1), rel["test"].max(axis=1) > 1.0,
-                                  rel["ood"].max(axis=1) > 1.0, rel["test"].max(axis=1))
+                                  rel["ood"].max(axis=1) > 1.0, rel["test"].max(axis=1), rel["ood"].max(axis=1))
     return out
 
 
@@ -108,7 +110,30 @@ def summary(o: Outcome, bench: VariedBenchmark) -> dict:
         "auroc": float(roc_auc_score(labels, scores)),
         "median_delay_steps": float(np.median(delay)) if len(delay) else None,
         "per_family": families,
+        "consequential": consequential(o, bench),
     }
+
+
+def consequential(o: Outcome, bench: VariedBenchmark) -> dict:
+    """Faults whose task failed where their twin's succeeded, scored as robot failure detectors
+    are: caught at the episode threshold, how long before the episode's end (when success is
+    judged) the first flag came, and the AUROC of their score against every successful run
+    (the normal test episodes and the benign out-of-range runs that placed their cube)."""
+    failed, placed = bench.consequence == "consequential", bench.ood_success
+    if not failed.any():
+        return {"n": 0, "detection": None, "lead_time_s_median": None, "auroc": None,
+                "benign_ood_false_alarm": None, "per_family": {}}
+    caught = failed & o.detected
+    lead_s = (bench.faults.data.shape[1] - o.first[caught]) / SIM.timing.observation_hz
+    scores = np.concatenate([o.fault_score[failed], o.normal_score, o.ood_score[placed]])
+    labels = np.concatenate([np.ones(failed.sum()), np.zeros(len(o.normal_score) + placed.sum())])
+    return {"n": int(failed.sum()), "detection": float(caught.sum() / failed.sum()),
+            "lead_time_s_median": float(np.median(lead_s)) if caught.any() else None,
+            "auroc": float(roc_auc_score(labels, scores)),
+            "benign_ood_false_alarm": float(o.ood_flagged[placed].mean()) if placed.any() else None,
+            "per_family": {str(kind): {"n": int((failed & (bench.kinds == kind)).sum()),
+                                       "detection": float(o.detected[failed & (bench.kinds == kind)].mean())}
+                           for kind in np.unique(bench.kinds[failed])}}
 
 
 def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, alpha: float = ALPHA
