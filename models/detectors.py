@@ -11,12 +11,14 @@ from __future__ import annotations
 from models.detector_base import Detector
 from models.one_step import LinearOneStep, TemplateResidualOneStep
 from models.sequence_detectors import LSTMVAE, GRUOneStep, RecurrentConfig
-from models.templates import ConditionalTemplate, NearestDemos, PerSkillZScore
+from models.templates import ConditionalTemplate, CueNearestDemos, CueTemplate, NearestDemos, PerSkillZScore
 
 __all__ = [
     "Detector",
     "PerSkillZScore",
     "ConditionalTemplate",
+    "CueTemplate",
+    "CueNearestDemos",
     "TemplateResidualOneStep",
     "NearestDemos",
     "LinearOneStep",
@@ -32,8 +34,10 @@ def all_detectors() -> list[Detector]:
     return [
         PerSkillZScore(),
         ConditionalTemplate(),
+        CueTemplate(),
         TemplateResidualOneStep(),
         NearestDemos(),
+        CueNearestDemos(),
         LinearOneStep(),
         GRUOneStep(),
         LSTMVAE(),

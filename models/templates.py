@@ -6,8 +6,10 @@
   per step and channel, chosen likewise on the demonstrations only).
 - ``NearestDemos``: per skill, the mean of the k demonstrations whose standardised context is
   nearest (k by leave-one-out error).
+- ``CueTemplate``, ``CueNearestDemos``: the same two on the whole first observation (the cue
+  the Neural ASM gets), so the start posture counts as context too.
 
-Without context channels the last two reduce to the per-skill mean.
+Without context channels ``ConditionalTemplate`` and ``NearestDemos`` reduce to the per-skill mean.
 """
 
 from __future__ import annotations
@@ -140,3 +142,25 @@ class NearestDemos(DetectorBase):
             nearest = np.argsort(dist, axis=1, kind="stable")[:, :k]
             out[rows] = demos[nearest].mean(axis=1)[:, : x.shape[1]]
         return out
+
+
+class CueTemplate(ConditionalTemplate):
+    """The conditional template regressed on the whole cue: the context channels and every other
+    channel of the first observation (the start posture the arm's null space carries forward).
+    The Neural ASM is cued by that same observation."""
+
+    name = "cue_template"
+    label = "conditional template (ridge on the whole first observation)"
+
+    def context(self, x: np.ndarray) -> np.ndarray:
+        return x[:, 0, :]
+
+
+class CueNearestDemos(NearestDemos):
+    """The k nearest demonstrations by the whole first observation (context and start posture)."""
+
+    name = "cue_nearest_demos"
+    label = "k-nearest-demonstration template (whole first observation)"
+
+    def context(self, x: np.ndarray) -> np.ndarray:
+        return x[:, 0, :]

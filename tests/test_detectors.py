@@ -6,6 +6,8 @@ import pytest
 from models.detectors import (
     LSTMVAE,
     ConditionalTemplate,
+    CueNearestDemos,
+    CueTemplate,
     Detector,
     GRUOneStep,
     LinearOneStep,
@@ -72,7 +74,7 @@ def mse(x, expected):
 
 def test_all_detectors_are_distinct_and_follow_the_protocol():
     found = all_detectors()
-    assert len({d.name for d in found}) == len(found) == 7
+    assert len({d.name for d in found}) == len(found) == 9
     assert all(isinstance(d, Detector) and d.label for d in found)
 
 
@@ -185,3 +187,16 @@ def test_one_step_predictor_reads_two_steps_of_an_oscillator():
     one_lag = fit_one_step(x[:40], skills[:40], seed=0, lag_choices=(1,))
     one_lag_error = ((one_lag.predict(x[40:], skills[40:]) - x[40:, 1:]) ** 2).mean()
     assert error < 0.2 * one_lag_error
+
+
+def test_the_whole_cue_tells_the_templates_the_start_posture():
+    """A start posture no context channel reports (an offset the whole episode keeps): only the
+    templates that read the whole first observation can expect it."""
+    rng = np.random.default_rng(5)
+    (demos, skills), (test, test_skills) = varied_task(40, seed=2), varied_task(30, seed=3)
+    for x in (demos, test):
+        x[:, :, C:] += rng.uniform(-1.0, 1.0, (len(x), 1, 1))  # the posture, from step 0 on
+    context_only = [fitted(d, demos, skills) for d in (ConditionalTemplate(), NearestDemos())]
+    whole_cue = [fitted(d, demos, skills) for d in (CueTemplate(), CueNearestDemos())]
+    for narrow, wide in zip(context_only, whole_cue):
+        assert mse(test, wide.expected(test, test_skills)) < 0.5 * mse(test, narrow.expected(test, test_skills))
