@@ -1,6 +1,7 @@
 import runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import os
+import shutil
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -18,6 +19,10 @@ from sim.channels import CHANNEL_NAMES
 def pytest_configure(config: pytest.Config) -> None:
     """Tests never touch the user's data home (read by the commands' defaults when their modules load)."""
     os.environ["NASM_HOME"] = tempfile.mkdtemp(prefix="nasm-home-")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    shutil.rmtree(os.environ.get("NASM_HOME", ""), ignore_errors=True)
 
 
 # Small but real: three skills, distinct starts, noisy repetitions.
