@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from experiments.methods import Method, neural_asm_methods
-from experiments.varied.ceiling import ceiling, ceiling_markdown
+from experiments.varied.ceiling import ceiling, ceiling_markdown, oracle_rates
 from experiments.varied.data import make_benchmark
 from experiments.varied.methods import train_neural_asm
 from experiments.varied.score import headline, score_all
@@ -56,13 +56,19 @@ def test_headline_follows_the_contract(bench, tmp_path):
         detector.fit(norm.normalise(bench.demos.data), bench.demos.labels, bench.context_channels.tolist())
         methods.append(Method(detector.name, detector.label, False, detector.expected))
     summaries, outcomes = score_all(bench, methods, norm)
-    h = headline(summaries, outcomes, bench, "nasm_online")
+    h = headline(summaries, outcomes, bench, "nasm_online", oracle={"visible": 0.5, "consequential": 0.8})
     json.dumps(h)  # plain JSON
     assert h["featured"] == "nasm_online" and h["episode_fa_target"] == 0.01
-    assert set(h["methods"]) == {m.name for m in methods}
-    for values in h["methods"].values():
+    assert set(h["methods"]) == set(h["per_family"]) == set(h["consequential"]["methods"]) == {m.name for m in methods}
+    for name, values in h["methods"].items():
         assert set(values) == {"is_neural_asm", "detection", "normal_episode_false_alarm", "benign_ood_false_alarm",
-                               "auroc", "median_delay_steps"}
+                               "auroc", "median_delay_steps", "oracle_share"}
+        assert values["oracle_share"] == pytest.approx(values["detection"] / 0.5)
+        c = h["consequential"]["methods"][name]
+        assert set(c) == {"is_neural_asm", "detection", "oracle_share", "lead_time_s_median",
+                          "normal_episode_false_alarm", "benign_ood_false_alarm", "auroc"}
+    assert h["consequential"]["oracle_detection"] == 0.8
+    assert h["consequential"]["n"] == (bench.consequence == "consequential").sum()
     best = h["paired"]["baseline"]
     assert not h["methods"][best]["is_neural_asm"]
     assert h["methods"][best]["detection"] == max(v["detection"] for v in h["methods"].values() if not v["is_neural_asm"])
@@ -136,8 +142,12 @@ def test_a_replicate_keeps_the_context_and_redraws_the_noise():
     assert np.abs(replicate.observations[:, joints] - original.observations[:, joints]).max() < np.deg2rad(5)
 
 
-def test_ceiling_oracles_see_what_the_context_explains(bench):
-    result = ceiling(bench, Parallel(2), alpha=0.1)  # 12 calibration episodes: a 1 % threshold would be infinite
+def test_ceiling_oracles_see_what_the_context_explains(bench, tmp_path):
+    result = ceiling(bench, Parallel(2), alpha=0.1, cache=tmp_path)  # 12 calibration episodes: 1 % would be their max
+    # the sweep's oracle reads the replicates the ceiling simulated, and scores them alike
+    rates = oracle_rates(bench, Parallel(1), alpha=0.1, cache=tmp_path)
+    assert rates["visible"] == result["oracles"]["conditional_mean_given_start"]["episode"]["detection"]
+    assert sorted(p.name for p in tmp_path.glob("replicates_*.mcap"))[0] == "replicates_fresh_calibration.mcap"
     assert sum(result["replicates_failed"].values()) == 0
     replay, mean, start = (result["oracles"][k] for k in ("replay", "conditional_mean", "conditional_mean_given_start"))
     assert mean["held_out_mse"] == pytest.approx(replay["held_out_mse"] / 2, rel=1e-5)

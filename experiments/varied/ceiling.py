@@ -27,6 +27,7 @@ benchmark reports for every method) is the floor that no expectation of the epis
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -41,6 +42,7 @@ from models.scoring import energy
 from models.sequences import Sequences
 from pipelines.episodes import as_sequences
 from runtime.parallel import Parallel
+from sim.dataset import load_episodes, write_cache, write_mcap
 from sim.episode import Episode
 from sim.varied import channel_groups, context_columns
 from sim.varied_sets import VariedJob, run_job
@@ -59,7 +61,26 @@ def replicate_jobs(bench: VariedBenchmark, kind: str) -> dict[str, list[VariedJo
             "ood": jobs(bench.ood, out_of_range=True), "faults": jobs(bench.twins)}
 
 
-def simulate_replicates(bench: VariedBenchmark, parallel: Parallel = Parallel()
+def _replicates(jobs: list[VariedJob], name: str, parallel: Parallel, cache: Path | None) -> list[Episode | str]:
+    """Each job's episode (or why the simulation refused it), read from ``cache/<name>.mcap``
+    where an earlier run left it: replicates depend on the episodes' seeds, not the context."""
+    path = None if cache is None else Path(cache) / f"{name}.mcap"
+    refused_path = None if path is None else path.with_suffix(".refused.json")
+    if path is not None and path.exists() and refused_path.exists():
+        done = {(e.skill, e.seed): e for e in load_episodes(path)}
+        refused = {tuple(k): reason for *k, reason in json.loads(refused_path.read_text())}
+        if all((j.skill, j.seed) in done or (j.skill, j.seed) in refused for j in jobs):
+            return [done.get((j.skill, j.seed)) or refused[(j.skill, j.seed)] for j in jobs]
+    results = parallel.map(run_job, [(job,) for job in jobs], desc=name.replace("_", " "), unit="ep", chunksize=8)
+    if path is not None:
+        episodes = [r for r in results if isinstance(r, Episode)]
+        write_mcap(episodes, path)
+        write_cache(episodes, path)
+        refused_path.write_text(json.dumps([[j.skill, j.seed, r] for j, r in zip(jobs, results) if isinstance(r, str)]))
+    return results
+
+
+def simulate_replicates(bench: VariedBenchmark, parallel: Parallel = Parallel(), cache: Path | None = None
                         ) -> tuple[VariedBenchmark, dict[str, dict[str, Sequences]], dict[str, int]]:
     """Both kinds of replicates as Sequences of the benchmark's channels, with the benchmark
     restricted to the episodes that have both (a replicate the simulation refuses, at its
@@ -67,8 +88,7 @@ def simulate_replicates(bench: VariedBenchmark, parallel: Parallel = Parallel()
     results = {}
     for kind in REPLICATES:
         for key, jobs in replicate_jobs(bench, kind).items():
-            results[kind, key] = parallel.map(run_job, [(job,) for job in jobs],
-                                              desc=f"{kind} replicates, {key}", unit="ep", chunksize=8)
+            results[kind, key] = _replicates(jobs, f"replicates_{kind}_{key}", parallel, cache)
     kept = {key: np.logical_and.reduce([[isinstance(r, Episode) for r in results[kind, key]] for kind in REPLICATES])
             for key in SETS}
     bench = _keep(bench, kept)
@@ -85,6 +105,7 @@ def _keep(bench: VariedBenchmark, kept: dict[str, np.ndarray]) -> VariedBenchmar
     f = kept["faults"]
     return replace(bench, precision=bench.precision.take(kept["precision"]),
                    calibration=bench.calibration.take(kept["calibration"]), test=bench.test.take(kept["test"]),
+                   test_success=bench.test_success[kept["test"]],
                    ood=bench.ood.take(kept["ood"]), ood_success=bench.ood_success[kept["ood"]], faults=bench.faults.take(f),
                    twins=bench.twins.take(f), kinds=bench.kinds[f], fault_step=bench.fault_step[f], onset=bench.onset[f],
                    visible=bench.visible[f], consequence=bench.consequence[f])
@@ -126,12 +147,24 @@ def _scored(bench: VariedBenchmark, errors: dict[str, np.ndarray], alpha: float,
     return {rule: summary(o, bench) for rule, o in outcomes(e, bench.onset, alpha).items()}
 
 
+def oracle_rates(bench: VariedBenchmark, parallel: Parallel = Parallel(), alpha: float = ALPHA,
+                 cache: Path | None = None) -> dict:
+    """What the exact expectation given each episode's context and start posture detects, by
+    the benchmark's episode rule: of the visible faults and of the consequential ones (on the
+    episodes whose replicates simulated), the reference every method's rate is shared against."""
+    kept, reps, dropped = simulate_replicates(bench, parallel, cache)
+    errors = oracle_errors(kept, reps, Normaliser.fit(kept.demos.data))["conditional_mean_given_start"]
+    s = _scored(kept, errors, alpha, SCORING.error_std_floor)["episode"]
+    return {"oracle": "conditional_mean_given_start", "visible": s["detection"],
+            "consequential": s["consequential"]["detection"], "replicates_failed": dropped}
+
+
 def ceiling(bench: VariedBenchmark, parallel: Parallel = Parallel(), alpha: float = ALPHA,
-            floors: tuple[float, ...] = LOWER_FLOORS) -> dict:
+            floors: tuple[float, ...] = LOWER_FLOORS, cache: Path | None = None) -> dict:
     """Every oracle's summaries (the benchmark's keys, at the scoring's own spread floor),
     held-out error and explained variance; its detection with the spreads floored lower
     (``floors``: how much the floor, not the noise, hides); and the episodes dropped."""
-    bench, reps, dropped = simulate_replicates(bench, parallel)
+    bench, reps, dropped = simulate_replicates(bench, parallel, cache)
     norm = Normaliser.fit(bench.demos.data)
     result: dict = {"context": bench.context, "alpha": alpha, "replicates_failed": dropped,
                     "spread_floor": SCORING.error_std_floor, "oracles": {}}
@@ -147,7 +180,7 @@ def ceiling(bench: VariedBenchmark, parallel: Parallel = Parallel(), alpha: floa
 
 def run_ceiling(data_dir: Path, context: str, *, parallel: Parallel = Parallel()) -> dict:
     """``ceiling`` of the varied benchmark in ``data_dir`` (simulated there when missing)."""
-    return ceiling(load_varied_benchmark(data_dir, context, parallel), parallel)
+    return ceiling(load_varied_benchmark(data_dir, context, parallel), parallel, cache=data_dir)
 
 
 def ceiling_markdown(result: dict) -> str:

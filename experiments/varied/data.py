@@ -44,6 +44,7 @@ class VariedBenchmark:
     onset: np.ndarray  # (F,) first step departing from the twin
     visible: np.ndarray  # (F,) bool
     consequence: np.ndarray  # (F,) experiments.twins.CONSEQUENCES
+    test_success: np.ndarray  # (N_test,) bool: the normal test episode placed its cube
     ood_success: np.ndarray  # (N_ood,) bool: the benign out-of-range run placed its cube
     dropped: dict  # set -> episodes the simulation refused (velocity limits, IK)
 
@@ -83,6 +84,7 @@ def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict |
         ood=as_sequences(sets["ood"], columns),
         faults=fault_arr, twins=twin_arr, kinds=np.array([e.fault.kind for e in faults]),
         fault_step=np.array([e.fault.step for e in faults]), onset=onset, visible=visible, consequence=consequence,
+        test_success=np.array([e.success for e in sets["normal"]])[len(precision) + len(calibration):],
         ood_success=np.array([e.success for e in sets["ood"]]), dropped=dict(dropped or {}))
 
 

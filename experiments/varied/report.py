@@ -20,7 +20,7 @@ def _facts(result: VariedResult) -> dict:
                          "test": len(b.test), "ood": len(b.ood), "faults": len(b.faults),
                          "visible_faults": int(b.visible.sum())},
             "consequences": {str(k): int((b.consequence == k).sum()) for k in np.unique(b.consequence)},
-            "ood_placed": int(b.ood_success.sum()),
+            "test_placed": int(b.test_success.sum()), "ood_placed": int(b.ood_success.sum()),
             "dropped_by_simulation": b.dropped}
 
 
@@ -64,6 +64,16 @@ def write_markdown(result: VariedResult, path: Path) -> None:
     for name in order:
         fam = result.summaries[name]["episode"]["per_family"]
         lines.append(f"| {result.summaries[name]['label']} | " + " | ".join(_pct(f["detection_visible"]) for f in fam.values()) + " |")
+    oracle, c = h.get("oracle") or {}, h["consequential"]
+    if oracle:
+        featured = h["methods"][h["featured"]]
+        lines += ["", f"The oracle (the exact expectation given each episode's context and start posture, "
+                  f"{oracle['oracle']}) detects {_pct(oracle['visible'])} % of visible and "
+                  f"{_pct(oracle['consequential'])} % of consequential faults; the featured Neural ASM "
+                  f"{_pct(featured['oracle_share'])} % and {_pct(c['methods'][h['featured']]['oracle_share'])} % of "
+                  f"that. Paired on consequential faults against {c['paired']['baseline']}: Neural ASM alone "
+                  f"{c['paired']['nasm_only']}, baseline alone {c['paired']['baseline_only']}, exact McNemar p = "
+                  f"{c['paired']['p_value']:.3g}."]
     counts = _facts(result)["consequences"]
     lines += ["", f"Scored by consequence ({', '.join(f'{n} {k}' for k, n in counts.items())}): faults whose task "
               "failed where their twin placed the cube, caught at the same threshold; lead time from the first flag "

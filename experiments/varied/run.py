@@ -7,6 +7,10 @@ varied-task service ships, is the default network in online recall, decided befo
 episode was scored: on a varied task the hidden state must follow the episode (its speed, its
 route), which offline recall from a one-step cue cannot. Its preset, `ROBUST`, is the default
 network trained on noisy observations, chosen by held-out error (models/config.py).
+
+Every rate is also given as a share of the oracle's: the exact expectation given each episode's
+context and start posture (experiments/varied/ceiling.py), whose replicate episodes are
+simulated once into the data folder and reused.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from experiments.varied.ceiling import oracle_rates
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.methods import Method, neural_asm_methods
 from experiments.varied.methods import baseline_methods, train_neural_asm
@@ -48,5 +53,6 @@ def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = RO
         methods += neural_asm_methods(model, name, label)
     methods += baseline_methods(bench, norm)
     summaries, results = score_all(bench, methods, norm, alpha)
-    return VariedResult(bench, summaries, results, headline(summaries, results, bench, FEATURED, alpha),
-                        {name: config.to_dict() for name, (_, config) in configs.items()})
+    oracle = oracle_rates(bench, parallel, alpha, cache=data_dir)
+    head = headline(summaries, results, bench, FEATURED, alpha, oracle) | {"oracle": oracle}
+    return VariedResult(bench, summaries, results, head, {name: config.to_dict() for name, (_, config) in configs.items()})

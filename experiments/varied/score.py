@@ -119,14 +119,14 @@ def consequential(o: Outcome, bench: VariedBenchmark) -> dict:
     are: caught at the episode threshold, how long before the episode's end (when success is
     judged) the first flag came, and the AUROC of their score against every successful run
     (the normal test episodes and the benign out-of-range runs that placed their cube)."""
-    failed, placed = bench.consequence == "consequential", bench.ood_success
+    failed, normal_placed, placed = bench.consequence == "consequential", bench.test_success, bench.ood_success
     if not failed.any():
         return {"n": 0, "detection": None, "lead_time_s_median": None, "auroc": None,
                 "benign_ood_false_alarm": None, "per_family": {}}
     caught = failed & o.detected
     lead_s = (bench.faults.data.shape[1] - o.first[caught]) / SIM.timing.observation_hz
-    scores = np.concatenate([o.fault_score[failed], o.normal_score, o.ood_score[placed]])
-    labels = np.concatenate([np.ones(failed.sum()), np.zeros(len(o.normal_score) + placed.sum())])
+    scores = np.concatenate([o.fault_score[failed], o.normal_score[normal_placed], o.ood_score[placed]])
+    labels = np.concatenate([np.ones(failed.sum()), np.zeros(normal_placed.sum() + placed.sum())])
     return {"n": int(failed.sum()), "detection": float(caught.sum() / failed.sum()),
             "lead_time_s_median": float(np.median(lead_s)) if caught.any() else None,
             "auroc": float(roc_auc_score(labels, scores)),
@@ -150,18 +150,44 @@ def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, a
     return summaries, results
 
 
-def headline(summaries: dict, results: dict, bench: VariedBenchmark, featured: str, alpha: float = ALPHA) -> dict:
-    """The contract's headline: the featured Neural ASM, every method, and an exact McNemar
-    test against the best other method (by detection of visible faults)."""
+def _share(rate: float | None, oracle: float | None) -> float | None:
+    return None if rate is None or not oracle else rate / oracle
+
+
+def _paired(results: dict, featured: str, best: str, rows: np.ndarray) -> dict:
+    """Exact McNemar test of the featured method against ``best`` on the faults ``rows``."""
+    ours, theirs = results[(featured, "episode")].detected[rows], results[(best, "episode")].detected[rows]
+    nasm_only, baseline_only = int((ours & ~theirs).sum()), int((~ours & theirs).sum())
+    return {"baseline": best, "nasm_only": nasm_only, "baseline_only": baseline_only,
+            "p_value": mcnemar_exact(nasm_only, baseline_only)}
+
+
+def headline(summaries: dict, results: dict, bench: VariedBenchmark, featured: str, alpha: float = ALPHA,
+             oracle: dict | None = None) -> dict:
+    """The contract's headline: the featured Neural ASM, every method, each rate beside the
+    oracle's (``oracle``: its ``visible`` and ``consequential`` detection, None when not scored),
+    and exact McNemar tests against the best other method, on visible and on consequential faults."""
     rule = "episode"
+    oracle = oracle or {}
     methods = {name: {"is_neural_asm": s["is_neural_asm"], **{k: s[rule][k] for k in (
-        "detection", "normal_episode_false_alarm", "benign_ood_false_alarm", "auroc", "median_delay_steps")}}
+        "detection", "normal_episode_false_alarm", "benign_ood_false_alarm", "auroc", "median_delay_steps")},
+        "oracle_share": _share(s[rule]["detection"], oracle.get("visible"))}
         for name, s in summaries.items()}
     rivals = [n for n, s in summaries.items() if not s["is_neural_asm"]]
     best = max(rivals, key=lambda n: summaries[n][rule]["detection"])
-    visible = bench.visible
-    ours, theirs = results[(featured, rule)].detected[visible], results[(best, rule)].detected[visible]
-    nasm_only, baseline_only = int((ours & ~theirs).sum()), int((~ours & theirs).sum())
+    consequences = {name: s[rule]["consequential"] for name, s in summaries.items()}
+    best_consequential = max(rivals, key=lambda n: consequences[n]["detection"] or 0.0)
     return {"featured": featured, "episode_fa_target": alpha, "methods": methods,
-            "paired": {"baseline": best, "nasm_only": nasm_only, "baseline_only": baseline_only,
-                       "p_value": mcnemar_exact(nasm_only, baseline_only)}}
+            "paired": _paired(results, featured, best, bench.visible),
+            "per_family": {name: {family: f["detection_visible"] for family, f in s[rule]["per_family"].items()}
+                           for name, s in summaries.items()},
+            "consequential": {
+                "featured": featured, "n": int((bench.consequence == "consequential").sum()),
+                "oracle_detection": oracle.get("consequential"),
+                "methods": {name: {"is_neural_asm": summaries[name]["is_neural_asm"], "detection": c["detection"],
+                                   "oracle_share": _share(c["detection"], oracle.get("consequential")),
+                                   "lead_time_s_median": c["lead_time_s_median"],
+                                   "normal_episode_false_alarm": summaries[name][rule]["normal_episode_false_alarm"],
+                                   "benign_ood_false_alarm": c["benign_ood_false_alarm"], "auroc": c["auroc"]}
+                            for name, c in consequences.items()},
+                "paired": _paired(results, featured, best_consequential, bench.consequence == "consequential")}}
