@@ -31,11 +31,13 @@ from models.tpc import TemporalPC
 class BPTTConfig:
     """How the weights are fitted; the model's form is the TemporalPC's (its TPCConfig)."""
 
-    epochs: int = 400
-    learning_rate: float = 1e-3
+    # Chosen on the precision split (observed context, seed 0): 120 epochs at 2e-3 without noise
+    # reached a one-step error of 0.3236 there, 150 epochs with the robust preset's noise 0.3222.
+    epochs: int = 150
+    learning_rate: float = 2e-3
     lr_final_fraction: float = 0.01  # cosine decay, as models.train.learning_rate
     batch_size: int = 40  # sequences per update (demonstrations are shuffled every epoch)
-    training_noise: float = 0.0  # std of Gaussian noise on the observations the network sees
+    training_noise: float = 0.35  # std of Gaussian noise on the observations the relaxations see (as ROBUST)
     clip_norm: float = 1.0  # gradient norm clipping: long unrolls can spike
     eval_every: int = 10  # epochs between validation errors (the kept epoch is the best one)
     seed: int = 0

@@ -34,7 +34,8 @@ class VariedResult:
 
 
 def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = ROBUST, paper_epochs: int = 200,
-               workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA) -> VariedResult:
+               workers: int = 2, backend: Backend = "processes", alpha: float = ALPHA,
+               diagnostics: bool = True) -> VariedResult:
     bench = load_varied_benchmark(data_dir, context, workers, backend)
     configs = {"nasm": ("Neural ASM, default (robust preset)", fast),
                "nasm_paper": ("Neural ASM, paper configuration", FAITHFUL.with_(epochs=paper_epochs))}
@@ -47,5 +48,10 @@ def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = RO
         methods += neural_asm_methods(model, name, label)
     methods += baseline_methods(bench, norm)
     summaries, results = score_all(bench, methods, norm, alpha)
-    return VariedResult(bench, summaries, results, headline(summaries, results, bench, FEATURED, alpha),
-                        {name: config.to_dict() for name, (_, config) in configs.items()})
+    head = headline(summaries, results, bench, FEATURED, alpha)
+    if diagnostics:
+        # A measurement beyond the paper, kept out of the methods and the paired test (docs/diagnostic_bptt.md).
+        from experiments.varied.diagnostic import headline_diagnostics
+
+        head["diagnostics"] = headline_diagnostics(bench, norm, fast, alpha=alpha)
+    return VariedResult(bench, summaries, results, head, {name: config.to_dict() for name, (_, config) in configs.items()})
