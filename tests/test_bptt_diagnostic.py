@@ -81,6 +81,7 @@ def test_bptt_gradient_matches_finite_differences():
             assert float(grad[i]) == pytest.approx((up - down) / (2 * eps), rel=1e-4, abs=1e-9)
 
 
+@pytest.mark.slow  # trains for ~10-25 s on a shared 2-core machine
 def test_bptt_training_lowers_the_served_one_step_error():
     rng = np.random.default_rng(7)
     t = np.linspace(0, 2 * np.pi, 10)

@@ -67,10 +67,10 @@ def online_method(model: NeuralASM, name: str, label: str) -> Method:
 def best_linear(bench: VariedBenchmark, norm: Normaliser) -> dict:
     """The ridge one-step predictor (lags, ridge, one model or one per true skill) with the lowest
     held-out error on the precision split, fitted on the demonstrations; also its error on the
-    test split, which no choice saw."""
+    test split, which no choice saw, and on the demonstrations it was fitted on."""
     demos, skills = norm.normalise(bench.demos.data), bench.demos.labels.astype(str)
     split = {key: (norm.normalise(getattr(bench, key).data), getattr(bench, key).labels.astype(str))
-             for key in ("precision", "test")}
+             for key in ("precision", "test", "demos")}
     best: dict = {"held_out_mse": np.inf}
     for lags in ONE_STEP_LAGS:
         embedded = delay_embed(demos, lags)
@@ -84,6 +84,7 @@ def best_linear(bench: VariedBenchmark, norm: Normaliser) -> dict:
                     best = {"lags": lags, "ridge": ridge, "per_skill": per_skill, "held_out_mse": held_out["all"],
                             "held_out_mse_per_group": held_out,
                             "test_mse_per_group": held_out_error(errors["test"], bench.channel_names),
+                            "training_mse_per_group": held_out_error(errors["demos"], bench.channel_names),
                             "per_step_joints": _per_step(errors["precision"], bench.channel_names)}
     return best
 

@@ -43,7 +43,7 @@ def diagnostic_markdown(results: list[dict]) -> str:
         lines.append(f"| {r['context']} | best linear ({lin['lags']} lags, ridge {lin['ridge']:g}, "
                      f"{'per skill' if lin['per_skill'] else 'pooled'}) | - | {lin['held_out_mse']:.3f} | "
                      f"{lin['held_out_mse_per_group']['joints']:.3f} | {lin['test_mse_per_group']['joints']:.3f} | "
-                     "- | - | - | - |")
+                     f"{lin['training_mse_per_group']['joints']:.3f} | - | - | - |")
     return "\n".join(lines) + "\n"
 
 
@@ -97,3 +97,19 @@ def write_figure(results: list[dict], path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def main(paths: list[str], figure: str) -> None:
+    """Print both tables and write the figure for several contexts' diagnostic.json files."""
+    import json
+
+    results = [json.loads(Path(p).read_text()) for p in paths]
+    print(diagnostic_markdown(results))
+    print(per_group_markdown(results))
+    print(write_figure(results, Path(figure)))
+
+
+if __name__ == "__main__":
+    import sys
+
+    main(sys.argv[1:-1], sys.argv[-1])
