@@ -9,6 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 GROUPS = ("joints", "end effector", "fingers", "finger forces and torques", "perceived context")
+SHORT = {"finger forces and torques": "forces, torques", "perceived context": "context"}
 
 
 def spread(rows: list[dict], get) -> tuple[float, float, float]:
@@ -21,6 +22,10 @@ def _fmt(stats: tuple[float, float, float], pct: bool = False) -> str:
     scale, digits = (100, 1) if pct else (1, 3)
     mean, low, high = (scale * v for v in stats)
     return f"{mean:.{digits}f} ({low:.{digits}f}-{high:.{digits}f})"
+
+
+def _joints(row: dict, key: str) -> str:
+    return f"{row[key]['joints']:.3f}" if key in row else "-"
 
 
 def diagnostic_markdown(results: list[dict]) -> str:
@@ -43,7 +48,7 @@ def diagnostic_markdown(results: list[dict]) -> str:
         lines.append(f"| {r['context']} | best linear ({lin['lags']} lags, ridge {lin['ridge']:g}, "
                      f"{'per skill' if lin['per_skill'] else 'pooled'}) | - | {lin['held_out_mse']:.3f} | "
                      f"{lin['held_out_mse_per_group']['joints']:.3f} | {lin['test_mse_per_group']['joints']:.3f} | "
-                     f"{lin['training_mse_per_group']['joints']:.3f} | - | - | - |")
+                     f"{_joints(lin, 'training_mse_per_group')} | - | - | - |")
     return "\n".join(lines) + "\n"
 
 
@@ -75,7 +80,7 @@ def write_figure(results: list[dict], path: Path) -> Path:
         lin = r["best_linear"]
         row[0].bar(x + 0.27, [lin["held_out_mse_per_group"][g] for g in groups], 0.27, color=colours["linear"],
                    label=f"best linear ({lin['lags']} lags)")
-        row[0].set_xticks(x, [g.replace(" and ", " & ") for g in groups], fontsize=8)
+        row[0].set_xticks(x, [SHORT.get(g, g) for g in groups], fontsize=8)
         row[0].set_yscale("log")
         row[0].set_ylabel("held-out one-step MSE")
         row[0].set_title(f"{r['context']} context: per channel group (precision split)", fontsize=10)
