@@ -129,3 +129,17 @@ def test_ceiling_oracles_see_what_the_context_explains(bench):
     wrong_cube = mean["episode"]["per_family"]["wrong_cube"]
     assert wrong_cube["visible"] > 0 and wrong_cube["detection_visible"] >= 0.5  # a cube 6-10 cm off the reported pose
     assert set(mean["lower_floors"]) == {"0.01", "0.002"} and "floor 0.002" in ceiling_markdown(result)
+
+
+def test_headline_diagnostics_follow_the_contract(bench):
+    from experiments.varied.bptt import BPTTConfig
+    from experiments.varied.diagnostic import headline_diagnostics
+    from models.normaliser import Normaliser
+
+    d = headline_diagnostics(bench, Normaliser.fit(bench.demos.data), FAST.with_(hidden_size=16),
+                             bptt=BPTTConfig(epochs=2, batch_size=8, eval_every=1))
+    json.dumps(d)  # plain JSON
+    assert d["bptt"]["held_out_mse"] > 0 and 0.0 <= d["bptt"]["detection"] <= 1.0
+    assert d["bptt"]["held_out_mse_per_group"]["all"] == d["bptt"]["held_out_mse"]
+    assert d["best_linear"]["lags"] in (1, 2, 3)
+    assert d["best_linear_held_out_mse"] == d["best_linear"]["held_out_mse_per_group"]["all"] > 0

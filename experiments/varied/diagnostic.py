@@ -123,10 +123,10 @@ def measure(bench: VariedBenchmark, model: NeuralASM, name: str, label: str, nor
 
 
 def headline_diagnostics(bench: VariedBenchmark, norm: Normaliser, config: TPCConfig = ROBUST, seed: int = 0,
-                         alpha: float = ALPHA) -> dict:
+                         alpha: float = ALPHA, bptt: BPTTConfig = BPTT) -> dict:
     """The sweep headline's ``diagnostics``: one BPTT training of the featured network's form and
     the best linear predictor (several trainings: ``nasm faults --task varied --diagnostic``)."""
-    model = train_bptt_asm(bench, config, BPTTConfig(**{**vars(BPTT), "seed": seed}))
+    model = train_bptt_asm(bench, config, BPTTConfig(**{**vars(bptt), "seed": seed}))
     bptt = measure(bench, model, "bptt_online", LABEL, norm, alpha)
     linear = best_linear(bench, norm)
     return {"bptt": {"held_out_mse": bptt["held_out_mse"], "detection": bptt["detection"],
