@@ -58,8 +58,8 @@ def relax(prior: torch.Tensor, x: torch.Tensor, w_f: torch.Tensor, scale: torch.
 
     The curvature I + J^T J, J = Pi^1/2 W_F diag(f'(prior)), is factored once at the prior and
     solved in observation space (Woodbury); a step that would raise F is halved up to
-    MAX_HALVINGS times, and a row whose F still rises keeps its z. The accepted halving is
-    chosen per row (a gather): piecewise, so autograd differentiates the branch taken.
+    MAX_HALVINGS times, and a row whose F still rises keeps its z. Which halving a row accepts is
+    chosen without gradient: piecewise, so autograd differentiates the branch taken.
     """
     w = w_f * scale[:, None]
     target = x * scale
