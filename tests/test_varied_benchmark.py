@@ -143,3 +143,5 @@ def test_headline_diagnostics_follow_the_contract(bench):
     assert d["bptt"]["held_out_mse_per_group"]["all"] == d["bptt"]["held_out_mse"]
     assert d["best_linear"]["lags"] in (1, 2, 3)
     assert d["best_linear_held_out_mse"] == d["best_linear"]["held_out_mse_per_group"]["all"] > 0
+    # a choice among more models (one per skill too) is never worse on the split it is chosen on
+    assert d["best_linear_held_out_mse"] <= d["best_linear_not_told_the_skill"]["held_out_mse_per_group"]["all"]

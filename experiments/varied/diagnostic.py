@@ -64,17 +64,20 @@ def online_method(model: NeuralASM, name: str, label: str) -> Method:
     return Method(name, label, True, lambda x, _skills: x - model.errors(model.normaliser.denormalise(x), "online", 1))
 
 
-def best_linear(bench: VariedBenchmark, norm: Normaliser) -> dict:
+def best_linear(bench: VariedBenchmark, norm: Normaliser, per_skill_choices: tuple[bool, ...] = (False, True)) -> dict:
     """The ridge one-step predictor (lags, ridge, one model or one per true skill) with the lowest
     held-out error on the precision split, fitted on the demonstrations; also its error on the
-    test split, which no choice saw, and on the demonstrations it was fitted on."""
+    test split, which no choice saw, and on the demonstrations it was fitted on.
+
+    ``per_skill_choices=(False,)``: one model for every skill, which, like the network, is not
+    told the skill (the benchmark's baselines are)."""
     demos, skills = norm.normalise(bench.demos.data), bench.demos.labels.astype(str)
     split = {key: (norm.normalise(getattr(bench, key).data), getattr(bench, key).labels.astype(str))
              for key in ("precision", "test", "demos")}
     best: dict = {"held_out_mse": np.inf}
     for lags in ONE_STEP_LAGS:
         embedded = delay_embed(demos, lags)
-        for per_skill in (False, True):
+        for per_skill in per_skill_choices:
             for ridge in ONE_STEP_RIDGES:
                 models = ({s: RidgeOneStep.fit(embedded[skills == s], ridge) for s in np.unique(skills)} if per_skill
                           else dict.fromkeys(np.unique(skills), RidgeOneStep.fit(embedded, ridge)))
@@ -128,12 +131,13 @@ def headline_diagnostics(bench: VariedBenchmark, norm: Normaliser, config: TPCCo
     the best linear predictor (several trainings: ``nasm faults --task varied --diagnostic``)."""
     model = train_bptt_asm(bench, config, BPTTConfig(**{**vars(bptt), "seed": seed}))
     bptt = measure(bench, model, "bptt_online", LABEL, norm, alpha)
-    linear = best_linear(bench, norm)
+    linear, pooled = best_linear(bench, norm), best_linear(bench, norm, (False,))
     return {"bptt": {"held_out_mse": bptt["held_out_mse"], "detection": bptt["detection"],
                      "held_out_mse_per_group": bptt["held_out_mse_per_group"], "seed": seed,
                      "label": LABEL},
             "best_linear_held_out_mse": linear["held_out_mse"],
-            "best_linear": {k: linear[k] for k in ("lags", "ridge", "per_skill", "held_out_mse_per_group")}}
+            "best_linear": {k: linear[k] for k in ("lags", "ridge", "per_skill", "held_out_mse_per_group")},
+            "best_linear_not_told_the_skill": {k: pooled[k] for k in ("lags", "ridge", "held_out_mse_per_group")}}
 
 
 def run_diagnostic(data_dir: Path, context: str, seeds: tuple[int, ...] = (0, 1, 2), bptt: BPTTConfig = BPTT,
@@ -148,6 +152,7 @@ def run_diagnostic(data_dir: Path, context: str, seeds: tuple[int, ...] = (0, 1,
                     "hebbian": [], "bptt": [], "seconds": {}}
     start = time.perf_counter()
     result["best_linear"] = best_linear(bench, norm)
+    result["best_linear_not_told_the_skill"] = best_linear(bench, norm, (False,))
     result["seconds"]["linear"] = round(time.perf_counter() - start, 1)
     for seed in seeds:
         for kind in ("hebbian", "bptt"):
