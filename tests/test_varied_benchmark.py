@@ -191,3 +191,19 @@ def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path):
     after_onset = np.arange(faults.shape[1])[None] >= bench.onset[:, None]
     np.testing.assert_array_equal((faults & after_onset).any(axis=1), benchmark.detected)
     assert benchmark.detected.any() or benchmark.normal_flagged.any()  # the comparison decided something
+
+
+def test_headline_diagnostics_follow_the_contract(bench):
+    from experiments.varied.bptt import BPTTConfig
+    from experiments.varied.diagnostic import headline_diagnostics
+    from models.normaliser import Normaliser
+
+    d = headline_diagnostics(bench, Normaliser.fit(bench.demos.data), FAST.with_(hidden_size=16),
+                             bptt=BPTTConfig(epochs=2, batch_size=8, eval_every=1))
+    json.dumps(d)  # plain JSON
+    assert d["bptt"]["held_out_mse"] > 0 and 0.0 <= d["bptt"]["detection"] <= 1.0
+    assert d["bptt"]["held_out_mse_per_group"]["all"] == d["bptt"]["held_out_mse"]
+    assert d["best_linear"]["lags"] in (1, 2, 3)
+    assert d["best_linear_held_out_mse"] == d["best_linear"]["held_out_mse_per_group"]["all"] > 0
+    # a choice among more models (one per skill too) is never worse on the split it is chosen on
+    assert d["best_linear_held_out_mse"] <= d["best_linear_not_told_the_skill"]["held_out_mse_per_group"]["all"]

@@ -40,6 +40,11 @@ def faults(
                                   "(experiments/varied/ablation.py) and write ablation.json and ablation.md"),
     ceiling: bool = typer.Option(False, "--ceiling", help="varied task: score two oracles that know each episode's "
                                  "exact context (experiments/varied/ceiling.py); write ceiling.json and ceiling.md"),
+    diagnostic: bool = typer.Option(False, "--diagnostic", help="varied task: train the default network by its "
+                                    "Hebbian rule and by BPTT (a measurement beyond the paper, "
+                                    "experiments/varied/diagnostic.py), --seeds trainings each, against the best linear "
+                                    "one-step predictor; write diagnostic.json and diagnostic.md"),
+    seeds: int = typer.Option(3, min=1, help="trainings per learner for --diagnostic"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
     workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
@@ -50,6 +55,8 @@ def faults(
         out, data = out or home_path(f"varied_{context.value}"), data or home_path("data_varied")
         if ceiling:
             _ceiling(context.value, out, data, parallel=parallel)
+        elif diagnostic:
+            _diagnostic(context.value, out, data, seeds, parallel=parallel)
         elif ablation:
             _ablation(context.value, out, data, fast_epochs, parallel=parallel)
         else:
@@ -96,6 +103,20 @@ def _ablation(context: str, out: Path, data: Path, epochs: int | None, *, parall
     (out / "ablation.json").write_text(json.dumps(rows, indent=1))
     (out / "ablation.md").write_text(ablation_markdown(rows, context))
     typer.echo((out / "ablation.md").read_text())
+
+
+def _diagnostic(context: str, out: Path, data: Path, seeds: int, *, parallel: Parallel) -> None:
+    from experiments.varied.diagnostic import run_diagnostic
+    from experiments.varied.diagnostic_report import diagnostic_markdown, per_group_markdown
+
+    start = time.perf_counter()
+    result = run_diagnostic(data, context, tuple(range(seeds)), parallel=parallel)
+    result["seconds"]["total"] = round(time.perf_counter() - start, 1)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "diagnostic.json").write_text(json.dumps(result, indent=1))
+    (out / "diagnostic.md").write_text(diagnostic_markdown([result]) + "\n" + per_group_markdown([result]))
+    typer.echo((out / "diagnostic.md").read_text())
+    typer.echo(f"wrote {out} in {result['seconds']['total']:.0f} s")
 
 
 def _ceiling(context: str, out: Path, data: Path, *, parallel: Parallel) -> None:

@@ -58,6 +58,7 @@ def write_markdown(result: VariedResult, path: Path) -> None:
               "split's normal episodes after their first step.", "",
               f"Paired against the best other method ({p['baseline']}): Neural ASM alone {p['nasm_only']}, "
               f"baseline alone {p['baseline_only']}, exact McNemar p = {p['p_value']:.3g}.", "",
+              *_diagnostics_lines(h),
               "Detection of visible faults per family (episode threshold):", "",
               "| method | " + " | ".join(result.summaries[order[0]]["episode"]["per_family"]) + " |",
               "|---|" + "---|" * len(result.summaries[order[0]]["episode"]["per_family"])]
@@ -92,6 +93,18 @@ def write_markdown(result: VariedResult, path: Path) -> None:
         err = result.summaries[name]["held_out_mse_per_group"]
         lines.append(f"| {result.summaries[name]['label']} | " + " | ".join(f"{err[g]:.3f}" for g in groups) + " |")
     path.write_text("\n".join(lines) + "\n")
+
+
+def _diagnostics_lines(h: dict) -> list[str]:
+    """The headline's diagnostic (beyond the paper; docs/diagnostic_bptt.md), when it was run."""
+    d = h.get("diagnostics")
+    if d is None:
+        return []
+    b, lin = d["bptt"], d["best_linear"]
+    return [f"Diagnostic, not a method: the default network trained by BPTT through its online recall (one "
+            f"training) has held-out error {b['held_out_mse']:.3f} and detects {_pct(b['detection'])} % of visible "
+            f"faults; the best linear one-step predictor ({lin['lags']} lags, chosen on the precision split) "
+            f"{d['best_linear_held_out_mse']:.3f}.", ""]
 
 
 def write_figures(result: VariedResult, out: Path) -> list[Path]:

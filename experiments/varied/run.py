@@ -40,7 +40,7 @@ class VariedResult:
 
 
 def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = ROBUST, paper_epochs: int = 200,
-               *, parallel: Parallel = Parallel(), alpha: float = ALPHA) -> VariedResult:
+               *, parallel: Parallel = Parallel(), alpha: float = ALPHA, diagnostics: bool = True) -> VariedResult:
     bench = load_varied_benchmark(data_dir, context, parallel)
     configs = {"nasm": ("Neural ASM, default (robust preset)", fast),
                "nasm_paper": ("Neural ASM, paper configuration", FAITHFUL.with_(epochs=paper_epochs))}
@@ -55,4 +55,9 @@ def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = RO
     summaries, results = score_all(bench, methods, norm, alpha)
     oracle = oracle_rates(bench, parallel, alpha, cache=data_dir)
     head = headline(summaries, results, bench, FEATURED, alpha, oracle) | {"oracle": oracle}
+    if diagnostics:
+        # A measurement beyond the paper, kept out of the methods and the paired tests (docs/diagnostic_bptt.md).
+        from experiments.varied.diagnostic import headline_diagnostics
+
+        head["diagnostics"] = headline_diagnostics(bench, norm, fast, alpha=alpha)
     return VariedResult(bench, summaries, results, head, {name: config.to_dict() for name, (_, config) in configs.items()})
