@@ -9,9 +9,8 @@ command -v strip >/dev/null || { echo "slim.sh: strip not found (apt-get install
 # torch's C++ headers, test suite and test programs (torch_shm_manager stays: shared memory).
 rm -rf "$site/torch/include" "$site/torch/test" "$site"/torch/lib/lib*test*.so
 find "$site/torch/bin" -type f ! -name torch_shm_manager -delete
-# pyarrow's Flight RPC, S3 and Substrait libraries and its C++ tests: pyarrow loads them only when
-# asked for (pyarrow.flight, S3FileSystem, pyarrow.substrait).
-rm -f "$site"/pyarrow/*flight* "$site"/pyarrow/*s3* "$site"/pyarrow/*substrait* "$site"/pyarrow/*cpp_tests*
+# pyarrow's C++ tests (its other libraries stay: pyarrow.lib links Flight, S3, Substrait).
+rm -f "$site"/pyarrow/_pyarrow_cpp_tests*
 # Third-party test suites: never imported by their packages.
 find "$site" -depth -type d -name tests -prune -exec rm -rf {} +
 # dm_control's walker and maze assets: the project uses its MJCF library only.
