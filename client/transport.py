@@ -19,6 +19,7 @@ from websockets.sync.client import connect as ws_connect
 from runtime.net import is_loopback
 
 API_KEY_HEADER = "X-API-Key"
+SESSION_ID_HEADER = "X-Session-Id"  # as service/schemas.py
 TIMEOUT_S = 30.0
 
 
@@ -125,8 +126,10 @@ class HttpTransport:
         self.session_id: str | None = None
 
     def _request(self, method: str, path: str, body: dict[str, Any] | None = None) -> dict[str, Any]:
+        # the session's id in a header too: a load balancer routes the session's steps by it
+        headers = {SESSION_ID_HEADER: self.session_id} if self.session_id and path != "/sessions" else None
         try:
-            response = self.client.request(method, path, json=body)
+            response = self.client.request(method, path, json=body, headers=headers)
         except httpx.TransportError as exc:
             raise ServiceLost(f"{method} {path}: {exc!r}") from exc
         if response.status_code >= 400:

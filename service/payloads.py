@@ -67,5 +67,5 @@ def step_payload(session: Session, o: StepOutcome) -> dict[str, Any]:
     return {**_timed(session, o), **_predict(session, o), **_fault(session, o)}
 
 
-def json_response(payload: dict[str, Any]) -> Response:
-    return Response(orjson.dumps(payload), media_type="application/json")
+def json_response(payload: dict[str, Any], headers: dict[str, str] | None = None) -> Response:
+    return Response(orjson.dumps(payload), media_type="application/json", headers=headers)

@@ -18,6 +18,7 @@ from models.fault import ThresholdKind
 BOUND = 1e6
 MAX_CHANNELS = 1024
 SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+SESSION_ID_HEADER = "X-Session-Id"  # answers name their session here; clients send it back (see docker/haproxy.cfg)
 Value = Annotated[float, Field(strict=True, ge=-BOUND, le=BOUND, allow_inf_nan=False)]
 SessionId = Annotated[str, Field(pattern=SESSION_ID_PATTERN)]
 RecallMode = Literal["offline", "online"]

@@ -1,5 +1,6 @@
 """One observation step per request. Each call advances its session by one step: call
-``/predict`` or ``/fault`` for a step, not both (the websocket returns both at once)."""
+``/predict`` or ``/fault`` for a step, not both (the websocket returns both at once). Answers carry
+the session's id in the ``X-Session-Id`` header (a load balancer keeps routing the session by it)."""
 
 from fastapi import APIRouter, Depends, Response
 
@@ -7,7 +8,7 @@ from service.auth import require_api_key
 from service.deps import get_state
 from service.errors import ERROR_RESPONSES
 from service.payloads import fault_payload, json_response, predict_payload
-from service.schemas import Error, FaultResponse, PredictResponse, StepRequest
+from service.schemas import SESSION_ID_HEADER, Error, FaultResponse, PredictResponse, StepRequest
 from service.state import ServiceState
 
 router = APIRouter(
@@ -21,11 +22,11 @@ router = APIRouter(
 async def predict(req: StepRequest, state: ServiceState = Depends(get_state)) -> Response:
     """Score one observation; returns the next-step prediction, per-channel errors and energy."""
     session, outcome = await state.step(req.session_id, req)
-    return json_response(predict_payload(session, outcome))
+    return json_response(predict_payload(session, outcome), {SESSION_ID_HEADER: session.id})
 
 
 @router.post("/fault", response_model=FaultResponse)
 async def fault(req: StepRequest, state: ServiceState = Depends(get_state)) -> Response:
     """Score one observation; returns the fault flag, energy, threshold, isolated joint and ranked channels."""
     session, outcome = await state.step(req.session_id, req)
-    return json_response(fault_payload(session, outcome))
+    return json_response(fault_payload(session, outcome), {SESSION_ID_HEADER: session.id})

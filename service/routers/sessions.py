@@ -1,12 +1,12 @@
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Path, Request, status
+from fastapi import APIRouter, Depends, Path, Request, Response, status
 
 from service.auth import client_of, require_api_key
 from service.deps import get_state
 from service.errors import ERROR_RESPONSES
 from service.payloads import session_info
-from service.schemas import SESSION_ID_PATTERN, Error, SessionCreate, SessionInfo
+from service.schemas import SESSION_ID_HEADER, SESSION_ID_PATTERN, Error, SessionCreate, SessionInfo
 from service.state import ServiceState
 
 router = APIRouter(
@@ -28,11 +28,13 @@ SessionId = Annotated[str, Path(pattern=SESSION_ID_PATTERN, description="as retu
     },
 )
 async def create_session(
-    params: SessionCreate, request: Request, state: ServiceState = Depends(get_state)
+    params: SessionCreate, request: Request, response: Response, state: ServiceState = Depends(get_state)
 ) -> SessionInfo:
-    """Open a session for one episode: its first step is the episode's first observation."""
+    """Open a session for one episode: its first step is the episode's first observation. The answer's
+    ``X-Session-Id`` header repeats the id, for a load balancer that routes a session's requests."""
     client = client_of(state.settings.api_key, request.headers, request.client.host if request.client else None)
     session = await state.open(params, client)
+    response.headers[SESSION_ID_HEADER] = session.id
     return session_info(session, state.settings.session_idle_s)
 
 
