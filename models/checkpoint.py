@@ -1,6 +1,6 @@
 """Checkpoints: one safetensors file holding the weights and a JSON metadata header.
 
-Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
+Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``W_D`` (with direct pathways only), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
 calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.step_thresholds`` and, when errors are whitened,
 ``calibration.<key>.error_precision`` (absent: channels weighed independently). The header entry ``neural_asm`` is a JSON
@@ -35,9 +35,9 @@ from models.tpc import TemporalPC
 from runtime.version import __version__
 
 # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
-# digest; 5: the inference solver in the config.
-FORMAT_VERSION = 5
-READABLE_VERSIONS = (2, 3, 4, 5)  # older files simply have no precision matrices, context input or digest
+# digest; 5: the inference solver in the config; 6: optional W_D (direct pathways).
+FORMAT_VERSION = 6
+READABLE_VERSIONS = (2, 3, 4, 5, 6)  # older files simply have no precision matrices, context input, digest or W_D
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
 MAX_ABS_WEIGHT = 1e3
@@ -71,6 +71,8 @@ def to_bytes(model: NeuralASM) -> bytes:
     }
     if model.net.has_context:
         tensors["W_C"] = model.net.W_C.contiguous()
+    if model.net.has_direct:
+        tensors["W_D"] = model.net.W_D.contiguous()
     calibrations = []
     for key, cal in model.calibrations.items():
         fprs = sorted(cal.step_thresholds)
@@ -153,7 +155,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
         config = TPCConfig.from_dict({"solver": "gradient", **meta["config"]})
         names = meta["channel_names"]
         net = TemporalPC(len(names), config, context_index(names, meta.get("context_channels", []), config))
-        net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"], tensors.get("W_C"))
+        net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"], tensors.get("W_C"), tensors.get("W_D"))
         normaliser = Normaliser(tensors["normaliser.mean"].numpy(), tensors["normaliser.std"].numpy())
         calibrations = {}
         for c in meta["calibrations"]:
@@ -183,7 +185,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
             )
     if not all(torch.isfinite(t).all() for t in tensors.values()):
         raise CheckpointError(f"{where} holds NaN or inf values")
-    for name in ("W_H", "W_F", "W_C"):
+    for name in ("W_H", "W_F", "W_C", "W_D"):
         if name in tensors and tensors[name].numel() and float(tensors[name].abs().max()) > MAX_ABS_WEIGHT:
             raise CheckpointError(f"{where}: {name} holds values beyond +-{MAX_ABS_WEIGHT:g}, not a trained network")
     return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"))

@@ -58,6 +58,10 @@ class TPCConfig:
     # 0.41-0.43) and did not raise detection (experiments/varied/ablation.py). Off, the context
     # channels are observations only, reconstructed like any other channel.
     context_input: bool = False
+    # Direct pathways (beyond the paper): the observation is expected as W_F f(z) + W_D p, p the
+    # last `direct_lags` observations, W_D learned by the local rule of W_F (models/tpc.py).
+    # 0 is the paper's network.
+    direct_lags: int = 0
     # Standard deviation of Gaussian noise added to every normalised training observation,
     # redrawn each epoch (0: none). A regulariser for few demonstrations: the memory must
     # recall a skill from observations that are never exactly the demonstrated ones.
@@ -88,6 +92,8 @@ class TPCConfig:
                 "TPCConfig.observation_precision must be 'uniform' or 'demo_spread', "
                 f"got {self.observation_precision!r}"
             )
+        if self.direct_lags < 0:
+            raise ValueError(f"TPCConfig.direct_lags must be >= 0, got {self.direct_lags}")
         if not self.training_noise >= 0:
             raise ValueError(f"TPCConfig.training_noise must be >= 0, got {self.training_noise}")
         if self.wf_max_norm is not None and not self.wf_max_norm > 0:
