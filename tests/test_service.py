@@ -243,16 +243,17 @@ def test_websocket_mistakes_keep_the_connection(server, episodes):
             await ws.recv()
             answers = []
             for text in ['{"type": "step", "observation": [1.0]}', "not json", '{"type": "start", "model": "nope"}',
-                         '{"type": "start"}', '{"type": "step", "observation": [NaN]}',
+                         '{"type": "start", "rate_hz": 40}', '{"type": "start"}', '{"type": "step", "observation": [NaN]}',
                          json.dumps({"type": "step", "observation": episodes[0, 0].tolist()})]:
                 await ws.send(text)
                 answers.append(json.loads(await ws.recv()))
             return answers
 
     answers = asyncio.run(talk())
-    assert [a.get("status") for a in answers] == [409, 400, 404, None, 422, None]
-    assert "start" in answers[0]["detail"] and "nope" in answers[2]["detail"] and "finite" in answers[4]["detail"]
-    assert answers[3]["type"] == "started" and answers[5]["type"] == "step"
+    assert [a.get("status") for a in answers] == [409, 400, 404, 409, None, 422, None]
+    assert "start" in answers[0]["detail"] and "nope" in answers[2]["detail"] and "finite" in answers[5]["detail"]
+    assert "(40 Hz)" in answers[3]["detail"]
+    assert answers[4]["type"] == "started" and answers[6]["type"] == "step"
 
 
 def _post(client: httpx.Client, path: str, body: bytes) -> httpx.Response:
