@@ -5,8 +5,9 @@ calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.step_thresholds`` and, when errors are whitened,
 ``calibration.<key>.error_precision`` (absent: channels weighed independently). The header entry ``neural_asm`` is a JSON
 document with the format version, the TPCConfig, the channel names, each
-calibration's thresholds and source, the data provenance and the training energy
-curve, and a SHA-256 digest of every tensor's name, dtype, shape and bytes, checked on load
+calibration's thresholds and source, the data provenance, the training energy
+curve, the observation rate the model learnt at (``rate_hz``; files without it are 2 Hz),
+and a SHA-256 digest of every tensor's name, dtype, shape and bytes, checked on load
 so that flipped bytes in the weights are refused rather than served. No pickle is involved;
 writes go to a temporary file that replaces the target only once complete, so a crash never
 leaves a half-written checkpoint.
@@ -29,15 +30,16 @@ from safetensors.torch import save as st_save
 
 from models.asm import NeuralASM, context_index
 from models.calibration import Calibration
-from models.config import TPCConfig
+from models.config import DEFAULT_RATE_HZ, TPCConfig
 from models.normaliser import Normaliser
 from models.tpc import TemporalPC
 from runtime.version import __version__
 
 # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
-# digest; 5: the inference solver in the config; 6: optional W_D (direct pathways).
+# digest; 5: the inference solver in the config; 6: the observation rate (older: 2 Hz) and
+# optional W_D (direct pathways).
 FORMAT_VERSION = 6
-READABLE_VERSIONS = (2, 3, 4, 5, 6)  # older files simply have no precision matrices, context input, digest or W_D
+READABLE_VERSIONS = (2, 3, 4, 5, 6)  # older files simply have no precision matrices, context input, digest, rate or W_D
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
 MAX_ABS_WEIGHT = 1e3
@@ -103,6 +105,7 @@ def to_bytes(model: NeuralASM) -> bytes:
         "calibrations": calibrations,
         "provenance": model.provenance,
         "history": model.history,
+        "rate_hz": model.rate_hz,
         "tensor_sha256": tensor_digest(tensors),
     }
     return st_save(tensors, metadata={HEADER_KEY: json.dumps(meta)})
@@ -188,7 +191,11 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
     for name in ("W_H", "W_F", "W_C", "W_D"):
         if name in tensors and tensors[name].numel() and float(tensors[name].abs().max()) > MAX_ABS_WEIGHT:
             raise CheckpointError(f"{where}: {name} holds values beyond +-{MAX_ABS_WEIGHT:g}, not a trained network")
-    return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"))
+    try:
+        return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"),
+                         meta.get("rate_hz", DEFAULT_RATE_HZ))
+    except ValueError as exc:
+        raise CheckpointError(f"{where}: {exc}") from exc
 
 
 def load(path: str | os.PathLike[str]) -> NeuralASM:
