@@ -21,6 +21,7 @@ Optimizer = Literal["adam", "sgd"]
 InitialState = Literal["zeros", "random"]
 Covariance = Literal["full", "diagonal"]
 Solver = Literal["gradient", "gauss_newton"]
+DirectTarget = Literal["observation", "hidden"]
 
 
 @dataclass(frozen=True)
@@ -62,10 +63,12 @@ class TPCConfig:
     # 0.41-0.43) and did not raise detection (experiments/varied/ablation.py). Off, the context
     # channels are observations only, reconstructed like any other channel.
     context_input: bool = False
-    # Direct pathways (beyond the paper): the observation is expected as W_F f(z) + W_D p, p the
-    # last `direct_lags` observations, W_D learned by the local rule of W_F (models/tpc.py).
-    # 0 is the paper's network.
+    # Direct pathways (beyond the paper): the last `direct_lags` observations p enter the
+    # prediction through W_D, added to the expected observation or to the hidden state's prior
+    # (`direct_target`), learned by the local rule of W_F or W_H (models/tpc.py). 0 is the
+    # paper's network.
     direct_lags: int = 0
+    direct_target: DirectTarget = "hidden"
     # Standard deviation of Gaussian noise added to every normalised training observation,
     # redrawn each epoch (0: none). A regulariser for few demonstrations: the memory must
     # recall a skill from observations that are never exactly the demonstrated ones.
@@ -98,6 +101,8 @@ class TPCConfig:
             )
         if self.direct_lags < 0:
             raise ValueError(f"TPCConfig.direct_lags must be >= 0, got {self.direct_lags}")
+        if self.direct_target not in ("observation", "hidden"):
+            raise ValueError(f"TPCConfig.direct_target must be 'observation' or 'hidden', got {self.direct_target!r}")
         if not self.training_noise >= 0:
             raise ValueError(f"TPCConfig.training_noise must be >= 0, got {self.training_noise}")
         if self.wf_max_norm is not None and not self.wf_max_norm > 0:

@@ -10,8 +10,8 @@ At every step the network first says what it expects, then sees the observation:
 - online, after the cue: expectation W_F f(W_H f(zhat)), then z is inferred from x.
 The eq. 6 relaxation of x-hat starts at, and stays at, the forward prediction
 W_F f(z): with x-hat free that is the minimum of eq. 5 (see relax_observation).
-A network with direct pathways adds W_D p to every expectation, p the last observations it
-saw, or, offline past the cue, the last ones it expected.
+A network with direct pathways adds W_D p to every expectation or every prior, p the last
+observations it saw, or, offline past the cue, the last ones it expected.
 """
 
 from __future__ import annotations
@@ -126,7 +126,7 @@ class Recaller:
     def forecast(self) -> np.ndarray:
         """Prediction of the next observation, W_F f(W_H f(zhat)) (+ W_D p); kept for the next step."""
         if self.next_prior is None:
-            self.next_prior = self.net.prior(self.zhat, self.context)
+            self.next_prior = self.net.prior(self.zhat, self.context, self.past)
             self.next_expected = self.net.observe(self.next_prior, self.past)
         return self.next_expected
 

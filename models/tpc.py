@@ -8,12 +8,16 @@ W_C c is optional: the tPC with inputs of the temporal predictive coding literat
 what the episode's first observation says of its context (cube pose, goal, obstacle). Without
 context channels the term is absent and the energy is the paper's.
 
-So are direct pathways (beyond the paper): with ``config.direct_lags`` = L > 0 the observation is
-predicted as W_F f(z) + W_D p, where p = [x_{t-1}, ..., x_{t-L}] are the last L observations
-(the first standing in for the steps before it). The hidden state then only has to carry what
-the recent past does not say (which skill, which phase, which route), and W_D learns by the same
-local rule as W_F: its postsynaptic error is Pi eps_x, its presynaptic activity p. With W_D = 0
-the network is the paper's; with W_F = 0 it is a linear model of the last L steps.
+So are direct pathways (beyond the paper): with ``config.direct_lags`` = L > 0 the last L
+observations p = [x_{t-1}, ..., x_{t-L}] (the first standing in for the steps before it) enter
+the prediction through W_D, where ``config.direct_target`` says:
+- "observation": x is expected as W_F f(z) + W_D p. The hidden state only has to carry what the
+  recent past does not say, and W_D learns by W_F's local rule, (Pi eps_x) p^T. With W_F = 0
+  this is a linear model of the last L steps.
+- "hidden": the prior becomes W_H f(zhat) (+ W_C c) + W_D p, the tPC with inputs fed the recent
+  observations, and W_D learns by W_H's rule, eps_z p^T. The recent past then shapes the next
+  state through the network's nonlinearity, together with what the state knows of skill and phase.
+With W_D = 0 (where training starts) the network is the paper's.
 
 torch holds the parameters (what checkpoints store). The relaxation of z (eq. 2) and the
 learning (models/train.py) run on numpy views of the same memory: they are loops of tiny
@@ -45,8 +49,8 @@ def stable_wf_norm(inference_rate: float, margin: float = 0.5) -> float:
 
 
 class TemporalPC:
-    """Weights W_H (H x H), W_F (D x H), optionally W_C (H x C) and W_D (D x L*D), and the inference
-    and learning rules.
+    """Weights W_H (H x H), W_F (D x H), optionally W_C (H x C) and W_D (D or H x L*D), and the
+    inference and learning rules.
 
     ``context_index`` names the observation channels whose values at the first step are the
     context input c of every later prior (empty: the paper's network, no W_C).
@@ -67,7 +71,7 @@ class TemporalPC:
         n_context = len(self.context_index)
         self.W_C = (torch.rand(h, n_context, generator=gen) * 2 - 1) / math.sqrt(max(n_context, 1))
         # Zero: training starts from the paper's network and the local rule grows the pathways.
-        self.W_D = torch.zeros(obs_size, obs_size * config.direct_lags)
+        self.W_D = torch.zeros(h if config.direct_target == "hidden" else obs_size, obs_size * config.direct_lags)
         # Precision of each observation channel in the energy, ||x - W_F f(z)||^2_Pi.
         # All ones is the paper's model; values are kept in (0, 1] so the stability
         # bound on W_F (stable_wf_norm) is unchanged.
@@ -79,6 +83,8 @@ class TemporalPC:
         self.w_f = self.W_F.numpy()
         self.w_c = self.W_C.numpy()
         self.w_d = self.W_D.numpy()
+        self.direct_x = self.has_direct and self.config.direct_target == "observation"
+        self.direct_z = self.has_direct and self.config.direct_target == "hidden"
         self.pi = self.precision.numpy()
         self.pi_sqrt = np.sqrt(self.pi)
 
@@ -162,17 +168,22 @@ class TemporalPC:
         bound = math.sqrt(6.0 / h)
         return (rng or np.random.default_rng(0)).uniform(-bound, bound, (batch, h)).astype(np.float32)
 
-    def prior(self, zhat_prev: np.ndarray, context: np.ndarray | None = None) -> np.ndarray:
-        """Temporal prediction of the hidden state, W_H f(zhat_prev) (+ W_C c with a context input)."""
+    def prior(self, zhat_prev: np.ndarray, context: np.ndarray | None = None,
+              past: np.ndarray | None = None) -> np.ndarray:
+        """Temporal prediction of the hidden state, W_H f(zhat_prev) (+ W_C c with a context input,
+        + W_D p with direct pathways into the hidden state)."""
         prior = np.tanh(zhat_prev) @ self.w_h.T
         if context is not None:
             prior += context @ self.w_c.T
+        if self.direct_z:
+            prior += past @ self.w_d.T
         return prior
 
     def observe(self, z: np.ndarray, past: np.ndarray | None = None) -> np.ndarray:
-        """Prediction of the observation from a hidden state, W_F f(z) (+ W_D p with direct pathways)."""
+        """Prediction of the observation from a hidden state, W_F f(z) (+ W_D p with direct pathways
+        into the observation)."""
         expected = np.tanh(z) @ self.w_f.T
-        if past is not None:
+        if self.direct_x:
             expected += past @ self.w_d.T
         return expected
 
@@ -182,10 +193,10 @@ class TemporalPC:
 
         ``config.solver`` chooses how: the paper's fixed K steps of gradient descent, or a few
         Gauss-Newton steps, which reach the same minimum far sooner. ``steps`` overrides K or
-        the number of Gauss-Newton steps. W_D p does not depend on z: with direct pathways z
-        relaxes towards what they leave of x.
+        the number of Gauss-Newton steps. W_D p does not depend on z: with direct pathways
+        into the observation z relaxes towards what they leave of x.
         """
-        if past is not None:
+        if self.direct_x:
             x = x - past @ self.w_d.T
         if self.config.solver == "gauss_newton":
             return self._gauss_newton(prior, x, self.config.solver_iterations if steps is None else steps)
@@ -246,8 +257,8 @@ class TemporalPC:
 
         A weight (O, I) learns from its pair (post (B, O), pre (B, I)) by post^T pre / B, the
         negative gradient of F averaged over the batch: eps_z f(zhat_prev)^T for W_H,
-        (Pi eps_x) f(z)^T for W_F, like W_H eps_z c^T for W_C and, like W_F, (Pi eps_x) p^T for
-        W_D. The products are left to
+        (Pi eps_x) f(z)^T for W_F, like W_H eps_z c^T for W_C and, for W_D, (Pi eps_x) p^T into the
+        observation like W_F, eps_z p^T into the hidden state like W_H. The products are left to
         the update (``models.train.WeightUpdate``), which forms them in buffers it keeps.
         """
         fz = np.tanh(z)
@@ -258,7 +269,7 @@ class TemporalPC:
         if self.has_context:
             terms.append((eps_z, context))
         if self.has_direct:
-            terms.append((weighted, past))
+            terms.append((weighted if self.direct_x else eps_z, past))
         energy = float((eps_z * eps_z).sum() + (weighted * eps_x).sum()) / x.shape[0]
         return terms, energy
 

@@ -85,7 +85,7 @@ def train_epoch(
         past = net.initial_past(x_seq[:, 0])
         for t in range(steps):
             x = x_seq[:, t]
-            prior = net.prior(zhat, context)
+            prior = net.prior(zhat, context, past)
             z = net.infer(prior, x, past=past)
             terms, energy = net.hebbian_terms(zhat, prior, z, x, context, past)
             update.apply(terms, rate)
