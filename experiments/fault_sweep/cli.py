@@ -49,7 +49,9 @@ def faults(
                                     "Hebbian rule and by BPTT (a measurement beyond the paper, "
                                     "experiments/varied/diagnostic.py), --seeds trainings each, against the best linear "
                                     "one-step predictor; write diagnostic.json and diagnostic.md"),
-    seeds: int = typer.Option(3, min=1, help="trainings per learner for --diagnostic"),
+    seeds: int = typer.Option(3, min=1, help="trainings per learner (--diagnostic) or per variant (--ablation)"),
+    variant: list[str] = typer.Option([], help="--ablation: only this variant (repeat for more; default: all of "
+                                      "experiments/varied/ablation.py's VARIANTS)"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
     workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
@@ -63,7 +65,7 @@ def faults(
         elif diagnostic:
             _diagnostic(context.value, out, data, seeds, parallel=parallel)
         elif ablation:
-            _ablation(context.value, out, data, fast_epochs, parallel=parallel)
+            _ablation(context.value, out, data, fast_epochs, tuple(variant), seeds, parallel=parallel)
         else:
             _varied(context.value, out, data, fast_epochs, paper_epochs, parallel=parallel)
         return
@@ -114,10 +116,11 @@ def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_
     typer.echo(f"wrote {out} in {time.perf_counter() - start:.0f} s")
 
 
-def _ablation(context: str, out: Path, data: Path, epochs: int | None, *, parallel: Parallel) -> None:
+def _ablation(context: str, out: Path, data: Path, epochs: int | None, names: tuple[str, ...], seeds: int, *,
+              parallel: Parallel) -> None:
     from experiments.varied.ablation import ablation_markdown, run_ablation
 
-    rows = run_ablation(data, context, epochs, parallel=parallel)
+    rows = run_ablation(data, context, epochs, names=names, seeds=tuple(range(seeds)), parallel=parallel)
     out.mkdir(parents=True, exist_ok=True)
     (out / "ablation.json").write_text(json.dumps(rows, indent=1))
     (out / "ablation.md").write_text(ablation_markdown(rows, context))
