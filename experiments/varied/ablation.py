@@ -20,12 +20,12 @@ from experiments.methods import neural_asm_methods
 from experiments.varied.methods import train_neural_asm
 from experiments.varied.score import ALPHA, score_all
 from models.asm import NeuralASM
-from models.config import FAST, ROBUST, TPCConfig
+from models.config import FAST, PATHWAYS, ROBUST, TPCConfig
 from runtime.parallel import Parallel
 from sim.varied import channel_groups
 
 VARIANTS: dict[str, tuple[str, TPCConfig]] = {
-    "default": ("robust preset: training noise 0.35 (the benchmark's default)", ROBUST),
+    "default": ("robust preset: training noise 0.35 (the featured network before direct pathways)", ROBUST),
     "no_noise": ("no training noise (the fast preset)", FAST),
     "noise_0.2": ("training noise 0.2", FAST.with_(training_noise=0.2)),
     "noise_0.5": ("training noise 0.5", FAST.with_(training_noise=0.5)),
@@ -37,8 +37,8 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
                                  ROBUST.with_(direct_lags=3, direct_target="observation")),
     "direct_hidden": ("no noise, the last 2 observations added to the hidden prior through W_D",
                       FAST.with_(direct_lags=2, direct_target="hidden")),
-    "direct_hidden_noise": ("robust preset, the last 2 observations added to the hidden prior through W_D",
-                            ROBUST.with_(direct_lags=2, direct_target="hidden")),
+    "direct_hidden_noise": ("pathways preset (featured): robust, the last 2 observations added to the hidden "
+                            "prior through W_D", PATHWAYS),
     "direct_hidden_noise_lags1": ("robust preset, the last observation added to the hidden prior through W_D",
                                   ROBUST.with_(direct_lags=1, direct_target="hidden")),
     "direct_hidden_noise_lags3": ("robust preset, the last 3 observations added to the hidden prior through W_D",
