@@ -17,7 +17,7 @@ import numpy as np
 
 from models import recall as recall_
 from models.calibration import Calibration, calibration_key, estimate, set_thresholds
-from models.config import FAST, SCORING, Covariance, TPCConfig
+from models.config import DEFAULT_RATE_HZ, FAST, SCORING, Covariance, TPCConfig
 from models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_for
 from models.normaliser import Normaliser
 from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
@@ -63,15 +63,21 @@ class NeuralASM:
         calibrations: dict[str, Calibration] | None = None,
         provenance: dict[str, Any] | None = None,
         history: list[float] | None = None,
+        rate_hz: float = DEFAULT_RATE_HZ,
     ) -> None:
         if len(channel_names) != net.obs_size:
             raise ValueError(f"{len(channel_names)} channel names for {net.obs_size} channels")
+        if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+            raise ValueError(f"rate_hz must be a finite number > 0, got {rate_hz!r}")
         self.net = net
         self.normaliser = normaliser
         self.channel_names = tuple(channel_names)
         self.calibrations = dict(calibrations or {})
         self.provenance = dict(provenance or {})
         self.history = list(history or [])
+        # Observations per second of the sequences it learnt (its steps are 1 / rate_hz apart):
+        # its predictions, precisions and thresholds hold at this rate only.
+        self.rate_hz = float(rate_hz)
 
     @classmethod
     def fit(
@@ -84,9 +90,11 @@ class NeuralASM:
         validation: np.ndarray | None = None,
         labels: np.ndarray | None = None,
         context_channels: Sequence[str] = (),
+        rate_hz: float = DEFAULT_RATE_HZ,
     ) -> "NeuralASM":
         """Fit the normaliser, train the network and estimate precisions on the data.
 
+        ``rate_hz`` is the sequences' sampling rate, stored with the model.
         ``context_channels`` name the observation channels that describe the episode's
         context (where the object is, where it must go); with ``config.context_input`` their
         first-step values drive the hidden state's prior through W_C, so that the recalled
@@ -108,7 +116,7 @@ class NeuralASM:
             held_out = normaliser.normalise(as_sequences(validation, len(channel_names)))
         history, kept = train(net, normaliser.normalise(data), progress=progress, validation=held_out)
         provenance = {**(provenance or {}), "kept_epoch": kept + 1}
-        model = cls(net, normaliser, channel_names, provenance=provenance, history=history)
+        model = cls(net, normaliser, channel_names, provenance=provenance, history=history, rate_hz=rate_hz)
         for mode in recall_.RECALL_MODES:
             # provisional until calibrate(); one sequence cannot give a precision matrix
             covariance = SCORING.error_covariance if len(data) > 1 else "diagonal"

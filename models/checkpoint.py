@@ -1,12 +1,13 @@
 """Checkpoints: one safetensors file holding the weights and a JSON metadata header.
 
-Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
+Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``W_D`` (with direct pathways only), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
 calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.step_thresholds`` and, when errors are whitened,
 ``calibration.<key>.error_precision`` (absent: channels weighed independently). The header entry ``neural_asm`` is a JSON
 document with the format version, the TPCConfig, the channel names, each
-calibration's thresholds and source, the data provenance and the training energy
-curve, and a SHA-256 digest of every tensor's name, dtype, shape and bytes, checked on load
+calibration's thresholds and source, the data provenance, the training energy
+curve, the observation rate the model learnt at (``rate_hz``; files without it are 2 Hz),
+and a SHA-256 digest of every tensor's name, dtype, shape and bytes, checked on load
 so that flipped bytes in the weights are refused rather than served. No pickle is involved;
 writes go to a temporary file that replaces the target only once complete, so a crash never
 leaves a half-written checkpoint.
@@ -29,15 +30,16 @@ from safetensors.torch import save as st_save
 
 from models.asm import NeuralASM, context_index
 from models.calibration import Calibration
-from models.config import TPCConfig
+from models.config import DEFAULT_RATE_HZ, TPCConfig
 from models.normaliser import Normaliser
 from models.tpc import TemporalPC
 from runtime.version import __version__
 
 # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
-# digest; 5: the inference solver in the config.
-FORMAT_VERSION = 5
-READABLE_VERSIONS = (2, 3, 4, 5)  # older files simply have no precision matrices, context input or digest
+# digest; 5: the inference solver in the config; 6: the observation rate (older: 2 Hz) and
+# optional W_D (direct pathways).
+FORMAT_VERSION = 6
+READABLE_VERSIONS = (2, 3, 4, 5, 6)  # older files simply have no precision matrices, context input, digest, rate or W_D
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
 MAX_ABS_WEIGHT = 1e3
@@ -71,6 +73,8 @@ def to_bytes(model: NeuralASM) -> bytes:
     }
     if model.net.has_context:
         tensors["W_C"] = model.net.W_C.contiguous()
+    if model.net.has_direct:
+        tensors["W_D"] = model.net.W_D.contiguous()
     calibrations = []
     for key, cal in model.calibrations.items():
         fprs = sorted(cal.step_thresholds)
@@ -101,6 +105,7 @@ def to_bytes(model: NeuralASM) -> bytes:
         "calibrations": calibrations,
         "provenance": model.provenance,
         "history": model.history,
+        "rate_hz": model.rate_hz,
         "tensor_sha256": tensor_digest(tensors),
     }
     return st_save(tensors, metadata={HEADER_KEY: json.dumps(meta)})
@@ -153,7 +158,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
         config = TPCConfig.from_dict({"solver": "gradient", **meta["config"]})
         names = meta["channel_names"]
         net = TemporalPC(len(names), config, context_index(names, meta.get("context_channels", []), config))
-        net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"], tensors.get("W_C"))
+        net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"], tensors.get("W_C"), tensors.get("W_D"))
         normaliser = Normaliser(tensors["normaliser.mean"].numpy(), tensors["normaliser.std"].numpy())
         calibrations = {}
         for c in meta["calibrations"]:
@@ -183,10 +188,14 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
             )
     if not all(torch.isfinite(t).all() for t in tensors.values()):
         raise CheckpointError(f"{where} holds NaN or inf values")
-    for name in ("W_H", "W_F", "W_C"):
+    for name in ("W_H", "W_F", "W_C", "W_D"):
         if name in tensors and tensors[name].numel() and float(tensors[name].abs().max()) > MAX_ABS_WEIGHT:
             raise CheckpointError(f"{where}: {name} holds values beyond +-{MAX_ABS_WEIGHT:g}, not a trained network")
-    return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"))
+    try:
+        return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"),
+                         meta.get("rate_hz", DEFAULT_RATE_HZ))
+    except ValueError as exc:
+        raise CheckpointError(f"{where}: {exc}") from exc
 
 
 def load(path: str | os.PathLike[str]) -> NeuralASM:

@@ -10,6 +10,8 @@ At every step the network first says what it expects, then sees the observation:
 - online, after the cue: expectation W_F f(W_H f(zhat)), then z is inferred from x.
 The eq. 6 relaxation of x-hat starts at, and stays at, the forward prediction
 W_F f(z): with x-hat free that is the minimum of eq. 5 (see relax_observation).
+A network with direct pathways adds W_D p to every expectation or every prior, p the last
+observations it saw, or, offline past the cue, the last ones it expected.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ class Recaller:
         self.net, self.mode, self.cue_steps = net, mode, cue_steps
         self.zhat = net.initial_state(batch, rng)
         self.context: np.ndarray | None = None  # read from the first observation (networks with W_C)
+        self.past: np.ndarray | None = None  # the direct pathways' input p (networks with W_D)
         # Once ``forecast`` has run: the next step's prior W_H f(zhat) (+ W_C c) and what it
         # predicts, W_F f(prior), which past the cue is that step's expectation.
         self.next_prior: np.ndarray | None = None
@@ -69,6 +72,8 @@ class Recaller:
         batch.zhat = joined([r.zhat for r in recallers])
         if first.context is not None:
             batch.context = joined([r.context for r in recallers])
+        if first.past is not None:
+            batch.past = joined([r.past for r in recallers])
         if all(r.next_prior is not None for r in recallers):
             batch.next_prior = joined([r.next_prior for r in recallers])
             batch.next_expected = joined([r.next_expected for r in recallers])
@@ -80,12 +85,13 @@ class Recaller:
         may differ past the cue)."""
         self.t += 1
         if len(batch.zhat) == 1:  # a batch of one shares this recaller's arrays already
-            self.zhat, self.context = batch.zhat, batch.context
+            self.zhat, self.context, self.past = batch.zhat, batch.context, batch.past
             self.next_prior, self.next_expected = batch.next_prior, batch.next_expected
             return
         row = slice(i, i + 1)
         self.zhat = batch.zhat[row].copy()
         self.context = None if batch.context is None else batch.context[row].copy()
+        self.past = None if batch.past is None else batch.past[row].copy()
         self.next_prior = None if batch.next_prior is None else batch.next_prior[row].copy()
         self.next_expected = None if batch.next_expected is None else batch.next_expected[row].copy()
 
@@ -95,31 +101,33 @@ class Recaller:
 
     def step(self, x: np.ndarray | None) -> np.ndarray:
         """Advance one step given observation x (B, D); returns what was expected of it."""
-        if self.t == 0 and self.net.has_context:
+        if self.t == 0 and (self.net.has_context or self.net.has_direct):
             if x is None:
-                raise ValueError("step 0 needs an observation: it sets the context input")
+                raise ValueError("step 0 needs an observation: it sets the context and direct inputs")
             self.context = self.net.context_of(x)
-            self.next_prior = None  # a forecast made before the context was known
+            self.past = self.net.initial_past(x)
+            self.next_prior = None  # a forecast made before they were known
         if self.infers_now and x is None:
             raise ValueError(f"step {self.t} needs an observation in {self.mode} recall")
         if self.next_prior is None:
             self.forecast()
         prior, forecast = self.next_prior, self.next_expected
         if self.t < self.cue_steps:  # the cue: what it is, not what was predicted of it
-            z = self.net.infer(prior, x)
-            expected = self.net.observe(z)
+            z = self.net.infer(prior, x, past=self.past)
+            expected = self.net.observe(z, self.past)
         else:
-            z = self.net.infer(prior, x) if self.mode == "online" else prior
+            z = self.net.infer(prior, x, past=self.past) if self.mode == "online" else prior
             expected = forecast
-        self.zhat, self.next_prior, self.next_expected = z, None, None
+        seen = x if self.infers_now else expected
+        self.zhat, self.past, self.next_prior, self.next_expected = z, self.net.push(self.past, seen), None, None
         self.t += 1
         return expected
 
     def forecast(self) -> np.ndarray:
-        """Prediction of the next observation, W_F f(W_H f(zhat)); kept for the next step."""
+        """Prediction of the next observation, W_F f(W_H f(zhat)) (+ W_D p); kept for the next step."""
         if self.next_prior is None:
-            self.next_prior = self.net.prior(self.zhat, self.context)
-            self.next_expected = self.net.observe(self.next_prior)
+            self.next_prior = self.net.prior(self.zhat, self.context, self.past)
+            self.next_expected = self.net.observe(self.next_prior, self.past)
         return self.next_expected
 
 

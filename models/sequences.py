@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from models.config import DEFAULT_RATE_HZ
+
 
 def checked_array(data: Any, what: str = "sequences", width: int | None = None,
                   dtype: type = np.float64) -> np.ndarray:
@@ -33,6 +35,7 @@ class Sequences:
     channel_names: tuple[str, ...]
     seeds: np.ndarray | None = None  # (N,) simulation seeds, where the sequences were simulated
     provenance: dict[str, Any] = field(default_factory=dict)
+    rate_hz: float = DEFAULT_RATE_HZ  # observations per second along T
 
     def __post_init__(self) -> None:
         if self.data.ndim != 3:

@@ -8,6 +8,17 @@ W_C c is optional: the tPC with inputs of the temporal predictive coding literat
 what the episode's first observation says of its context (cube pose, goal, obstacle). Without
 context channels the term is absent and the energy is the paper's.
 
+So are direct pathways (beyond the paper): with ``config.direct_lags`` = L > 0 the last L
+observations p = [x_{t-1}, ..., x_{t-L}] (the first standing in for the steps before it) enter
+the prediction through W_D, where ``config.direct_target`` says:
+- "observation": x is expected as W_F f(z) + W_D p. The hidden state only has to carry what the
+  recent past does not say, and W_D learns by W_F's local rule, (Pi eps_x) p^T. With W_F = 0
+  this is a linear model of the last L steps.
+- "hidden": the prior becomes W_H f(zhat) (+ W_C c) + W_D p, the tPC with inputs fed the recent
+  observations, and W_D learns by W_H's rule, eps_z p^T. The recent past then shapes the next
+  state through the network's nonlinearity, together with what the state knows of skill and phase.
+With W_D = 0 (where training starts) the network is the paper's.
+
 torch holds the parameters (what checkpoints store). The relaxation of z (eq. 2) and the
 learning (models/train.py) run on numpy views of the same memory: they are loops of tiny
 operations (K=100 gradient steps, or two Gauss-Newton steps, and Adam, compiled in
@@ -38,7 +49,8 @@ def stable_wf_norm(inference_rate: float, margin: float = 0.5) -> float:
 
 
 class TemporalPC:
-    """Weights W_H (H x H), W_F (D x H), optionally W_C (H x C), and the inference and learning rules.
+    """Weights W_H (H x H), W_F (D x H), optionally W_C (H x C) and W_D (D or H x L*D), and the
+    inference and learning rules.
 
     ``context_index`` names the observation channels whose values at the first step are the
     context input c of every later prior (empty: the paper's network, no W_C).
@@ -58,6 +70,8 @@ class TemporalPC:
         self.W_F = (torch.rand(obs_size, h, generator=gen) * 2 - 1) * bound
         n_context = len(self.context_index)
         self.W_C = (torch.rand(h, n_context, generator=gen) * 2 - 1) / math.sqrt(max(n_context, 1))
+        # Zero: training starts from the paper's network and the local rule grows the pathways.
+        self.W_D = torch.zeros(h if config.direct_target == "hidden" else obs_size, obs_size * config.direct_lags)
         # Precision of each observation channel in the energy, ||x - W_F f(z)||^2_Pi.
         # All ones is the paper's model; values are kept in (0, 1] so the stability
         # bound on W_F (stable_wf_norm) is unchanged.
@@ -68,6 +82,9 @@ class TemporalPC:
         self.w_h = self.W_H.numpy()
         self.w_f = self.W_F.numpy()
         self.w_c = self.W_C.numpy()
+        self.w_d = self.W_D.numpy()
+        self.direct_x = self.has_direct and self.config.direct_target == "observation"
+        self.direct_z = self.has_direct and self.config.direct_target == "hidden"
         self.pi = self.precision.numpy()
         self.pi_sqrt = np.sqrt(self.pi)
 
@@ -76,9 +93,28 @@ class TemporalPC:
         return bool(self.context_index)
 
     @property
+    def has_direct(self) -> bool:
+        return self.config.direct_lags > 0
+
+    @property
     def parameters(self) -> list[torch.Tensor]:
-        """The weights that learn: W_H, W_F and, with context channels, W_C."""
-        return [self.W_H, self.W_F, self.W_C] if self.has_context else [self.W_H, self.W_F]
+        """The weights that learn: W_H, W_F, W_C with context channels, W_D with direct pathways."""
+        weights = [self.W_H, self.W_F]
+        if self.has_context:
+            weights.append(self.W_C)
+        if self.has_direct:
+            weights.append(self.W_D)
+        return weights
+
+    def initial_past(self, x: np.ndarray) -> np.ndarray | None:
+        """The direct pathways' input p at step 0 of observations x (B, D): x standing in for
+        every step before it, as a delay embedding does (None without direct pathways)."""
+        return np.tile(x, (1, self.config.direct_lags)).astype(np.float32) if self.has_direct else None
+
+    @staticmethod
+    def push(past: np.ndarray | None, x: np.ndarray) -> np.ndarray | None:
+        """p for the next step: x in front, the oldest step dropped."""
+        return None if past is None else np.concatenate([x, past[:, : past.shape[1] - x.shape[1]]], axis=1, dtype=past.dtype)
 
     def context_of(self, x: np.ndarray) -> np.ndarray | None:
         """The context input c of a (normalised) observation batch (B, D), or None without W_C."""
@@ -92,7 +128,7 @@ class TemporalPC:
         self._bind_views()
 
     def load_weights(self, W_H: torch.Tensor, W_F: torch.Tensor, precision: torch.Tensor | None = None,
-                     W_C: torch.Tensor | None = None) -> None:
+                     W_C: torch.Tensor | None = None, W_D: torch.Tensor | None = None) -> None:
         h = self.config.hidden_size
         if tuple(W_H.shape) != (h, h) or tuple(W_F.shape) != (self.obs_size, h):
             raise ValueError(
@@ -103,10 +139,17 @@ class TemporalPC:
         if (W_C is None) != (n_context == 0) or (W_C is not None and tuple(W_C.shape) != (h, n_context)):
             got = None if W_C is None else tuple(W_C.shape)
             raise ValueError(f"W_C {got} does not match {n_context} context channels and hidden_size={h}")
+        direct = tuple(self.W_D.shape)
+        if (W_D is None) != (not self.has_direct) or (W_D is not None and tuple(W_D.shape) != direct):
+            got = None if W_D is None else tuple(W_D.shape)
+            raise ValueError(f"W_D {got} does not match direct_lags={self.config.direct_lags}: expected "
+                             f"{direct if self.has_direct else None}")
         self.W_H = W_H.detach().to(torch.float32).contiguous().clone()
         self.W_F = W_F.detach().to(torch.float32).contiguous().clone()
         if W_C is not None:
             self.W_C = W_C.detach().to(torch.float32).contiguous().clone()
+        if W_D is not None:
+            self.W_D = W_D.detach().to(torch.float32).contiguous().clone()
         self._bind_views()
         if precision is not None:
             self.set_precision(precision.numpy())
@@ -125,24 +168,36 @@ class TemporalPC:
         bound = math.sqrt(6.0 / h)
         return (rng or np.random.default_rng(0)).uniform(-bound, bound, (batch, h)).astype(np.float32)
 
-    def prior(self, zhat_prev: np.ndarray, context: np.ndarray | None = None) -> np.ndarray:
-        """Temporal prediction of the hidden state, W_H f(zhat_prev) (+ W_C c with a context input)."""
+    def prior(self, zhat_prev: np.ndarray, context: np.ndarray | None = None,
+              past: np.ndarray | None = None) -> np.ndarray:
+        """Temporal prediction of the hidden state, W_H f(zhat_prev) (+ W_C c with a context input,
+        + W_D p with direct pathways into the hidden state)."""
         prior = np.tanh(zhat_prev) @ self.w_h.T
         if context is not None:
             prior += context @ self.w_c.T
+        if self.direct_z:
+            prior += past @ self.w_d.T
         return prior
 
-    def observe(self, z: np.ndarray) -> np.ndarray:
-        """Prediction of the observation from a hidden state, W_F f(z)."""
-        return np.tanh(z) @ self.w_f.T
+    def observe(self, z: np.ndarray, past: np.ndarray | None = None) -> np.ndarray:
+        """Prediction of the observation from a hidden state, W_F f(z) (+ W_D p with direct pathways
+        into the observation)."""
+        expected = np.tanh(z) @ self.w_f.T
+        if self.direct_x:
+            expected += past @ self.w_d.T
+        return expected
 
-    def infer(self, prior: np.ndarray, x: np.ndarray, steps: int | None = None) -> np.ndarray:
+    def infer(self, prior: np.ndarray, x: np.ndarray, steps: int | None = None,
+              past: np.ndarray | None = None) -> np.ndarray:
         """Relax z from the prior towards the observation x: the minimum of F in z (eq. 2).
 
         ``config.solver`` chooses how: the paper's fixed K steps of gradient descent, or a few
         Gauss-Newton steps, which reach the same minimum far sooner. ``steps`` overrides K or
-        the number of Gauss-Newton steps.
+        the number of Gauss-Newton steps. W_D p does not depend on z: with direct pathways
+        into the observation z relaxes towards what they leave of x.
         """
+        if self.direct_x:
+            x = x - past @ self.w_d.T
         if self.config.solver == "gauss_newton":
             return self._gauss_newton(prior, x, self.config.solver_iterations if steps is None else steps)
         return self._gradient_descent(prior, x, self.config.inference_steps if steps is None else steps)
@@ -195,23 +250,26 @@ class TemporalPC:
 
     def hebbian_terms(
         self, zhat_prev: np.ndarray, prior: np.ndarray, z: np.ndarray, x: np.ndarray,
-        context: np.ndarray | None = None,
+        context: np.ndarray | None = None, past: np.ndarray | None = None,
     ) -> tuple[list[tuple[np.ndarray, np.ndarray]], float]:
         """The Hebbian terms of eqs. 3-4 as (postsynaptic error, presynaptic activity) pairs, one
         per weight in the order of ``parameters``, and the batch's mean energy F.
 
         A weight (O, I) learns from its pair (post (B, O), pre (B, I)) by post^T pre / B, the
         negative gradient of F averaged over the batch: eps_z f(zhat_prev)^T for W_H,
-        (Pi eps_x) f(z)^T for W_F and, like W_H, eps_z c^T for W_C. The products are left to
+        (Pi eps_x) f(z)^T for W_F, like W_H eps_z c^T for W_C and, for W_D, (Pi eps_x) p^T into the
+        observation like W_F, eps_z p^T into the hidden state like W_H. The products are left to
         the update (``models.train.WeightUpdate``), which forms them in buffers it keeps.
         """
         fz = np.tanh(z)
         eps_z = z - prior
-        eps_x = x - fz @ self.w_f.T
+        eps_x = x - self.observe(z, past)
         weighted = eps_x * self.pi
         terms = [(eps_z, np.tanh(zhat_prev)), (weighted, fz)]
         if self.has_context:
             terms.append((eps_z, context))
+        if self.has_direct:
+            terms.append((weighted if self.direct_x else eps_z, past))
         energy = float((eps_z * eps_z).sum() + (weighted * eps_x).sum()) / x.shape[0]
         return terms, energy
 

@@ -82,16 +82,17 @@ def train_epoch(
             x_seq = x_seq + np.float32(net.config.training_noise) * rng.standard_normal(x_seq.shape, np.float32)
         zhat = net.initial_state(len(x_seq), rng)
         context = net.context_of(x_seq[:, 0])
+        past = net.initial_past(x_seq[:, 0])
         for t in range(steps):
             x = x_seq[:, t]
-            prior = net.prior(zhat, context)
-            z = net.infer(prior, x)
-            terms, energy = net.hebbian_terms(zhat, prior, z, x, context)
+            prior = net.prior(zhat, context, past)
+            z = net.infer(prior, x, past=past)
+            terms, energy = net.hebbian_terms(zhat, prior, z, x, context, past)
             update.apply(terms, rate)
             net.project()
             total += energy
             count += 1
-            zhat = z
+            zhat, past = z, net.push(past, x)
     return total / count
 
 

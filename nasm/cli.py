@@ -77,9 +77,9 @@ def train(
     provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs)}
     if seqs.seeds is not None:
         provenance["seeds"] = seqs.seeds.tolist()
-    model = NeuralASM.fit(seqs.data, seqs.channel_names, config, provenance=provenance)
+    model = NeuralASM.fit(seqs.data, seqs.channel_names, config, provenance=provenance, rate_hz=seqs.rate_hz)
     checkpoint.save(model, out)
-    typer.echo(f"trained on {len(seqs)} sequences; final energy {model.history[-1]:.4g}; wrote {out}")
+    typer.echo(f"trained on {len(seqs)} sequences at {seqs.rate_hz:g} Hz; final energy {model.history[-1]:.4g}; wrote {out}")
 
 
 @app.command(cls=Command)
@@ -144,6 +144,7 @@ def info(model_path: Path | None = typer.Argument(None, help="checkpoint (.safet
     model = _load_model(model_path)
     summary = {
         "config": model.config.to_dict(),
+        "rate_hz": model.rate_hz,
         "channels": list(model.channel_names),
         "calibrations": {
             k: {"source": c.source, "whitened": c.error_precision is not None, "thresholds": c.thresholds}

@@ -13,10 +13,12 @@ from pathlib import Path
 
 from models import checkpoint
 from models.asm import NeuralASM
-from models.config import FAST, TPCConfig
+from models.config import FAST, RATE_DEFAULTS, TPCConfig
 from models.sequences import Sequences
 from pipelines.episodes import NormalSets, load_normal_sets
 from runtime.home import home_path
+from sim.config import SIM
+from sim.dataset import set_folder
 
 DEFAULT_NAME = "panda"
 
@@ -31,7 +33,7 @@ def train_calibrated(
     provenance: dict | None = None,
 ) -> NeuralASM:
     model = NeuralASM.fit(demos.data, channel_names, config, progress=progress, provenance=provenance,
-                          validation=precision.data, labels=demos.labels)
+                          validation=precision.data, labels=demos.labels, rate_hz=demos.rate_hz)
     for mode in ("offline", "online"):
         model.calibrate(precision.data, calibration.data, mode, 1, source="held-out normal episodes (simulated Panda)")
     return model
@@ -48,15 +50,22 @@ def provenance_of(bench: NormalSets, data_dir: Path) -> dict:
     }
 
 
-def ensure_default_model(models_dir: Path, data_dir: Path | None = None, progress: bool = True) -> Path:
-    """Return models_dir/panda.safetensors, simulating data and training it if missing."""
-    path = Path(models_dir) / f"{DEFAULT_NAME}.safetensors"
+def model_name(rate: float = SIM.timing.observation_hz) -> str:
+    """The default model's name at `rate`: `panda` at 2 Hz, `panda-40hz` at 40 Hz."""
+    return DEFAULT_NAME if rate == SIM.timing.observation_hz else f"{DEFAULT_NAME}-{rate:g}hz"
+
+
+def ensure_default_model(models_dir: Path, data_dir: Path | None = None, progress: bool = True,
+                         rate: float = SIM.timing.observation_hz) -> Path:
+    """Return models_dir/<model_name(rate)>.safetensors, simulating data observed at `rate` and
+    training it (the rate's default network, `RATE_DEFAULTS`) if missing."""
+    path = Path(models_dir) / f"{model_name(rate)}.safetensors"
     if path.exists():
         return path
-    data_dir = home_path("data") if data_dir is None else Path(data_dir)
-    bench = load_normal_sets(data_dir)
+    data_dir = home_path(set_folder(rate)) if data_dir is None else Path(data_dir)
+    bench = load_normal_sets(data_dir, rate=rate)
     model = train_calibrated(
-        bench.demos, bench.precision, bench.calibration, bench.channel_names,
+        bench.demos, bench.precision, bench.calibration, bench.channel_names, RATE_DEFAULTS[rate],
         progress=progress, provenance=provenance_of(bench, data_dir),
     )
     return checkpoint.save(model, path)

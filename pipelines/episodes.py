@@ -16,7 +16,8 @@ import numpy as np
 
 from models.sequences import Sequences
 from runtime.parallel import Parallel
-from sim.dataset import generate, load_episodes
+from sim.config import SIM
+from sim.dataset import generate, load_episodes, set_folder
 from sim.episode import Episode
 
 MIN_HELD_OUT = 60
@@ -24,15 +25,18 @@ MIN_HELD_OUT = 60
 
 def as_sequences(episodes: list[Episode], columns: np.ndarray | None = None,
                  provenance: dict | None = None) -> Sequences:
-    """The episodes' observations (all channels, or ``columns``), skills and seeds."""
+    """The episodes' observations (all channels, or ``columns``), skills, seeds and rate."""
     if not episodes:
         raise ValueError("no episodes")
+    rates = {e.rate_hz for e in episodes}
+    if len(rates) != 1:
+        raise ValueError(f"episodes observed at different rates {sorted(rates)} Hz cannot form one set of sequences")
     names = tuple(episodes[0].channel_names)
     data = np.stack([e.observations for e in episodes])
     if columns is not None:
         data, names = data[:, :, columns], tuple(names[c] for c in columns)
     return Sequences(data, np.array([e.skill for e in episodes]), names,
-                     seeds=np.array([e.seed for e in episodes]), provenance=provenance or {})
+                     seeds=np.array([e.seed for e in episodes]), provenance=provenance or {}, rate_hz=rates.pop())
 
 
 @dataclass(frozen=True)
@@ -78,12 +82,19 @@ def ensure_sets(data_dir: Path, kinds: tuple[str, ...], simulate: Simulate) -> d
 
 
 def paper_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int = 400,
-               parallel: Parallel = Parallel()) -> dict[str, list[Episode]]:
-    """The paper task's sets (sim/dataset.py), simulated where missing."""
-    return ensure_sets(data_dir, kinds, lambda kind, folder: generate(
-        kind, folder, workers=parallel.workers, n_normal=n_normal, backend=parallel.backend))
+               parallel: Parallel = Parallel(), rate: float = SIM.timing.observation_hz) -> dict[str, list[Episode]]:
+    """The paper task's sets (sim/dataset.py) observed at `rate`, simulated where missing; a
+    set found at another rate is refused (a folder holds one rate: `sim.dataset.set_folder`)."""
+    sets = ensure_sets(data_dir, kinds, lambda kind, folder: generate(
+        kind, folder, workers=parallel.workers, n_normal=n_normal, backend=parallel.backend, rate=rate))
+    for kind, episodes in sets.items():
+        if episodes and episodes[0].rate_hz != rate:
+            raise ValueError(f"{Path(data_dir) / kind}.mcap holds episodes at {episodes[0].rate_hz:g} Hz, "
+                             f"not {rate:g} Hz: use the folder {set_folder(rate)!r} of the data home for that rate")
+    return sets
 
 
-def load_normal_sets(data_dir: Path, n_normal: int = 400, parallel: Parallel = Parallel()) -> NormalSets:
-    sets = paper_sets(data_dir, ("demos", "normal"), n_normal, parallel)
+def load_normal_sets(data_dir: Path, n_normal: int = 400, parallel: Parallel = Parallel(),
+                     rate: float = SIM.timing.observation_hz) -> NormalSets:
+    sets = paper_sets(data_dir, ("demos", "normal"), n_normal, parallel, rate)
     return split_normal(sets["demos"], sets["normal"])

@@ -129,7 +129,7 @@ class RecorderProcess:
         self.folder.mkdir(parents=True, exist_ok=True)
         self._inbox: Any = _CTX.Queue(maxsize=BACKLOG)
         self._outbox: Any = _CTX.Queue()
-        process = _CTX.Process(target=_serve, args=(self._inbox, self._outbox, self.folder, self.step_period_s),
+        process = _CTX.Process(target=_serve, args=(self._inbox, self._outbox, self.folder),
                                name="nasm-recorder", daemon=True)
         # Spawning re-imports the parent's __main__ in the child; under `nasm serve` that is every
         # command's imports (torch, the simulator), which the child never uses.
@@ -161,11 +161,13 @@ class RecorderProcess:
                     return
 
     def open(self, run_id: str, channel_names: Sequence[str], recording_id: str,
-             metadata: dict[str, Any], joints: Sequence[int] = ()) -> SessionRecording:
-        """Start a session's files (in the child; this only queues the request)."""
+             metadata: dict[str, Any], joints: Sequence[int] = (), step_period_s: float | None = None) -> SessionRecording:
+        """Start a session's files (in the child; this only queues the request), its steps
+        `step_period_s` apart on the timeline (default: the recorder's)."""
         key = safe_name(run_id)
         paths = {"rrd": self.folder / f"{key}.rrd", "mcap": self.folder / f"{key}.mcap"}
-        self._put(("open", key, tuple(channel_names), recording_id, metadata, tuple(joints)))
+        period = self.step_period_s if step_period_s is None else step_period_s
+        self._put(("open", key, tuple(channel_names), recording_id, metadata, tuple(joints), period))
         return SessionRecording(key, paths, self.generation, self)
 
     def write(self, batch: StepBatch) -> None:
@@ -248,7 +250,7 @@ class RecorderProcess:
             q.close()
 
 
-def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
+def _serve(inbox: Any, outbox: Any, folder: Path) -> None:
     """The child: recover the folder, then open, write and close sessions' files as told."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server stops us
     rerun_file.defer_freeing()  # one sweep a second, not one per closed file
@@ -279,7 +281,7 @@ def _serve(inbox: Any, outbox: Any, folder: Path, step_period_s: float) -> None:
             continue
         kind = message[0]
         if kind == "open":
-            _, key, names, recording_id, metadata, joints = message
+            _, key, names, recording_id, metadata, joints, step_period_s = message
             try:
                 opened = {"pid": os.getpid(), "run_id": key, "recording_id": recording_id,
                           "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "metadata": metadata}

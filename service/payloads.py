@@ -26,6 +26,7 @@ def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
         cue_steps=session.stream.recaller.cue_steps,
         fpr=session.fpr,
         threshold=session.threshold,
+        rate_hz=session.stream.model.rate_hz,
         channel_names=list(session.channel_names),
         steps=session.stream.t,
         recording_id=session.recording_id,

@@ -87,6 +87,7 @@ class ModelInfo(BaseModel):
     error: str | None = Field(None, description="why a broken checkpoint was refused")
     channel_names: list[str] = []
     hidden_size: int | None = None
+    rate_hz: float | None = Field(None, description="observations per second the model learnt and was calibrated at")
     calibrations: list[CalibrationInfo] = []
     provenance: dict[str, Any] = {}
 
@@ -113,6 +114,10 @@ class SessionCreate(Strict):
         pattern=r"^[A-Za-z0-9._-]{1,128}$",
         description="Rerun recording id; pass the client's so both files merge into one view",
     )
+    rate_hz: float | None = Field(
+        None, gt=0, le=10_000,
+        description="observations per second the client streams at; refused (409) unless it is the model's",
+    )
 
 
 class SessionInfo(BaseModel):
@@ -122,6 +127,7 @@ class SessionInfo(BaseModel):
     cue_steps: int
     fpr: float
     threshold: ThresholdKind
+    rate_hz: float = Field(description="observations per second the model expects (one every 1 / rate_hz s)")
     channel_names: list[str]
     steps: int = Field(description="observations scored so far")
     recording_id: str

@@ -7,6 +7,7 @@ client, so that one client can neither exhaust the server's memory nor lock othe
 """
 
 import logging
+import math
 import secrets
 import time
 from collections import Counter
@@ -61,6 +62,12 @@ def open_session(
     """Check the recall setting is calibrated, then start its stream and recording."""
     name, model = registry.get(params.model)
     fpr = settings.default_fpr if params.fpr is None else params.fpr
+    if params.rate_hz is not None and not math.isclose(params.rate_hz, model.rate_hz, rel_tol=1e-6):
+        raise NotCalibrated(
+            f"rate_hz: model {name!r} expects one observation every {1e3 / model.rate_hz:g} ms ({model.rate_hz:g} Hz), "
+            f"the client streams one every {1e3 / params.rate_hz:g} ms ({params.rate_hz:g} Hz); open the session on a "
+            f"model trained at {params.rate_hz:g} Hz"
+        )
     if model.calibration(params.mode, params.cue_steps) is None:
         raise NotCalibrated(
             f"model {name!r} has no calibration for {params.mode} recall cued from {params.cue_steps} step(s); "
@@ -79,8 +86,9 @@ def open_session(
             model.channel_names,
             recording_id,
             {"source": "service", "session_id": session_id, "model": name, "mode": params.mode,
-             "cue_steps": params.cue_steps, "fpr": fpr, "threshold": params.threshold},
+             "cue_steps": params.cue_steps, "fpr": fpr, "threshold": params.threshold, "rate_hz": model.rate_hz},
             joint_channels(model.channel_names),
+            step_period_s=1.0 / model.rate_hz,
         )
     return session
 

@@ -14,6 +14,9 @@ import numpy as np
 
 ControllerKind = Literal["stiff", "compliant"]
 CONTROLLERS: tuple[str, ...] = get_args(ControllerKind)
+# Rates an episode can be observed at (Hz): the skill layer's 2 Hz (the paper's) and the
+# controller's 40 Hz (every tick). The `--rate` of every command line is one of these.
+RATES: tuple[int, ...] = (2, 40)
 
 
 @dataclass(frozen=True)
@@ -44,6 +47,17 @@ class Timing:
     def step_time(self, k: int) -> float:
         """Time of observation k."""
         return k / self.observation_hz
+
+    def ticks_per_observation(self, rate_hz: float) -> int:
+        """Control ticks between observations at `rate_hz` (20 at 2 Hz, 1 at 40 Hz), or a
+        ValueError naming the rates an episode can be observed at."""
+        if rate_hz not in RATES:
+            raise ValueError(f"rate must be one of {', '.join(map(str, RATES))} Hz, got {rate_hz!r}")
+        return round(self.control_hz / rate_hz)
+
+    def observations(self, rate_hz: float) -> int:
+        """Observations per episode at `rate_hz`: 15 at 2 Hz, 300 at 40 Hz (one per tick)."""
+        return self.n_steps * self.ticks_per_step // self.ticks_per_observation(rate_hz)
 
 
 @dataclass(frozen=True)
@@ -140,6 +154,10 @@ class ElbowHit:
     # The client demo's hit (`nasm client --falling-object`): the compliant arm alone drops the
     # cube on one skill there, and the correction places it.
     demo_momentum: float = 40.0
+    # The falling-object set of the fault sweep (`sim.dataset`): these momenta (kg m/s), each on
+    # `set_seeds` seeds, skills alternating.
+    set_momenta: tuple[float, ...] = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0)
+    set_seeds: int = 14
 
 
 @dataclass(frozen=True)
@@ -149,6 +167,7 @@ class Seeds:
     demos: int = 0
     held_out: int = 10_000
     faults: int = 100_000
+    hits: int = 150_000  # the falling-object set (`sim.dataset`): hits and their twins
     client: int = 50_000  # episodes the streaming client runs: none of the sets above
 
 

@@ -6,7 +6,12 @@ demonstration's variation):
 - `demos`: 10 demonstrations per skill, seeds 0..9;
 - `normal`: held-out normal episodes for threshold calibration, seeds 10000..;
 - `faults`: the paper's 980 joint-lock faults, each with its own seed 100000 + i;
-- `twins`: the same 980 seeds without a fault, so what a fault changes can be measured exactly.
+- `twins`: the same 980 seeds without a fault, so what a fault changes can be measured exactly;
+- `hits`: the falling object on the elbow during the carry (`SIM.hit.set_momenta`, 20-80 kg m/s,
+  each on `SIM.hit.set_seeds` seeds from 150000), and `hit_twins`, the same seeds without it.
+
+Every set can be observed at 2 Hz (the paper's skill layer) or at 40 Hz (every control tick):
+the rate is the episodes' `rate_hz`, and a set folder holds one rate (`set_folder`).
 
 File format, one `<set>.mcap` per set (JSON-schema channels, zstd chunks):
 
@@ -14,9 +19,9 @@ File format, one `<set>.mcap` per set (JSON-schema channels, zstd chunks):
   index x 7.5 s: `index, skill, seed, fault ({joint, time_s, overshoot_deg} or null),
   disturbance (or null), success, cube_error_m, channel_names, warnings, plan` (15 x 7 rad) and
   `hi_rate` (40 Hz `t, qpos, command, ee, cube, box` as float32 lists);
-- topic `/observation` (schema `nasm.Observation`), one message per 2 Hz step, log time =
-  the episode's start + k x 0.5 s: `episode, step, time_s, values` (one float per channel, in
-  the episode's `channel_names` order).
+- topic `/observation` (schema `nasm.Observation`), one message per observation, log time =
+  the episode's start + k / rate: `episode, step, time_s, values` (one float per channel, in
+  the episode's `channel_names` order). `/episode` says the rate (`rate_hz`; absent: 2 Hz).
 
 `<set>.npz` holds the same data as arrays (observations (N, T, D), ...) plus the MCAP's size
 and mtime; `load_episodes` uses it only while it matches the MCAP, else decodes the MCAP.
@@ -35,14 +40,14 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from sim.config import SIM
-from sim.disturbances import FallingObject
+from sim.disturbances import FallingObject, elbow_hit
 from sim.episode import Episode
 from sim.faults import FaultSpec, fault_grid
 from runtime.parallel import Backend, parallel_map
 from sim.skills import SKILLS
 from sim.varied_faults import VariedFault
 
-KINDS = ("demos", "normal", "faults", "twins")
+KINDS = ("demos", "normal", "faults", "twins", "hits", "hit_twins")
 HI_RATE = ("t_hi", "qpos_hi", "command_hi", "ee_hi", "cube_hi", "box_hi")
 EPISODE_SCHEMA = {
     "title": "nasm.Episode", "type": "object",
@@ -51,7 +56,7 @@ EPISODE_SCHEMA = {
                    "success": {"type": "boolean"}, "cube_error_m": {"type": "number"},
                    "channel_names": {"type": "array", "items": {"type": "string"}},
                    "warnings": {"type": "array"}, "plan": {"type": "array"}, "hi_rate": {"type": "object"},
-                   "task": {"type": ["object", "null"]}},
+                   "task": {"type": ["object", "null"]}, "rate_hz": {"type": "number"}},
 }
 OBSERVATION_SCHEMA = {
     "title": "nasm.Observation", "type": "object",
@@ -68,6 +73,14 @@ class Job:
     seed: int
     fault: FaultSpec | None = None
     disturbance: FallingObject | None = None
+    rate: float = SIM.timing.observation_hz  # observations per second (sim.config.RATES)
+
+
+def set_folder(rate: float) -> str:
+    """The data home's folder of the paper task's sets observed at `rate`: `data` at 2 Hz, as
+    ever, `data_40hz` at 40 Hz."""
+    SIM.timing.ticks_per_observation(rate)  # a ValueError for a rate episodes cannot be observed at
+    return "data" if rate == SIM.timing.observation_hz else f"data_{rate:g}hz"
 
 
 def demonstrations(n_per_skill: int = 10) -> list[Job]:
@@ -86,13 +99,25 @@ def twins() -> list[Job]:
     return [Job(job.skill, job.seed) for job in faults()]
 
 
-def jobs_for(kind: str, n_demos: int = 10, n_normal: int = 200) -> list[Job]:
-    """The jobs of set `kind` (one of KINDS)."""
+def hits() -> list[Job]:
+    """The falling object on the elbow at each of `SIM.hit.set_momenta`, skills alternating over seeds."""
+    momenta, n = SIM.hit.set_momenta, SIM.hit.set_seeds
+    return [Job(SKILLS[i % len(SKILLS)], SIM.seeds.hits + i, disturbance=elbow_hit(momenta[i // n]))
+            for i in range(len(momenta) * n)]
+
+
+def hit_twins() -> list[Job]:
+    return [Job(job.skill, job.seed) for job in hits()]
+
+
+def jobs_for(kind: str, n_demos: int = 10, n_normal: int = 200, rate: float = SIM.timing.observation_hz) -> list[Job]:
+    """The jobs of set `kind` (one of KINDS), observed at `rate`."""
     table = {"demos": lambda: demonstrations(n_demos), "normal": lambda: held_out_normal(n_normal),
-             "faults": faults, "twins": twins}
+             "faults": faults, "twins": twins, "hits": hits, "hit_twins": hit_twins}
     if kind not in table:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    return table[kind]()
+    SIM.timing.ticks_per_observation(rate)
+    return [Job(job.skill, job.seed, job.fault, job.disturbance, rate) for job in table[kind]()]
 
 
 def run_job(job: Job) -> Episode | str:
@@ -101,7 +126,7 @@ def run_job(job: Job) -> Episode | str:
     from sim.skills import PlanError
 
     try:
-        return run_episode(job.skill, job.seed, job.fault, job.disturbance)
+        return run_episode(job.skill, job.seed, job.fault, job.disturbance, rate=job.rate)
     except (SimulationError, PlanError) as err:
         return f"{job.skill} seed {job.seed}: {err}"
 
@@ -118,7 +143,7 @@ def _meta(index: int, ep: Episode) -> dict:
             "fault": None if ep.fault is None else ep.fault.to_dict(),
             "disturbance": None if ep.disturbance is None else ep.disturbance.to_dict(),
             "success": bool(ep.success), "cube_error_m": ep.cube_error_m, "channel_names": list(ep.channel_names),
-            "warnings": ep.warnings, "task": ep.task}
+            "warnings": ep.warnings, "task": ep.task, "rate_hz": ep.rate_hz}
 
 
 def _episode_message(index: int, ep: Episode) -> dict:
@@ -130,8 +155,7 @@ def write_mcap(episodes: list[Episode], path: Path) -> None:
     """Write episodes to `path` (atomically: a temporary file renamed into place)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".mcap.tmp")
-    step_ns = int(1e9 / SIM.timing.observation_hz)
-    episode_ns = step_ns * SIM.timing.n_steps
+    episode_ns = int(1e9 * SIM.timing.duration_s)
     with open(tmp, "wb") as f:
         writer = Writer(f)
         writer.start(profile="", library="neural-asm sim")
@@ -143,8 +167,9 @@ def write_mcap(episodes: list[Episode], path: Path) -> None:
             start = i * episode_ns
             writer.add_message(ep_channel, start, orjson.dumps(_episode_message(i, ep), option=orjson.OPT_SERIALIZE_NUMPY),
                                start, sequence=i)
+            step_ns = round(1e9 / ep.rate_hz)
             for k, values in enumerate(ep.observations):
-                msg = {"episode": i, "step": k, "time_s": SIM.timing.step_time(k), "values": values}
+                msg = {"episode": i, "step": k, "time_s": k / ep.rate_hz, "values": values}
                 writer.add_message(ob_channel, start + k * step_ns, orjson.dumps(msg, option=orjson.OPT_SERIALIZE_NUMPY),
                                    start + k * step_ns, sequence=k)
         writer.finish()
@@ -163,7 +188,7 @@ def _episode_from(meta: dict, observations: np.ndarray) -> Episode:
                    fault=fault, disturbance=disturbance, task=meta.get("task"),
                    success=bool(meta["success"]), cube_error_m=float(meta["cube_error_m"]),
                    plan=np.asarray(meta["plan"], dtype=np.float64), channel_names=tuple(meta["channel_names"]),
-                   warnings=list(meta["warnings"]), **hi)
+                   warnings=list(meta["warnings"]), rate_hz=float(meta.get("rate_hz", SIM.timing.observation_hz)), **hi)
 
 
 def read_episode_set(path: Path) -> list[Episode]:
@@ -225,9 +250,11 @@ def load_episodes(path: str | Path) -> list[Episode]:
 
 
 def generate(kind: str, out_dir: str | Path, workers: int = 2, n_demos: int = 10,
-             n_normal: int = 200, backend: Backend = "processes") -> tuple[Path, list[str]]:
-    """Simulate set `kind`, write `<out_dir>/<kind>.mcap` and its cache; return the path and failures."""
-    episodes, failures = run_jobs(jobs_for(kind, n_demos, n_normal), workers, desc=kind, backend=backend)
+             n_normal: int = 200, backend: Backend = "processes",
+             rate: float = SIM.timing.observation_hz) -> tuple[Path, list[str]]:
+    """Simulate set `kind` observed at `rate`, write `<out_dir>/<kind>.mcap` and its cache; return
+    the path and failures."""
+    episodes, failures = run_jobs(jobs_for(kind, n_demos, n_normal, rate), workers, desc=kind, backend=backend)
     path = Path(out_dir) / f"{kind}.mcap"
     write_mcap(episodes, path)
     write_cache(episodes, path)

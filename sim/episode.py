@@ -1,4 +1,5 @@
-"""The record of one episode: 2 Hz observations for the model, 40 Hz traces for the eyes."""
+"""The record of one episode: observations for the model (2 Hz, or 40 Hz: every tick), 40 Hz
+traces for the eyes."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS
+from sim.config import SIM
 from sim.disturbances import FallingObject
 from sim.faults import FaultSpec
 
@@ -17,9 +19,10 @@ if TYPE_CHECKING:
 
 @dataclass
 class Episode:
-    """One run of a skill. `observations[k]` is taken at t = 0.5 k s (k = 0..14)."""
+    """One run of a skill. `observations[k]` is taken at t = k / `rate_hz` s (paper task: k = 0..14
+    at 2 Hz, 0..299 at 40 Hz)."""
 
-    observations: np.ndarray  # (T, D) float64, channels in `channel_names` order (paper task: (15, 25))
+    observations: np.ndarray  # (T, D) float64, channels in `channel_names` order (paper task: (15, 25) or (300, 25))
     skill: str
     seed: int
     fault: "FaultSpec | VariedFault | None"
@@ -36,8 +39,9 @@ class Episode:
     channel_names: tuple[str, ...] = CHANNEL_NAMES
     warnings: list[str] = field(default_factory=list)
     task: dict | None = None  # the varied task's context of this episode (sim.varied.Context.to_dict)
+    rate_hz: float = SIM.timing.observation_hz  # the observation rate (sim.config.RATES)
 
     @property
     def joints(self) -> np.ndarray:
-        """(15, 7) joint channels."""
+        """(T, 7) joint channels."""
         return self.observations[:, JOINT_CHANNELS]

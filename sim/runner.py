@@ -1,4 +1,5 @@
-"""Run episodes: reset the workcell for a seed, track a 2 Hz joint plan at 40 Hz, observe at 2 Hz.
+"""Run episodes: reset the workcell for a seed, track a 2 Hz joint plan at 40 Hz, observe at 2 Hz
+(the paper's skill layer) or at 40 Hz (every control tick, `rate=40`).
 
 `run_episode` plans a skill by IK and executes it; `execute_plan` executes any 2 Hz joint plan
 (e.g. one recalled by a model). The loop per 40 Hz tick is: the controller interpolates the plan
@@ -8,6 +9,10 @@ linearly between observation steps (target plus velocity feed-forward); an optio
 compliant impedance, both gravity compensated) acts at every physics step, as a robot's 1 kHz
 torque loop does under its slower set-point stream. MuJoCo warnings or a diverging state raise `SimulationError`: an
 unstable episode is never returned as data.
+
+At 40 Hz the observation at every 20th tick is the 2 Hz one, bit for bit (same physics, same
+sensor noise), so a 40 Hz episode is its 2 Hz twin plus the 19 ticks between each pair of
+observations; the noise of those ticks comes from a stream of its own.
 """
 
 from __future__ import annotations
@@ -52,7 +57,7 @@ class ControlState:
     ee: np.ndarray  # (3,) tool centre point
     target: np.ndarray  # (7,) the plan's target for the end of this tick
     torque: np.ndarray  # (7,) joint torques the controller applied at the last physics step (N m)
-    observations: np.ndarray  # (k + 1, 25) observations so far (a new one arrives when the tick starts a block)
+    observations: np.ndarray  # (n, 25) observations so far (a new one arrives when the tick starts an observation period)
     # (7,) external joint torques at the last physics step (N m): what contacts (a box on the arm,
     # the carried cube) exert at each joint, which a torque-sensing arm such as the Panda estimates
     external_torque: np.ndarray
@@ -159,10 +164,11 @@ def _observe(w: World, gripper: float, tare: np.ndarray, noise: np.ndarray) -> n
 def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube_xy: np.ndarray,
              cube_yaw: float, noise: np.ndarray, effects: list[Effect], hook: CorrectionHook | None,
              fault: FaultSpec | None, disturbance: FallingObject | None, cube_goal: np.ndarray | None = None,
-             controller: ControllerKind | None = None) -> Episode:
-    """Execute a joint plan (T, 7) and gripper toggles (T,) given at the observation rate.
+             controller: ControllerKind | None = None, rate: float = SIM.timing.observation_hz) -> Episode:
+    """Execute a joint plan (T, 7) and gripper toggles (T,) given at the skill layer's 2 Hz,
+    observed at `rate` (2 or 40 Hz; `noise` holds one row per observation).
 
-    The low-level loop every task shares: T observation blocks of 20 control ticks each;
+    The low-level loop every task shares: T blocks of 20 control ticks each;
     `cube_goal` (where the cube should end up) defaults to the paper's skill's target;
     `controller` defaults to `SIM.controller`.
     """
@@ -175,6 +181,7 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
         effect.initialize(physics, scene)
     warnings = physics.data.warning.number  # a live view of MuJoCo's warning counters
     block, n = timing.ticks_per_step, len(joints)
+    period = timing.ticks_per_observation(rate)
     hi = {key: np.empty((n * block + 1, width)) for key, width in
           (("q", N_JOINTS), ("cmd", N_JOINTS), ("ee", N_EE), ("cube", 3), ("box", 3))}
 
@@ -189,8 +196,8 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
     obs = []
     for index in range(n * block):
         k, sub = divmod(index, block)
-        if sub == 0:
-            obs.append(_observe(w, gripper[k], tare, noise[k]))
+        if index % period == 0:
+            obs.append(_observe(w, gripper[k], tare, noise[len(obs)]))
         nxt = joints[min(k + 1, n - 1)]
         tick = Tick(index, index / timing.control_hz, k, joints, joints[k] + (sub + 1) / block * (nxt - joints[k]),
                     (nxt - joints[k]) * timing.observation_hz, bool(gripper[k]))
@@ -217,6 +224,7 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
     cube_error = float(np.linalg.norm(hi["cube"][-1] - cube_goal))
     return Episode(observations=observations, skill=skill, seed=int(seed), fault=fault, disturbance=disturbance,
                    success=cube_error < SIM.success_tolerance_m, cube_error_m=cube_error, plan=joints.copy(),
+                   rate_hz=float(rate),
                    t_hi=np.arange(n * block + 1) / timing.control_hz, qpos_hi=hi["q"],
                    command_hi=hi["cmd"], ee_hi=hi["ee"], cube_hi=hi["cube"], box_hi=hi["box"])
 
@@ -232,22 +240,32 @@ def seed_variation(skill: str, seed: int) -> Variation:
     return sample_variation(skill, _rng(skill, seed))
 
 
-def _seeded(skill: str, seed: int) -> tuple[Variation, np.ndarray]:
-    """`seed`'s scene variation and sensor noise for `skill`, drawn in this order from one stream."""
+def _seeded(skill: str, seed: int, rate: float = SIM.timing.observation_hz) -> tuple[Variation, np.ndarray]:
+    """`seed`'s scene variation and sensor noise for `skill` observed at `rate`: the variation and
+    the 2 Hz observations' noise drawn in this order from one stream, the other ticks' noise
+    (at 40 Hz) from a second stream of the same seed."""
     skill_spec(skill)
     rng = _rng(skill, seed)
     variation = sample_variation(skill, rng)
-    return variation, rng.standard_normal((SIM.timing.n_steps, N_NOISY))
+    noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
+    period = SIM.timing.ticks_per_observation(rate)
+    if period == SIM.timing.ticks_per_step:
+        return variation, noise
+    ticks = np.random.default_rng((int(seed), SKILLS.index(skill), period)).standard_normal(
+        (SIM.timing.observations(rate), N_NOISY))
+    ticks[:: SIM.timing.ticks_per_step // period] = noise
+    return variation, ticks
 
 
 def run_episode(skill: str, seed: int, fault: FaultSpec | None = None,
-                disturbance: FallingObject | None = None, controller: ControllerKind | None = None) -> Episode:
+                disturbance: FallingObject | None = None, controller: ControllerKind | None = None,
+                rate: float = SIM.timing.observation_hz) -> Episode:
     """Plan `skill` for `seed` by IK and execute it, optionally with a fault and/or a disturbance,
-    under `controller` (default `SIM.controller`)."""
-    variation, noise = _seeded(skill, seed)
+    under `controller` (default `SIM.controller`), observed at `rate` (2 or 40 Hz)."""
+    variation, noise = _seeded(skill, seed, rate)
     plan = make_plan(skill, variation)
     return execute(skill, seed, plan.joints, plan.gripper, variation.cube_xy, variation.cube_yaw, noise,
-                    _effects(fault, disturbance), None, fault, disturbance, controller=controller)
+                    _effects(fault, disturbance), None, fault, disturbance, controller=controller, rate=rate)
 
 
 def first_observation(skill: str, seed: int) -> np.ndarray:

@@ -1,3 +1,4 @@
+import copy
 import json
 
 import numpy as np
@@ -99,6 +100,22 @@ def test_checkpoint_from_before_the_solver_setting_keeps_gradient_descent(traine
 
     old = checkpoint.from_bytes(_rewrite_header(data, as_version_4))
     assert old.config.solver == "gradient" and old.config.inference_steps == trained.config.inference_steps
+
+
+def test_the_rate_is_stored_and_older_checkpoints_are_2_hz(trained, tmp_path):
+    """A 40 Hz model loads as 40 Hz; a file from before models carried their rate loads as 2 Hz."""
+    model = copy.deepcopy(trained)
+    model.rate_hz = 40.0
+    data = checkpoint.save(model, tmp_path / "m.safetensors").read_bytes()
+    assert checkpoint.from_bytes(data).rate_hz == 40.0
+
+    def as_version_5(meta):
+        meta["format_version"] = 5
+        del meta["rate_hz"]
+
+    assert checkpoint.from_bytes(_rewrite_header(data, as_version_5)).rate_hz == 2.0
+    with pytest.raises(CheckpointError, match="rate_hz"):
+        checkpoint.from_bytes(_rewrite_header(data, lambda m: m.__setitem__("rate_hz", -1)))
 
 
 def test_failed_write_leaves_previous_checkpoint_intact(trained, tmp_path, monkeypatch):

@@ -78,6 +78,21 @@ def test_health_and_models(client):
     assert {(c["mode"], c["cue_steps"]) for c in model["calibrations"]} == {("offline", 1), ("online", 1)}
     assert 0.01 in model["calibrations"][0]["fprs"]
     assert all(c["whitened"] for c in model["calibrations"])  # the default scoring
+    assert model["rate_hz"] == 2.0  # trained on 2 Hz sequences
+
+
+def test_a_client_at_another_rate_is_refused_and_the_server_serves_on(client, episodes):
+    """A 40 Hz client on a 2 Hz model gets a 409 naming both rates; its own rate opens a session that steps."""
+    r = client.post("/sessions", json={"rate_hz": 40})
+    assert r.status_code == 409, r.text
+    detail = r.json()["detail"]
+    assert "'panda'" in detail and "500 ms (2 Hz)" in detail and "25 ms (40 Hz)" in detail
+    assert client.post("/sessions", json={"rate_hz": -2}).status_code == 422
+    info = open_session(client, rate_hz=2.0)
+    assert info["rate_hz"] == 2.0
+    step = client.post("/predict", json={"session_id": info["session_id"], "observation": episodes[0, 0].tolist()})
+    assert step.status_code == 200, step.text
+    assert client.delete(f"/sessions/{info['session_id']}").status_code == 200
 
 
 def test_session_lifecycle(client):
@@ -228,16 +243,17 @@ def test_websocket_mistakes_keep_the_connection(server, episodes):
             await ws.recv()
             answers = []
             for text in ['{"type": "step", "observation": [1.0]}', "not json", '{"type": "start", "model": "nope"}',
-                         '{"type": "start"}', '{"type": "step", "observation": [NaN]}',
+                         '{"type": "start", "rate_hz": 40}', '{"type": "start"}', '{"type": "step", "observation": [NaN]}',
                          json.dumps({"type": "step", "observation": episodes[0, 0].tolist()})]:
                 await ws.send(text)
                 answers.append(json.loads(await ws.recv()))
             return answers
 
     answers = asyncio.run(talk())
-    assert [a.get("status") for a in answers] == [409, 400, 404, None, 422, None]
-    assert "start" in answers[0]["detail"] and "nope" in answers[2]["detail"] and "finite" in answers[4]["detail"]
-    assert answers[3]["type"] == "started" and answers[5]["type"] == "step"
+    assert [a.get("status") for a in answers] == [409, 400, 404, 409, None, 422, None]
+    assert "start" in answers[0]["detail"] and "nope" in answers[2]["detail"] and "finite" in answers[5]["detail"]
+    assert "(40 Hz)" in answers[3]["detail"]
+    assert answers[4]["type"] == "started" and answers[6]["type"] == "step"
 
 
 def _post(client: httpx.Client, path: str, body: bytes) -> httpx.Response:

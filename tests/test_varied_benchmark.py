@@ -121,16 +121,22 @@ def test_ablation_rows_carry_validation_error_and_test_scores(bench):
     from experiments.varied.ablation import ablate, ablation_markdown
 
     tiny = FAST.with_(epochs=2, hidden_size=16)
-    rows = ablate(bench, {"a": ("capped", tiny), "b": ("uncapped", tiny.with_(wf_max_norm=None))}, progress=False)
-    assert [(r["variant"], r["mode"]) for r in rows] == [("a", "offline"), ("a", "online"), ("b", "offline"), ("b", "online")]
-    assert rows[2]["config"]["wf_max_norm"] is None and rows[0]["config"]["wf_max_norm"] == tiny.wf_max_norm
+    rows = ablate(bench, {"a": ("capped", tiny), "b": ("uncapped", tiny.with_(wf_max_norm=None))}, progress=False,
+                  seeds=(0, 1))
+    assert [(r["variant"], r["seed"], r["mode"]) for r in rows] == [
+        (v, seed, mode) for v in "ab" for seed in (0, 1) for mode in ("offline", "online")]
+    assert rows[0]["config"]["seed"] == 0 and rows[2]["config"]["seed"] == 1
+    assert rows[4]["config"]["wf_max_norm"] is None and rows[0]["config"]["wf_max_norm"] == tiny.wf_max_norm
     for r in rows:
         assert r["validation_mse"] > 0 and 0.0 <= r["detection"] <= 1.0 and 0.0 <= r["auroc"] <= 1.0
         assert r["validation_mse_per_group"]["all"] == r["validation_mse"]
         assert set(r["training_mse_per_group"]) == set(r["validation_mse_per_group"]) >= {"all", "joints"}
         assert all(v > 0 for v in r["training_mse_per_group"].values())
     table = ablation_markdown(rows, "hidden")
-    assert table.count("\n| ") == 1 + len(rows)  # header and one line per row
+    assert table.count("\n| ") == 1 + len(rows) // 2  # header and one line per variant and mode
+    online = [r["detection"] for r in rows if r["variant"] == "a" and r["mode"] == "online"]
+    line = next(row for row in table.splitlines() if row.startswith("| capped | online"))
+    assert f"{np.mean(online):.1%} ({min(online):.1%}-{max(online):.1%})" in line  # mean (range) of the trainings
 
 
 def test_a_replicate_keeps_the_context_and_redraws_the_noise():

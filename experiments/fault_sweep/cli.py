@@ -13,7 +13,9 @@ from runtime.cli import Command, Group
 from models.config import FAITHFUL
 from runtime.home import home_path
 from runtime.parallel import Backend, Parallel
-from sim.cli import Task
+from sim.dataset import set_folder
+from sim.cli import RATE_HELP, Task, check_rate
+from sim.config import SIM
 
 # The paper's batch-1 training over 160 varied demonstrations costs ~3 s per epoch here: the
 # varied benchmark caps the paper-configured network's epochs to stay within minutes.
@@ -32,6 +34,9 @@ def faults(
     task: Task = typer.Option(Task.paper, help="paper: the 980 joint locks of the paper's fixed task; varied: "
                               "four skills whose cube, goal, speed and obstacle vary, with nine fault families"),
     context: Context = typer.Option(Context.observed, help="varied task: whether the goal is an observed channel"),
+    rate: int = typer.Option(int(SIM.timing.observation_hz), help=f"{RATE_HELP} At 40 Hz: the served monitor at 40 "
+                             "and 2 Hz on the joint locks and the falling object, with latency (no baselines)",
+                             callback=check_rate),
     out: Path | None = typer.Option(None, help="output folder (default: fault_sweep, varied_<context> in the data home)"),
     data: Path | None = typer.Option(None, help="episode sets, simulated when missing (default: data, data_varied in the data home)"),
     paper_epochs: int = typer.Option(FAITHFUL.epochs, help="epochs of the paper-configuration model"),
@@ -44,7 +49,9 @@ def faults(
                                     "Hebbian rule and by BPTT (a measurement beyond the paper, "
                                     "experiments/varied/diagnostic.py), --seeds trainings each, against the best linear "
                                     "one-step predictor; write diagnostic.json and diagnostic.md"),
-    seeds: int = typer.Option(3, min=1, help="trainings per learner for --diagnostic"),
+    seeds: int = typer.Option(3, min=1, help="trainings per learner (--diagnostic) or per variant (--ablation)"),
+    variant: list[str] = typer.Option([], help="--ablation: only this variant (repeat for more; default: all of "
+                                      "experiments/varied/ablation.py's VARIANTS)"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
     workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
@@ -58,9 +65,13 @@ def faults(
         elif diagnostic:
             _diagnostic(context.value, out, data, seeds, parallel=parallel)
         elif ablation:
-            _ablation(context.value, out, data, fast_epochs, parallel=parallel)
+            _ablation(context.value, out, data, fast_epochs, tuple(variant), seeds, parallel=parallel)
         else:
             _varied(context.value, out, data, fast_epochs, paper_epochs, parallel=parallel)
+        return
+    if rate != SIM.timing.observation_hz:
+        _rate(rate, out or home_path(f"fault_sweep_{rate}hz"), data or home_path(set_folder(rate)), n_normal,
+              fast_epochs, parallel=parallel)
         return
     out = out or home_path("fault_sweep")
     data = data or home_path("data")
@@ -76,6 +87,16 @@ def faults(
     write_figures(result, out)
     typer.echo((out / "fault_sweep.md").read_text())
     typer.echo(f"wrote {out}")
+
+
+def _rate(rate: int, out: Path, data: Path, n_normal: int, epochs: int | None, *, parallel: Parallel) -> None:
+    from experiments.fault_sweep.rate import markdown, run_rate_sweep, write
+
+    out.mkdir(parents=True, exist_ok=True)
+    result = run_rate_sweep(data, out, rate, n_normal, epochs, parallel=parallel)
+    write(result, out)
+    typer.echo(markdown(result))
+    typer.echo(f"wrote {out} in {result['seconds']:.0f} s")
 
 
 def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_epochs: int, *,
@@ -95,10 +116,11 @@ def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_
     typer.echo(f"wrote {out} in {time.perf_counter() - start:.0f} s")
 
 
-def _ablation(context: str, out: Path, data: Path, epochs: int | None, *, parallel: Parallel) -> None:
+def _ablation(context: str, out: Path, data: Path, epochs: int | None, names: tuple[str, ...], seeds: int, *,
+              parallel: Parallel) -> None:
     from experiments.varied.ablation import ablation_markdown, run_ablation
 
-    rows = run_ablation(data, context, epochs, parallel=parallel)
+    rows = run_ablation(data, context, epochs, names=names, seeds=tuple(range(seeds)), parallel=parallel)
     out.mkdir(parents=True, exist_ok=True)
     (out / "ablation.json").write_text(json.dumps(rows, indent=1))
     (out / "ablation.md").write_text(ablation_markdown(rows, context))

@@ -22,6 +22,7 @@ def model_info(hosted: Hosted, default: str | None) -> ModelInfo:
         for c in model.calibrations.values()
     ]
     info.channel_names, info.hidden_size = list(model.channel_names), model.config.hidden_size
+    info.rate_hz = model.rate_hz
     info.provenance = model.provenance
     return info
 

@@ -1,0 +1,120 @@
+"""The served monitor on the joint locks and the falling object, at its own observation rate.
+
+What a session of the service decides, measured: each episode's energies held to the
+checkpoint's episode threshold at the default false-positive rate by the service's own rule
+(`models.fault.flag_steps`); the share of held-out normal episodes it flags; the locks and hits it
+flags at or after their onset; how long after the onset the first flag comes; which joint it
+isolates there (`models.fault.isolated_joint`, what the served decision names).
+
+An episode's onset is the first 40 Hz tick at which its observations differ from its twin's (the
+same seed without the fault or the hit; before it the two are identical bit for bit), so latency
+is counted from the first moment anything could have seen it, at either rate: a 2 Hz monitor's
+step k is at k / 2 s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from experiments.twins import onset_steps
+from models.asm import NeuralASM
+from models.config import SCORING
+from models.fault import flag_steps, isolated_joint, threshold_for
+from models.scoring import step_rows
+from models.sequences import Sequences
+
+THRESHOLD = "episode"  # the service's default threshold kind
+
+
+@dataclass(frozen=True)
+class Onsets:
+    """Episodes of one kind (locks or hits) at 40 Hz, what each one was (the locked joint, the
+    hit's momentum) and their onset times."""
+
+    episodes: Sequences  # at 40 Hz
+    label: np.ndarray  # (N,) the locked joint (1..7) or the momentum (kg m/s)
+    onset_s: np.ndarray  # (N,) first tick differing from the twin, in seconds
+
+    @classmethod
+    def against(cls, episodes: Sequences, label: np.ndarray, twins: Sequences) -> "Onsets":
+        """Pair `episodes` with `twins` by seed (an episode whose twin the simulator refused is left out)."""
+        index = {int(s): i for i, s in enumerate(twins.seeds)}
+        keep = np.array([int(s) in index for s in episodes.seeds])
+        episodes = episodes.take(keep)
+        paired = twins.data[[index[int(s)] for s in episodes.seeds]]
+        return cls(episodes, np.asarray(label)[keep], onset_steps(episodes.data, paired) / episodes.rate_hz)
+
+
+def subsampled(seqs: Sequences, rate_hz: float) -> Sequences:
+    """`seqs` observed at a lower `rate_hz`: every k-th observation (a 40 Hz episode's every 20th
+    is its 2 Hz twin's, bit for bit)."""
+    stride = round(seqs.rate_hz / rate_hz)
+    if stride < 1 or not np.isclose(seqs.rate_hz / stride, rate_hz):
+        raise ValueError(f"{rate_hz:g} Hz is not {seqs.rate_hz:g} Hz divided by a whole number")
+    return Sequences(seqs.data[:, ::stride], seqs.labels, seqs.channel_names, seqs.seeds, seqs.provenance, rate_hz)
+
+
+def percentiles_ms(seconds: np.ndarray) -> dict[str, float | None]:
+    if not len(seconds):
+        return {"median_ms": None, "p95_ms": None}
+    return {"median_ms": round(float(np.median(seconds)) * 1e3, 1),
+            "p95_ms": round(float(np.quantile(seconds, 0.95)) * 1e3, 1)}
+
+
+@dataclass(frozen=True)
+class Flagged:
+    """The served decisions on one set: the first flag at or after each onset."""
+
+    detected: np.ndarray  # (N,) bool
+    first: np.ndarray  # (N,) step of the first flag at or after the onset (-1: none)
+    latency_s: np.ndarray  # (N,) first flag's time - onset (nan: not detected)
+    weighted_errors: np.ndarray  # (N, T, D) what isolation ranks
+
+
+def flagged(model: NeuralASM, mode: str, data: np.ndarray, onset_s: np.ndarray, fpr: float) -> Flagged:
+    """Score whole episodes as sessions would, and find each one's first flag from its onset on."""
+    calibration = model.calibration(mode, 1)
+    score = model.score(data, mode, 1)
+    flags, _ = flag_steps(score.energy, calibration, fpr, THRESHOLD)
+    times = np.arange(data.shape[1]) / model.rate_hz
+    after = flags & (times[None] >= onset_s[:, None] - 1e-9)
+    detected = after.any(axis=1)
+    first = np.where(detected, after.argmax(axis=1), -1)
+    latency = np.where(detected, times[first] - onset_s, np.nan)
+    weighted = score.errors / step_rows(calibration.error_std, data.shape[1])
+    return Flagged(detected, first, latency, weighted)
+
+
+def evaluate(model: NeuralASM, mode: str, normal_test: Sequences, locks: Onsets, hits: Onsets,
+             fpr: float = SCORING.default_fpr) -> dict:
+    """The served monitor's numbers for one recall mode; `locks` and `hits` at 40 Hz are
+    subsampled to the model's rate."""
+    def at_rate(s: Sequences) -> np.ndarray:
+        return subsampled(s, model.rate_hz).data
+
+    calibration = model.calibration(mode, 1)
+    normal_flags, _ = flag_steps(model.score(at_rate(normal_test), mode, 1).energy, calibration, fpr, THRESHOLD)
+    lock = flagged(model, mode, at_rate(locks.episodes), locks.onset_s, fpr)
+    hit = flagged(model, mode, at_rate(hits.episodes), hits.onset_s, fpr)
+    rows = np.flatnonzero(lock.detected)
+    isolated = isolated_joint(lock.weighted_errors[rows, lock.first[rows]], model.channel_names) + 1
+    return {
+        "mode": mode,
+        "rate_hz": model.rate_hz,
+        "fpr": fpr,
+        "threshold": threshold_for(calibration, fpr, 0, THRESHOLD),
+        "normal_episodes_flagged": float(normal_flags.any(axis=1).mean()),
+        "normal_episodes": len(normal_test),
+        "detection": {
+            "lock": float(lock.detected.mean()),
+            "falling_object": float(hit.detected.mean()),
+            "falling_object_by_momentum": {f"{m:g}": float(hit.detected[hits.label == m].mean())
+                                           for m in np.unique(hits.label)},
+        },
+        "episodes": {"lock": len(lock.detected), "falling_object": len(hit.detected)},
+        "latency": {"lock": percentiles_ms(lock.latency_s[lock.detected]),
+                    "falling_object": percentiles_ms(hit.latency_s[hit.detected])},
+        "isolation_at_detection": float((isolated == locks.label[rows]).mean()) if len(rows) else 0.0,
+    }

@@ -1,0 +1,56 @@
+"""The served monitor's sweep at any rate: onsets from twins, flags by the service's rule, latency."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from experiments.fault_sweep.served import Onsets, flagged, percentiles_ms, subsampled
+from models.fault import flag_steps
+from models.sequences import Sequences
+
+
+@pytest.fixture(scope="module")
+def calibrated(trained, skills):
+    train, test = skills
+    model = copy.deepcopy(trained)
+    model.calibrate(train.data, test.data, "online", 1)
+    return model, test
+
+
+def test_onsets_pair_by_seed_and_are_the_first_differing_step(skills):
+    _, test = skills
+    twins = Sequences(test.data, test.labels, test.channel_names, seeds=np.arange(len(test)), rate_hz=40.0)
+    changed = test.data.copy()
+    changed[0, 7:, 2] += 1.0
+    changed[1, 3:, 0] -= 0.5
+    episodes = Sequences(changed[:3], test.labels[:3], test.channel_names, seeds=np.array([0, 1, 99]), rate_hz=40.0)
+    onsets = Onsets.against(episodes, np.array([3, 1, 5]), twins)
+    assert onsets.episodes.seeds.tolist() == [0, 1]  # seed 99 has no twin
+    assert onsets.label.tolist() == [3, 1] and onsets.onset_s.tolist() == [7 / 40, 3 / 40]
+
+
+def test_flags_are_the_services_and_count_from_the_onset(calibrated):
+    model, test = calibrated
+    data = test.data[:4].copy()
+    data[:, 9:, 1] += 25.0  # a large fault from step 9 on
+    onset_s = np.array([9, 9, 12, 20]) / model.rate_hz  # the third "began" later; the fourth after the end
+    result = flagged(model, "online", data, onset_s, 0.01)
+    served, _ = flag_steps(model.score(data, "online", 1).energy, model.calibration("online", 1), 0.01, "episode")
+    assert served[:, 9].all()
+    assert result.detected.tolist() == [True, True, True, False]
+    assert result.first.tolist()[:3] == [9, 9, 12] and result.first[3] == -1
+    assert np.allclose(result.latency_s[:3], 0.0) and np.isnan(result.latency_s[3])
+
+
+def test_subsampling_and_percentiles(skills):
+    _, test = skills
+    fast = Sequences(test.data, test.labels, test.channel_names, rate_hz=40.0)
+    slow = subsampled(fast, 8.0)
+    assert slow.rate_hz == 8.0 and np.array_equal(slow.data, test.data[:, ::5])
+    with pytest.raises(ValueError, match="whole number"):
+        subsampled(fast, 3.0)
+    assert percentiles_ms(np.array([0.025, 0.05, 0.075])) == {"median_ms": 50.0, "p95_ms": 72.5}
+    assert percentiles_ms(np.array([])) == {"median_ms": None, "p95_ms": None}
