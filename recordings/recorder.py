@@ -50,7 +50,7 @@ from recordings import rerun_file
 from recordings.episode import EpisodeRecorder
 from recordings.paths import APP_ID, safe_name
 from recordings.records import StepRecord
-from recordings.recover import OPEN_MARKER, recover_interrupted, write_json
+from recordings.recover import OPEN_MARKER, recover_interrupted, write_json, writer_identity
 
 log = logging.getLogger("recordings.recorder")
 _CTX = mp.get_context("spawn")  # no fork: the server has threads (uvicorn, inference, Rerun's)
@@ -283,7 +283,7 @@ def _serve(inbox: Any, outbox: Any, folder: Path) -> None:
         if kind == "open":
             _, key, names, recording_id, metadata, joints, step_period_s = message
             try:
-                opened = {"pid": os.getpid(), "run_id": key, "recording_id": recording_id,
+                opened = {**writer_identity(), "run_id": key, "recording_id": recording_id,
                           "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "metadata": metadata}
                 write_json(folder / f"{key}{OPEN_MARKER}", opened)
                 writers[key] = EpisodeRecorder(key, names, folder=folder, recording_id=recording_id,

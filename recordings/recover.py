@@ -127,14 +127,35 @@ def write_json(path: Path, content: dict[str, Any]) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def _alive(pid: int) -> bool:
+def process_start(pid: int) -> str | None:
+    """When the kernel started process ``pid`` (clock ticks since boot, field 22 of
+    /proc/<pid>/stat), None where there is no /proc. With the PID it names one process: a PID
+    alone is reused, as by a restarted container, whose processes count from 1 again."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat[stat.rindex(")") + 2 :].split()[19]  # fields after the command name start at 3
+
+
+def writer_identity() -> dict[str, Any]:
+    """What a marker says of the process writing its files (see ``writing``)."""
+    return {"pid": os.getpid(), "pid_started": process_start(os.getpid())}
+
+
+def writing(opened: dict[str, Any]) -> bool:
+    """Whether the process a marker names is alive and is the one that wrote it."""
+    pid = opened.get("pid")
+    if not isinstance(pid, int) or pid <= 0 or pid == os.getpid():
+        return False
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
-        return True
-    return True
+        pass
+    started = opened.get("pid_started")
+    return started is None or process_start(pid) in (started, None)
 
 
 def recover_interrupted(folder: Path) -> list[Path]:
@@ -145,8 +166,7 @@ def recover_interrupted(folder: Path) -> list[Path]:
             opened = json.loads(marker.read_text())
         except (OSError, ValueError):
             opened = {}
-        pid = opened.get("pid")
-        if isinstance(pid, int) and pid > 0 and pid != os.getpid() and _alive(pid):
+        if writing(opened):
             continue  # another live process is writing these
         run = marker.name[: -len(OPEN_MARKER)]
         note = {"interrupted": "true", "reason": "the writer stopped without closing this episode"}
