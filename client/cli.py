@@ -9,7 +9,8 @@ from pathlib import Path
 import typer
 
 from runtime.cli import Command, Group
-from client.run import MODES, RATE_MODES, falling_object, fault_spec, run_client
+from pipelines.default_model import RATE_MODES
+from client.run import MODES, falling_object, fault_spec, run_client
 from client.transport import TRANSPORTS, ServiceError, ServiceLost
 from recordings import DEFAULT_DIR
 from runtime.home import home_path

@@ -22,7 +22,7 @@ from models import checkpoint
 from models.asm import NeuralASM
 from models.config import SCORING
 from pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
-from pipelines.default_model import ensure_default_model, model_name
+from pipelines.default_model import RATE_MODES, ensure_default_model, model_name
 from recordings import DEFAULT_DIR
 from runtime.home import home_path
 from sim.config import CONTROLLERS, RATES, SIM
@@ -33,9 +33,6 @@ from sim.runner import run_episode
 from sim.skills import SKILLS
 
 MODES = ("offline", "online")
-# The recall mode a session monitors in when none is given, per rate: at 40 Hz offline recall
-# rolls 300 ticks from one cue and drifts off the episode (docs/rate.md), so it is online.
-RATE_MODES: dict[float, str] = {SIM.timing.observation_hz: "offline", 40.0: "online"}
 
 
 def fault_spec(joint: int | None, time_s: float | None, overshoot_deg: float | None) -> FaultSpec | None:
