@@ -20,7 +20,19 @@ machine may be shared: absolute numbers move, same-run ratios less).
 (its process and the recorder's) over recorded sessions opened, stepped 15 times and
 closed, after a warm-up: the slope through five readings.
 
-    python benchmarks/bench_service.py [--record] [--steps 400] [--fleet-steps 150] [--sessions 1000]
+With ``--rate 40`` the model learnt 300-step sequences at 40 Hz, every session says that rate,
+and the fleet is 64 robots streaming one 300-step episode each at the controller's pace:
+robot r sends tick k at k / 40 s plus its phase r / 64 of a tick (independent robots' clocks
+are not aligned), or as soon as its previous reply is in if that is later. That offers 2,560
+steps/s; ``fleet_steps_per_s`` sums each robot's steps answered per second of its episode
+(300 ticks take 7.5 s, longer if its last reply comes later), so it is 2,560 exactly when every
+robot kept its pace; ``dropped_steps`` counts the steps answered after the robot's next tick
+was due (a monitor that missed the tick), ``fleet_ws_p50_ms``/``fleet_ws_p99_ms`` their round
+trips. The
+same fleet unpaced (``unpaced_fleet_steps_per_s``, each step sent as soon as the last is
+answered) is the most the service takes at that rate.
+
+    python benchmarks/bench_service.py [--record] [--rate 2|40] [--steps 400] [--fleet-steps N] [--sessions 1000]
 """
 
 import runtime  # noqa: F401  (first: one BLAS thread, no display)
@@ -48,14 +60,16 @@ from models.asm import NeuralASM
 from models.config import FAST
 from models.synthetic import make_skills
 from recordings.recorder import POLL_S
+from sim.config import RATES, SIM
 
 HERE = Path(__file__).parent
 ECHO_PADDING = 3350  # the reply is then ~3.4 kB, a 25-channel step reply's size
 CHANNELS = tuple(f"joint{i}" for i in range(1, 8)) + tuple(f"ch{i}" for i in range(18))
+FLEET = 64  # sessions stepping at once
 
-
-# Online recall: inference (K iterations) on every step, the costlier of the two modes.
-SESSION = {"mode": "online"}
+# Online recall: inference (K iterations) on every step, the costlier of the two modes; the
+# sessions say the model's rate (`main` sets it).
+SESSION: dict = {"mode": "online"}
 
 
 def free_port() -> int:
@@ -68,9 +82,10 @@ def percentiles(ms: list[float]) -> tuple[float, float]:
     return float(np.percentile(ms, 50)), float(np.percentile(ms, 99))
 
 
-def build_model(folder: Path) -> np.ndarray:
-    data = make_skills(n_skills=2, repetitions=10, channels=25)
-    model = NeuralASM.fit(data.data, CHANNELS, FAST.with_(epochs=60), progress=False)
+def build_model(folder: Path, rate: float) -> np.ndarray:
+    """Train the benchmark's model on synthetic episodes of ``rate``'s length (15 or 300 steps)."""
+    data = make_skills(n_skills=2, repetitions=10, channels=25, steps=SIM.timing.observations(rate))
+    model = NeuralASM.fit(data.data, CHANNELS, FAST.with_(epochs=60), progress=False, rate_hz=rate)
     model.calibrate(data.data, data.data, SESSION["mode"], 1)
     checkpoint.save(model, folder / "bench.safetensors")
     return data.data
@@ -221,8 +236,54 @@ async def fleet(url: str, episodes: np.ndarray, sessions: int, steps: int) -> Fl
 def warm_fleet(url: str, episodes: np.ndarray, steps: int) -> Fleet:
     """64 sessions, measured after a 20-step fleet has warmed the server (its first sessions,
     the allocator's pools)."""
-    asyncio.run(fleet(url, episodes, 64, 20))
-    return asyncio.run(fleet(url, episodes, 64, steps))
+    asyncio.run(fleet(url, episodes, FLEET, 20))
+    return asyncio.run(fleet(url, episodes, FLEET, steps))
+
+
+async def paced_session(url: str, episode: np.ndarray, period_s: float, phase_s: float,
+                        connected: asyncio.Barrier) -> tuple[list[float], list[float], int]:
+    """One robot streaming ``episode`` at its pace: tick k sent at k periods plus ``phase_s``
+    after the fleet's start, or once the previous reply is in if that is later. Returns the
+    round trips (ms), the reply times (s after its first tick) and the steps answered after the
+    next tick was due."""
+    times, replies, dropped = [], [], 0
+    async with websockets.connect(url) as ws:
+        await ws.recv()
+        await ws.send(orjson.dumps({"type": "start", **SESSION}).decode())
+        await ws.recv()
+        await connected.wait()
+        first_tick = time.perf_counter() + phase_s
+        for k, x in enumerate(episode.tolist()):
+            await asyncio.sleep(max(0.0, first_tick + k * period_s - time.perf_counter()))
+            t = time.perf_counter()
+            await ws.send(orjson.dumps({"type": "step", "observation": x}).decode())
+            await ws.recv()
+            answered = time.perf_counter()
+            times.append((answered - t) * 1e3)
+            replies.append(answered - first_tick)
+            dropped += answered > first_tick + (k + 1) * period_s
+    return times, replies, dropped
+
+
+@dataclass(frozen=True)
+class PacedFleet:
+    steps_per_s: float  # each robot's steps per second of its episode (at least its ticks' span), summed
+    dropped_steps: int
+    p50_ms: float
+    p99_ms: float
+
+
+async def paced_fleet(url: str, episodes: np.ndarray, rate: float) -> PacedFleet:
+    """``FLEET`` robots, one episode each, their ticks spread evenly over a period."""
+    period = 1.0 / rate
+    connected = asyncio.Barrier(FLEET + 1)
+    robots = [asyncio.create_task(paced_session(url, episodes[r % len(episodes)], period, r * period / FLEET,
+                                                connected)) for r in range(FLEET)]
+    await connected.wait()
+    results = await asyncio.gather(*robots)
+    ms = [t for times, _, _ in results for t in times]
+    served = sum(len(replies) / max(len(replies) * period, replies[-1]) for _, replies, _ in results)
+    return PacedFleet(served, sum(d for _, _, d in results), *percentiles(ms))
 
 
 def echo_app() -> FastAPI:
@@ -268,8 +329,14 @@ def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Nam
         ws_times, _ = asyncio.run(ws_session(ws_url, episodes, args.steps, 0))
         result["ws_p50_ms"], result["ws_p99_ms"] = percentiles(ws_times[10:])
         stepped = warm_fleet(ws_url, episodes, args.fleet_steps)
-        result.update(fleet_steps_per_s=stepped.steps_per_s, fleet_mean_batch=stepped.mean_batch,
-                      fleet_connect_ms=stepped.connect_ms)
+        if args.rate == SIM.timing.observation_hz:
+            result.update(fleet_steps_per_s=stepped.steps_per_s, fleet_mean_batch=stepped.mean_batch,
+                          fleet_connect_ms=stepped.connect_ms)
+        else:  # warmed by the unpaced fleet
+            paced = asyncio.run(paced_fleet(ws_url, episodes, args.rate))
+            result.update(offered_steps_per_s=FLEET * args.rate, fleet_steps_per_s=paced.steps_per_s,
+                          dropped_steps=paced.dropped_steps, fleet_ws_p50_ms=paced.p50_ms,
+                          fleet_ws_p99_ms=paced.p99_ms, unpaced_fleet_steps_per_s=stepped.steps_per_s)
         if record:
             result["rss_growth_mb_per_1000_sessions"] = rss_growth(ws_url, proc.pid, episodes, args.sessions)
     finally:
@@ -281,24 +348,35 @@ def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Nam
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=400, help="steps per latency measurement")
-    parser.add_argument("--fleet-steps", type=int, default=150, help="steps per session in the fleet")
+    parser.add_argument("--fleet-steps", type=int, default=None,
+                        help="steps per session in the unpaced fleet (default 150, at 40 Hz one episode: 300)")
+    parser.add_argument("--rate", type=int, choices=RATES, default=int(SIM.timing.observation_hz),
+                        help="the model's and the sessions' rate (Hz); at 40 the fleet is paced")
     parser.add_argument("--sessions", type=int, default=1000, help="recorded sessions for the memory growth")
     parser.add_argument("--record", action="store_true", help="let the service record every session")
     args = parser.parse_args()
+    if args.fleet_steps is None:
+        args.fleet_steps = 150 if args.rate == SIM.timing.observation_hz else SIM.timing.observations(args.rate)
+    SESSION["rate_hz"] = args.rate
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        episodes = build_model(folder)
+        episodes = build_model(folder, args.rate)
         if args.record:
             reference = measure(folder, episodes, False, args)
             result = measure(folder, episodes, True, args)
-            for key in ("fleet_steps_per_s", "predict_p99_ms", "ws_p99_ms"):
+            paced = ("fleet_ws_p99_ms", "unpaced_fleet_steps_per_s") if "dropped_steps" in result else ()
+            for key in ("fleet_steps_per_s", "predict_p99_ms", "ws_p99_ms", *paced):
                 result[f"{key}_no_record"] = reference[key]
                 result[f"{key}_vs_no_record"] = result[key] / reference[key]
+            if paced:
+                result["dropped_steps_no_record"] = reference["dropped_steps"]
         else:
             result = measure(folder, episodes, False, args)
             result["echo_fleet_steps_per_s"] = echo_fleet(episodes, args.fleet_steps)
-            result["fleet_vs_echo"] = result["fleet_steps_per_s"] / result["echo_fleet_steps_per_s"]
-    result.update(record=args.record, hidden_size=FAST.hidden_size, inference_steps=FAST.inference_steps)
+            most = result.get("unpaced_fleet_steps_per_s", result["fleet_steps_per_s"])  # both unpaced
+            result["fleet_vs_echo"] = most / result["echo_fleet_steps_per_s"]
+    result.update(record=args.record, rate_hz=args.rate, hidden_size=FAST.hidden_size,
+                  inference_steps=FAST.inference_steps)
     print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in result.items()}))
 
 

@@ -9,10 +9,12 @@ from pathlib import Path
 import typer
 
 from runtime.cli import Command, Group
+from pipelines.default_model import RATE_MODES
 from client.run import MODES, falling_object, fault_spec, run_client
 from client.transport import TRANSPORTS, ServiceError, ServiceLost
 from recordings import DEFAULT_DIR
 from runtime.home import home_path
+from sim.cli import RATE_HELP, check_rate
 from sim.config import CONTROLLERS, SIM
 from sim.skills import SKILLS
 
@@ -49,7 +51,13 @@ def client(
     url: str | None = typer.Option(None, help="service URL, e.g. http://127.0.0.1:8000; default: start one "
                                                "in-process on a free port"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
-    mode: Mode = typer.Option(MODES[0], help="recall mode: offline (the paper's setting) or online"),
+    rate: int = typer.Option(int(SIM.timing.observation_hz), "--rate", callback=check_rate,
+                             help=RATE_HELP + " Streams every observation; the default model at that rate "
+                             "(panda, panda-40hz) is built on first use."),
+    realtime: bool = typer.Option(False, "--realtime", help="send each observation at its time in the episode "
+                                  "(every 25 ms at 40 Hz), not as fast as the service answers"),
+    mode: Mode | None = typer.Option(None, help="recall mode: offline (the paper's setting) or online; default "
+                                     + ", ".join(f"{m} at {r:g} Hz" for r, m in RATE_MODES.items())),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
     reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
     transport: TransportName = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
@@ -60,8 +68,8 @@ def client(
     try:
         fault = fault_spec(fault_joint, fault_time, fault_overshoot)
         summaries = run_client(skill.value, seed, fault, falling_object(drop, hit_momentum), episodes, url,
-                               api_key, mode.value, out, reconnect, transport.value, models_dir,
-                               controller=controller.value, correct=correct)
+                               api_key, None if mode is None else mode.value, out, reconnect, transport.value,
+                               models_dir, controller=controller.value, correct=correct, rate=rate, realtime=realtime)
     except (ValueError, ServiceError) as exc:  # a bad option, or the service refused the request
         raise _fail(str(exc), 2) from None
     except ServiceLost as exc:

@@ -1,10 +1,13 @@
 """A client run: the service (the given URL, or one started in-process), then each episode
-simulated and streamed.
+simulated and streamed, observed at the skill layer's 2 Hz or at every 40 Hz control tick
+(the session says its rate, so a model learnt at another refuses it).
 
 Under stiff control (the default) an episode is the demonstrator's IK plan, as every data set
 is. Under compliant control it is the memory's recalled plan (the correction experiment's
 setting), corrected or not, and the session names the monitor calibrated for compliant
-control (``pipelines.compliant``), the one the correction's gate also uses."""
+control (``pipelines.compliant``), the one the correction's gate also uses. At 40 Hz the plan is
+the 2 Hz memory's (a 40 Hz one's offline recall drifts over 300 ticks) and the 40 Hz network
+monitors every tick."""
 
 from __future__ import annotations
 
@@ -19,9 +22,10 @@ from models import checkpoint
 from models.asm import NeuralASM
 from models.config import SCORING
 from pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
+from pipelines.default_model import RATE_MODES, ensure_default_model, model_name
 from recordings import DEFAULT_DIR
 from runtime.home import home_path
-from sim.config import CONTROLLERS, SIM
+from sim.config import CONTROLLERS, RATES, SIM
 from sim.disturbances import FallingObject, elbow_hit
 from sim.episode import Episode
 from sim.faults import FaultSpec
@@ -54,10 +58,11 @@ def falling_object(drop: bool, momentum_kg_m_s: float | None = None) -> FallingO
     return elbow_hit(momentum)
 
 
-def _compliant_monitor(models_dir: Path, quiet: bool) -> tuple[Path, NeuralASM]:
-    """The compliant monitor's checkpoint, built (with the default model) on first use."""
-    path = ensure_compliant_model(models_dir, progress=not quiet)
-    return path, checkpoint.load(path)
+def _compliant_monitor(models_dir: Path, rate: float, quiet: bool) -> tuple[Path, tuple[NeuralASM, NeuralASM]]:
+    """The compliant monitor's checkpoint at `rate` and (the monitor, the 2 Hz planner), built
+    (with the default models) on first use."""
+    path = ensure_compliant_model(models_dir, progress=not quiet, rate=rate)
+    return path, (checkpoint.load(path), checkpoint.load(ensure_default_model(models_dir, progress=not quiet)))
 
 
 def _check_served(url: str, api_key: str | None, path: Path) -> None:
@@ -69,29 +74,33 @@ def _check_served(url: str, api_key: str | None, path: Path) -> None:
                            f"(nasm serve --models-dir {path.parent}) or omit --url")
 
 
-def _simulate(skill: str, seed: int, fault: FaultSpec | None, disturbance: FallingObject | None,
-              monitor: NeuralASM | None, correct: bool, mode: str) -> tuple[Episode, dict | None]:
-    """The episode (stiff: the IK plan; compliant, ``monitor`` given: the recalled plan) and,
-    with ``correct``, when its correction engaged and let go."""
+def _simulate(skill: str, seed: int, fault: FaultSpec | None, disturbance: FallingObject | None, rate: float,
+              monitor: tuple[NeuralASM, NeuralASM] | None, correct: bool, mode: str) -> tuple[Episode, dict | None]:
+    """The episode observed at ``rate`` (stiff: the IK plan; compliant, ``monitor`` = (monitor,
+    planner) given: the recalled plan) and, with ``correct``, when its correction engaged and let go."""
     if monitor is None:
-        return run_episode(skill, seed, fault=fault, disturbance=disturbance), None
-    ep, correction = compliant_episode(monitor, skill, seed, disturbance, fault, correct, mode, SCORING.default_fpr)
+        return run_episode(skill, seed, fault=fault, disturbance=disturbance, rate=rate), None
+    ep, correction = compliant_episode(monitor[0], skill, seed, disturbance, fault, correct, mode,
+                                       SCORING.default_fpr, planner=monitor[1])
     if correction is None:
         return ep, None
     return ep, {"engaged_step": correction.engaged_step, "yielded_step": correction.yielded_step}
 
 
 @contextlib.contextmanager
-def _service(url: str | None, api_key: str | None, models_dir: Path, out: Path, quiet: bool) -> Iterator[str]:
-    """The given URL, or an embedded service on a free loopback port for the block's duration."""
+def _service(url: str | None, api_key: str | None, models_dir: Path, out: Path, rate: float,
+             quiet: bool) -> Iterator[str]:
+    """The given URL, or an embedded service on a free loopback port for the block's duration,
+    hosting the default model at ``rate`` (built first if missing)."""
     if url:
         yield url
         return
     from service.embedded import start_embedded  # only to start it in-process
     from service.settings import Settings
 
-    say(f"starting the service in-process (models: {models_dir}; the default Panda model is built on "
-        "first run, which takes a few minutes)", quiet)
+    say(f"starting the service in-process (models: {models_dir}; the default Panda model at {rate:g} Hz is built "
+        "on first run, which takes a few minutes)", quiet)
+    ensure_default_model(models_dir, progress=not quiet, rate=rate)
     settings = Settings(models_dir=models_dir, recordings_dir=out, api_key=api_key or None)
     with start_embedded(settings) as server:
         say(f"service at {server.url}", quiet)
@@ -106,7 +115,7 @@ def run_client(
     episodes: int = 1,
     url: str | None = None,
     api_key: str | None = None,
-    mode: str = "offline",
+    mode: str | None = None,
     out: Path = DEFAULT_DIR,
     reconnect: bool = False,
     transport: str = "ws",
@@ -115,13 +124,22 @@ def run_client(
     after_step: Callable[[int, int], None] | None = None,
     controller: str = SIM.controller,
     correct: bool = False,
+    rate: float = SIM.timing.observation_hz,
+    realtime: bool = False,
 ) -> list[EpisodeSummary]:
     """Simulate ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) and stream each to the service.
 
     ``controller`` is the arm's joint controller; ``correct`` (compliant only) turns the
-    memory's correction on. ``after_step(episode, step)`` is called after each scored step
-    (tests use it to stop the service mid-episode). Stops after an episode the service was lost in.
+    memory's correction on. ``rate`` (Hz) is how often the episode is observed and streamed
+    (the default model at that rate, ``panda`` or ``panda-40hz``, built on first use when the
+    service is started here); ``mode`` defaults to the rate's ``RATE_MODES``; ``realtime``
+    sends each observation at its time in the episode instead of as fast as the service answers.
+    ``after_step(episode, step)`` is called after each scored step (tests use it to stop the
+    service mid-episode). Stops after an episode the service was lost in.
     """
+    if rate not in RATES:
+        raise ValueError(f"--rate must be one of {', '.join(map(str, RATES))} Hz, got {rate!r}")
+    mode = RATE_MODES[rate] if mode is None else mode
     for name, value, known in (("skill", skill, SKILLS), ("mode", mode, MODES), ("transport", transport, TRANSPORTS),
                                ("controller", controller, CONTROLLERS)):
         if value not in known:
@@ -136,22 +154,24 @@ def run_client(
     out = Path(out)
     summaries: list[EpisodeSummary] = []
     models_dir = home_path("models") if models_dir is None else Path(models_dir)
-    monitor_path, monitor = _compliant_monitor(models_dir, quiet) if controller == "compliant" else (None, None)
-    with _service(url, api_key, models_dir, out, quiet) as service_url:
-        session = None
+    monitor_path, monitor = _compliant_monitor(models_dir, rate, quiet) if controller == "compliant" else (None, None)
+    with _service(url, api_key, models_dir, out, rate, quiet) as service_url:
+        session: dict = {"rate_hz": rate}
         if monitor_path is not None:
             if url:
                 _check_served(url, api_key, monitor_path)
-            session = {"model": monitor_path.stem, "fpr": SCORING.default_fpr}
+            session |= {"model": monitor_path.stem, "fpr": SCORING.default_fpr}
+        elif not url or rate != SIM.timing.observation_hz:  # at 2 Hz a given service's default model
+            session["model"] = model_name(rate)
         for i in range(episodes):
-            ep, correction = _simulate(skill, seed + i, fault, falling_object, monitor, correct, mode)
-            say(f"episode {i + 1}/{episodes}: {skill}, seed {seed + i}, {controller} control"
+            ep, correction = _simulate(skill, seed + i, fault, falling_object, rate, monitor, correct, mode)
+            say(f"episode {i + 1}/{episodes}: {skill}, seed {seed + i}, {rate:g} Hz, {controller} control"
                 + (", corrected" if correct else "") + (f", fault {fault.to_dict()}" if fault else "")
                 + (", falling object" if falling_object else "") + f", streaming to {service_url}", quiet)
             hook = None if after_step is None else (lambda k, i=i: after_step(i, k))
             outcome = {"controller": controller, "correction": correction, "cube_error_m": ep.cube_error_m}
             s = stream_episode(ep, i + 1, service_url, api_key, mode, out, transport, reconnect, quiet, hook,
-                               session=session, metadata=outcome)
+                               period=1.0 / rate, session=session, metadata=outcome, realtime=realtime)
             s.controller, s.correction, s.cube_error_m = controller, correction, ep.cube_error_m
             summaries.append(s)
             say(summary_line(s), quiet)

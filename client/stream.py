@@ -44,11 +44,13 @@ def stream_episode(
     period: float = 1.0 / SIM.timing.observation_hz,
     session: dict[str, Any] | None = None,
     metadata: dict[str, Any] | None = None,
+    realtime: bool = False,
 ) -> EpisodeSummary:
     """Stream one episode (simulated, or recorded with no 40 Hz world trace) to the service,
     recording it; never leaves files open. ``period`` is the time between its observations;
     ``session`` adds session parameters (the model, its rate), ``metadata`` what the
-    client's recording says about the run."""
+    client's recording says about the run; ``realtime`` sends observation k no sooner than
+    k periods after the first (as a robot would), else each as soon as the last is answered."""
     names = tuple(ep.channel_names)
     run_id = new_run_id("client")
     recording_id = run_id  # shared with the service session so both files merge
@@ -101,8 +103,11 @@ def stream_episode(
         try:
             next_row = 0
             k = 0
+            started = time.monotonic()
             while k < len(ep.observations):
                 t_k = k * period
+                if realtime:
+                    time.sleep(max(0.0, started + t_k - time.monotonic()))
                 for row, world in world_records(ep, t_k, next_row):
                     rec.log_world(world)
                     next_row = row + 1

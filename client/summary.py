@@ -110,7 +110,7 @@ def summary_line(s: EpisodeSummary) -> str:
 def step_line(line: StepLine) -> str:
     """One aligned line per step; the isolated joint is named only on a flagged step."""
     verdict = f"FAULT  joint={line.isolated_joint or '-'}" if line.fault else "ok"
-    return (f"step {line.step:2d}  t={line.time_s:4.1f}s  energy={line.energy:10.4g}  "
+    return (f"step {line.step:3d}  t={line.time_s:5.3f}s  energy={line.energy:10.4g}  "
             f"threshold={line.threshold:8.4g}  ({line.inference_ms:4.1f} ms)  {verdict}")
 
 

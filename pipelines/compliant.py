@@ -7,7 +7,10 @@ threshold, so its flag would say nothing about a hit. The compliant monitor is t
 network calibrated on undisturbed compliant executions of recalled plans, for both recall
 modes, written as `<default>-compliant`, a checkpoint the service hosts and a session names.
 It records the digest of the checkpoint it was derived from and is rebuilt when that changes;
-being derived, it is never the service's default (`service.registry`).
+being derived, it is never the service's default (`service.registry`). At 40 Hz the plan is
+still the skill layer's, recalled by the 2 Hz default (a 40 Hz memory's offline recall drifts
+off the skill over 300 ticks), and the 40 Hz network, calibrated on those plans' executions
+observed at every tick, monitors: `panda-40hz-compliant`, which records both digests.
 
 The client's demo and the correction experiment both gate the correction with
 `ServedMonitor`: the decision a served session makes, step by step.
@@ -26,7 +29,7 @@ from models.asm import NeuralASM, step_streams
 from models.config import SCORING
 from models.fault import ThresholdKind
 from models.recall import RECALL_MODES
-from pipelines.default_model import DEFAULT_NAME, ensure_default_model
+from pipelines.default_model import ensure_default_model, model_name
 from sim.config import SIM
 from sim.control import PlanCorrection, execute_recalled
 from sim.disturbances import FallingObject
@@ -36,7 +39,14 @@ from sim.runner import first_observation
 from sim.skills import SKILLS
 
 CONTROLLER = "compliant"
-COMPLIANT_NAME = f"{DEFAULT_NAME}-{CONTROLLER}"
+
+
+def compliant_name(rate: float = SIM.timing.observation_hz) -> str:
+    """The compliant monitor's name at `rate`: `panda-compliant`, `panda-40hz-compliant`."""
+    return f"{model_name(rate)}-{CONTROLLER}"
+
+
+COMPLIANT_NAME = compliant_name()
 
 
 @dataclass(frozen=True)
@@ -65,20 +75,35 @@ def recall_plan(model: NeuralASM, skill: str, seed: int) -> np.ndarray:
     return model.recall(first_observation(skill, seed)[None, None], SIM.timing.n_steps)[0]
 
 
-def undisturbed(model: NeuralASM, controller: str, seeds: MonitorSeeds) -> tuple[np.ndarray, np.ndarray]:
-    """Observations of undisturbed, uncorrected executions of recalled plans under `controller`:
-    the spread split, then the threshold split."""
+def planner_of(model: NeuralASM, planner: NeuralASM | None) -> NeuralASM:
+    """The memory whose recall is the plan: `planner`, else `model` itself. A plan is the skill
+    layer's 2 Hz steps: a 40 Hz memory monitors, but rolled 300 ticks from one cue it drifts
+    off the skill (its plans grasp nothing), so a 2 Hz memory plans for it."""
+    planner = model if planner is None else planner
+    if planner.rate_hz != SIM.timing.observation_hz:
+        raise ValueError(f"a plan is recalled at the skill layer's {SIM.timing.observation_hz:g} Hz; the "
+                         f"{planner.rate_hz:g} Hz model needs a {SIM.timing.observation_hz:g} Hz planner")
+    return planner
+
+
+def undisturbed(model: NeuralASM, controller: str, seeds: MonitorSeeds,
+                planner: NeuralASM | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Observations at `model`'s rate of undisturbed, uncorrected executions of the plans `planner`
+    (default: `model`) recalls, under `controller`: the spread split, then the threshold split."""
+    planner = planner_of(model, planner)
+
     def normal(first: int) -> np.ndarray:
-        return np.stack([execute_recalled(recall_plan(model, skill_of(s), s), skill_of(s), s, None, controller)
-                         .observations for s in range(first, first + seeds.per_split)])
+        return np.stack([execute_recalled(recall_plan(planner, skill_of(s), s), skill_of(s), s, None, controller,
+                                          rate=model.rate_hz).observations for s in range(first, first + seeds.per_split)])
 
     return normal(seeds.first), normal(seeds.first + seeds.per_split)
 
 
 def calibrated_for(model: NeuralASM, controller: str, seeds: MonitorSeeds, modes: tuple[str, ...] = RECALL_MODES,
-                   fprs: tuple[float, ...] = SCORING.fprs) -> NeuralASM:
-    """A copy of `model` whose only calibrations come from undisturbed runs under `controller`."""
-    spreads, thresholds = undisturbed(model, controller, seeds)
+                   fprs: tuple[float, ...] = SCORING.fprs, planner: NeuralASM | None = None) -> NeuralASM:
+    """A copy of `model` whose only calibrations come from undisturbed runs under `controller`
+    (of `planner`'s plans, default `model`'s)."""
+    spreads, thresholds = undisturbed(model, controller, seeds, planner)
     monitor = copy.deepcopy(model)
     monitor.calibrations.clear()
     for mode in modes:
@@ -103,12 +128,15 @@ class ServedMonitor:
 
 
 def compliant_episode(model: NeuralASM, skill: str, seed: int, hit: FallingObject | None, fault: FaultSpec | None,
-                      corrected: bool, mode: str, fpr: float) -> tuple[Episode, PlanCorrection | None]:
-    """The memory's plan recalled from the first observation, executed under compliant control;
-    with `corrected`, the correction engages once the served monitor has flagged `SIM.correction.confirm`
-    observations in a row."""
+                      corrected: bool, mode: str, fpr: float,
+                      planner: NeuralASM | None = None) -> tuple[Episode, PlanCorrection | None]:
+    """The plan `planner` (default: the monitor `model`) recalls from the first observation,
+    executed under compliant control and observed at `model`'s rate; with `corrected`, the
+    correction engages once the served monitor has flagged `SIM.correction.confirm` observations
+    in a row (at 40 Hz: ticks)."""
     correction = PlanCorrection(SIM.correction, ServedMonitor(model, mode, fpr)) if corrected else None
-    episode = execute_recalled(recall_plan(model, skill, seed), skill, seed, correction, CONTROLLER, hit, fault)
+    plan = recall_plan(planner_of(model, planner), skill, seed)
+    episode = execute_recalled(plan, skill, seed, correction, CONTROLLER, hit, fault, rate=model.rate_hz)
     return episode, correction
 
 
@@ -117,19 +145,22 @@ def digest_of(path: Path) -> str:
     return str(checkpoint.read_header(path.read_bytes(), str(path))["tensor_sha256"])
 
 
-def ensure_compliant_model(models_dir: Path, seeds: MonitorSeeds = SERVED_MONITOR, progress: bool = True) -> Path:
-    """Return models_dir/panda-compliant.safetensors, building the default model first if missing
-    and (re)calibrating when it is missing or was derived from another default."""
-    base = ensure_default_model(models_dir, progress=progress)
-    path = base.with_name(f"{COMPLIANT_NAME}.safetensors")
-    source = digest_of(base)
-    if path.exists() and checkpoint.load(path).provenance.get("derived_from_sha256") == source:
+def ensure_compliant_model(models_dir: Path, seeds: MonitorSeeds = SERVED_MONITOR, progress: bool = True,
+                           rate: float = SIM.timing.observation_hz) -> Path:
+    """Return models_dir/<compliant_name(rate)>.safetensors, building the default models first if
+    missing (at `rate` the monitor, at 2 Hz the planner: the same one at 2 Hz) and (re)calibrating
+    when it is missing or was derived from other defaults."""
+    base = ensure_default_model(models_dir, progress=progress, rate=rate)
+    planner = ensure_default_model(models_dir, progress=progress)
+    path = base.with_name(f"{compliant_name(rate)}.safetensors")
+    sources = {"derived_from_sha256": digest_of(base), "planned_by_sha256": digest_of(planner)}
+    if path.exists() and all(checkpoint.load(path).provenance.get(k) == v for k, v in sources.items()):
         return path
     if progress:
         print(f"calibrating the monitor for compliant control ({2 * seeds.per_split} undisturbed runs) into {path}",
               flush=True)
-    model = calibrated_for(checkpoint.load(base), CONTROLLER, seeds)
-    model.provenance |= {"derived_from": base.stem, "derived_from_sha256": source, "controller": CONTROLLER,
+    model = calibrated_for(checkpoint.load(base), CONTROLLER, seeds, planner=checkpoint.load(planner))
+    model.provenance |= {"derived_from": base.stem, "planned_by": planner.stem, **sources, "controller": CONTROLLER,
                          "monitor_seeds": [seeds.first, seeds.last]}
     checkpoint.save(model, path)
     return path

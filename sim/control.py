@@ -52,7 +52,7 @@ from sim.panda import TAU_MAX, dh_forward
 from sim.runner import N_JOINTS, ControlState, execute_plan, seed_variation
 from sim.skills import DOWN, PRECISE_STEPS, shared_ik, skill_spec, waypoints
 
-Detector = Callable[[np.ndarray], bool]  # observations so far (k + 1, 25) -> fault at step k?
+Detector = Callable[[np.ndarray], bool]  # observations so far (k + 1, 25) -> fault at observation k?
 
 
 def plan_from_recall(recalled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -85,7 +85,8 @@ def anchor_plan(joints: np.ndarray, skill: str, cube_xy: np.ndarray) -> np.ndarr
 class PlanCorrection:
     """Correction hook: q* = q_rec + K_i I, I the leaky, clipped integral of q_rec - q, its
     torque bounded by the external torque; with a `detector`, engaged once it has flagged
-    `gains.confirm` observations in a row."""
+    `gains.confirm` observations in a row. `engaged_step` and `yielded_step` count observations
+    (at 2 Hz the skill layer's steps, at 40 Hz the ticks), as the monitor's flags do."""
 
     def __init__(self, gains: CorrectionGains = SIM.correction, detector: Detector | None = None) -> None:
         self.gains, self.detector = gains, detector
@@ -112,11 +113,11 @@ class PlanCorrection:
             self.seen = len(state.observations)
             self.flags = self.flags + 1 if self.detector(state.observations) else 0
             if self.flags >= g.confirm:
-                self.engaged_step = state.step
+                self.engaged_step = self.seen - 1
         if self.engaged_step is None:
             return state.target
         if self.overloaded and self.yielded_step is None:
-            self.yielded_step = state.step
+            self.yielded_step = len(state.observations) - 1
         if self.yielded_step is not None:
             self.offset = self.offset * np.exp(-dt / g.release_s)
             return state.target + self.offset
@@ -130,8 +131,9 @@ class PlanCorrection:
 
 def execute_recalled(recalled: np.ndarray, skill: str, seed: int, correction: PlanCorrection | None = None,
                      controller: ControllerKind | None = None, disturbance: FallingObject | None = None,
-                     fault: FaultSpec | None = None) -> Episode:
-    """Execute a memory's recalled (15, 25) sequence for `seed`'s scene, anchored to its cube and goal.
+                     fault: FaultSpec | None = None, rate: float = SIM.timing.observation_hz) -> Episode:
+    """Execute a memory's recalled (15, 25) sequence (the skill layer's 2 Hz steps) for `seed`'s
+    scene, anchored to its cube and goal, observed at `rate` (2 or 40 Hz).
 
     `correction` (a fresh `PlanCorrection` per run; None: uncorrected) is the tick hook, and the
     caller keeps it to read when it engaged or let go; `controller` defaults to
@@ -141,4 +143,4 @@ def execute_recalled(recalled: np.ndarray, skill: str, seed: int, correction: Pl
     joints, gripper = plan_from_recall(recalled)
     joints = anchor_plan(joints, skill, seed_variation(skill, seed).cube_xy)
     return execute_plan(joints, gripper, seed, correction_hook=correction, disturbance=disturbance, skill=skill,
-                        fault=fault, controller=controller)
+                        fault=fault, controller=controller, rate=rate)

@@ -280,14 +280,15 @@ def first_observation(skill: str, seed: int) -> np.ndarray:
 def execute_plan(joint_plan: np.ndarray, gripper_plan: np.ndarray, seed: int,
                  correction_hook: CorrectionHook | None = None, disturbance: FallingObject | None = None,
                  skill: str = SKILLS[0], fault: FaultSpec | None = None,
-                 controller: ControllerKind | None = None) -> Episode:
-    """Execute a (15, 7) joint plan (rad) and (15,) gripper toggles given at 2 Hz.
+                 controller: ControllerKind | None = None, rate: float = SIM.timing.observation_hz) -> Episode:
+    """Execute a (15, 7) joint plan (rad) and (15,) gripper toggles given at 2 Hz, observed at
+    `rate` (2 or 40 Hz).
 
     The scene (cube pose, sensor noise) is the one `run_episode(skill, seed)` would see, so a
     recalled plan can be compared with the demonstration of the same seed. `correction_hook`,
     if given, is called before every 40 Hz tick with a `ControlState` and may return a (7,)
-    joint target replacing the plan's for that tick (None keeps it); faults and disturbances
-    still act after it. Targets are clipped to the joint limits. `controller` (default
+    joint target replacing the plan's for that tick (None keeps it; at 40 Hz its observations
+    gain one every tick); faults and disturbances still act after it. Targets are clipped to the joint limits. `controller` (default
     `SIM.controller`) tracks the targets: the stiff servos or the compliant impedance.
     """
     skill_spec(skill)
@@ -298,6 +299,7 @@ def execute_plan(joint_plan: np.ndarray, gripper_plan: np.ndarray, seed: int,
         raise ValueError(f"joint_plan must be a finite ({n}, {N_JOINTS}) array, got shape {joints.shape}")
     if gripper.shape != (n,) or not np.isin(gripper, (0.0, 1.0)).all():
         raise ValueError(f"gripper_plan must be a ({n},) array of 0/1, got {gripper!r}")
-    variation, noise = _seeded(skill, seed)
+    variation, noise = _seeded(skill, seed, rate)
     return execute(skill, seed, joints, gripper, variation.cube_xy, variation.cube_yaw, noise,
-                    _effects(fault, disturbance), correction_hook, fault, disturbance, controller=controller)
+                    _effects(fault, disturbance), correction_hook, fault, disturbance, controller=controller,
+                    rate=rate)

@@ -200,3 +200,25 @@ def test_test_seeds_may_not_overlap_the_selection_or_monitor_seeds(first):
     with pytest.raises(ValueError, match="overlap"):
         CORRECTION.with_(test_seed=first)
     assert CORRECTION.with_(test_seed=12_000).test_seeds[0] == 12_000
+
+
+@pytest.mark.slow
+def test_a_small_run_at_40_hz_over_two_trainings_gives_each_training_and_their_mean(tmp_path):
+    from experiments.correction.pipeline import run_trainings
+    from experiments.correction.report import write_json
+
+    config = CORRECTION.with_(n_seeds=1, momenta=(40.0,), monitor=MonitorSeeds(per_split=3), epochs=10, rate=40.0,
+                              monitor_mode="online", trainings=2, controllers=("compliant",))
+    result = run_trainings(config, progress=False)
+    write_json(result, tmp_path / "correction.json")
+    payload = json.loads((tmp_path / "correction.json").read_text())
+    assert payload["rate_hz"] == 40.0 and payload["model"]["rate_hz"] == 40.0
+    [row] = payload["results"]
+    assert len(row["per_training"]) == 2
+    for c in ("none", "corrected"):
+        assert row["recovery_rate"][c] == pytest.approx(np.mean([t[c] for t in row["per_training"]]))
+    assert sorted({r["training"] for r in payload["runs"]}) == [0, 1]
+    assert len(payload["monitor"]["compliant"]["per_training_threshold"]) == 2
+    first_tick = first_hit_step(config)
+    assert first_tick == 161  # the release at 4 s, seen from tick 161 on
+    assert all(r["detect_step"] >= first_tick for r in payload["runs"] if r["detect_step"] is not None)

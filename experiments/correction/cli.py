@@ -10,7 +10,10 @@ import typer
 
 from runtime.cli import Command, Group
 from experiments.correction.config import CORRECTION
+from pipelines.default_model import RATE_MODES
 from runtime.home import home_path
+from sim.cli import RATE_HELP, check_rate
+from sim.config import SIM
 
 app = typer.Typer(cls=Group)
 
@@ -21,23 +24,27 @@ def correction(
     seeds: int = typer.Option(24, min=1, help="test seeds per hit (skills alternate)"),
     first_seed: int = typer.Option(CORRECTION.test_seed, help="first test seed (a fresh block: any range clear of "
                                    "the selection and monitor seeds)"),
-    epochs: int | None = typer.Option(None, help="override the FAST model's epochs"),
+    epochs: int | None = typer.Option(None, help="override the default network's epochs"),
+    rate: int = typer.Option(int(SIM.timing.observation_hz), "--rate", callback=check_rate,
+                             help=RATE_HELP + " At 40 a network trained at 40 Hz monitors (online recall) and "
+                             "gates the correction at every tick; the 2 Hz network plans."),
+    trainings: int = typer.Option(1, min=1, help="trainings (seeds 0, 1, ...): recovery rates are their mean, "
+                                  "each training's in per_training"),
 ) -> None:
     """A box hits the arm carrying the cube, under stiff and compliant control, with and without
     the memory's correction; writes correction.json, correction.md and correction.png."""
 
     from experiments.correction.figures import write_figure
-    from experiments.correction.pipeline import fit_model, run_correction
+    from experiments.correction.pipeline import run_trainings
     from experiments.correction.report import write_json, write_markdown
 
     try:
-        config = CORRECTION.with_(n_seeds=seeds, test_seed=first_seed, epochs=epochs)
+        config = CORRECTION.with_(n_seeds=seeds, test_seed=first_seed, epochs=epochs, rate=float(rate),
+                                  monitor_mode=RATE_MODES[rate], trainings=trainings)
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--seeds / --first-seed") from exc
     out.mkdir(parents=True, exist_ok=True)
-    typer.echo("fitting the Neural ASM on the 20 demonstrations ...")
-    model = fit_model(config, progress=True)
-    result = run_correction(model, config)
+    result = run_trainings(config)
     write_json(result, out / "correction.json")
     write_markdown(result, out / "correction.md")
     write_figure(result, out / "correction.png")

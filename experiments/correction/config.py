@@ -12,7 +12,7 @@ from typing import Any
 
 from models.config import SCORING
 from pipelines.compliant import SERVED_MONITOR, MonitorSeeds
-from sim.config import CONTROLLERS, SIM, CorrectionGains, ElbowHit
+from sim.config import CONTROLLERS, RATES, SIM, CorrectionGains, ElbowHit
 
 
 @dataclass(frozen=True)
@@ -32,9 +32,17 @@ class CorrectionConfig:
     controllers: tuple[str, ...] = CONTROLLERS
     gains: CorrectionGains = SIM.correction
     gated: bool = True  # the correction engages once the monitor has flagged (False: from the start)
-    epochs: int | None = None  # None: the FAST preset's
+    epochs: int | None = None  # None: the rate's default network's
+    # The monitor's observation rate (Hz): at 40 a network trained at 40 Hz monitors every tick
+    # of the plan the 2 Hz network recalls (`pipelines.compliant.planner_of`).
+    rate: float = SIM.timing.observation_hz
+    trainings: int = 1  # networks trained per rate, training seeds 0, 1, ...
 
     def __post_init__(self) -> None:
+        if self.rate not in RATES:
+            raise ValueError(f"rate must be one of {', '.join(map(str, RATES))} Hz, got {self.rate!r}")
+        if self.trainings < 1:
+            raise ValueError(f"trainings must be >= 1, got {self.trainings}")
         tests = range(self.test_seed, self.test_seed + self.n_seeds)
         reserved = {"selection": range(*self.selection_seeds),
                     "monitor": range(self.monitor.first, self.monitor.last + 1),

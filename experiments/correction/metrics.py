@@ -38,8 +38,9 @@ def run_metrics(episode: Episode, config: CorrectionConfig) -> dict:
 
 
 def first_hit_step(config: CorrectionConfig) -> int:
-    """The first observation step that can see the hit (observations are taken before a block's ticks)."""
-    return int(np.floor(config.hit.release_s * SIM.timing.observation_hz + 1e-9)) + 1
+    """The first observation (at the config's rate) that can see the hit: observations are taken
+    before their ticks (9 at 2 Hz, 161 at 40 Hz for a release at 4 s)."""
+    return int(np.floor(config.hit.release_s * config.rate + 1e-9)) + 1
 
 
 def detection(energies: np.ndarray, threshold: float, config: CorrectionConfig) -> dict:

@@ -17,8 +17,15 @@ def _mean(values: list) -> float:
     return float(np.mean(values)) if values else float("nan")
 
 
+def per_training(runs: list[dict], trainings: int) -> list[dict[str, float]]:
+    """Each training's recovery rate without and with the correction."""
+    return [{c: _mean([r["recovered"] for r in runs if r["training"] == t and r["correction"] == c])
+             for c in CORRECTIONS} for t in range(trainings)]
+
+
 def summarise(result: Result) -> list[dict]:
-    """One row per (controller, momentum): recovery without and with the correction, detection, deviations."""
+    """One row per (controller, momentum): recovery without and with the correction (the mean of
+    the trainings' rates, each training's beside it), detection, deviations."""
     rows = []
     for controller in result.config.controllers:
         for momentum in result.config.momenta:
@@ -28,12 +35,14 @@ def summarise(result: Result) -> list[dict]:
             unrecovered = [r for r in plain if not r["recovered"]]
             ok = {c: [r for r in rows_ if r["error"] is None] for c, rows_ in sel.items()}
             steps = [r["detect_step"] for r in plain if r.get("detect_step") is not None]
+            trainings = per_training(sel["none"] + sel["corrected"], result.config.trainings)
             rows.append({
                 "controller": controller,
                 "momentum": float(momentum),
                 "mass_kg": float(momentum / result.config.hit.speed_m_s),
                 "n_seeds": len(plain),
-                "recovery_rate": {c: _mean([r["recovered"] for r in sel[c]]) for c in CORRECTIONS},
+                "recovery_rate": {c: _mean([t[c] for t in trainings]) for c in CORRECTIONS},
+                "per_training": trainings,
                 "placed_rate": {c: _mean([r["placed"] for r in sel[c]]) for c in CORRECTIONS},
                 "mean_peak_dev_deg": {c: _mean([r["peak_dev_deg"] for r in ok[c]]) for c in CORRECTIONS},
                 "mean_late_dev_deg": {c: _mean([r["late_dev_deg"] for r in ok[c]]) for c in CORRECTIONS},
@@ -65,6 +74,7 @@ def undisturbed(result: Result) -> list[dict]:
 
 def write_json(result: Result, path: Path) -> None:
     payload = {
+        "rate_hz": result.config.rate,
         "results": summarise(result),
         "undisturbed": undisturbed(result),
         "config": asdict(result.config) | {"test_seeds": result.config.test_seeds,
@@ -109,7 +119,11 @@ def write_markdown(result: Result, path: Path) -> None:
         for u in undisturbed(result))
     letting_go = (f"letting go once a joint is at {g.yield_torque:.0%} of its torque limit for {g.yield_s:g} s"
                   if g.yield_s is not None else "never letting go")
+    trainings = (f"; recovery rates are the means of {cfg.trainings} trainings (training seeds 0..{cfg.trainings - 1}), "
+                 "each training's in correction.json" if cfg.trainings > 1 else "")
     path.write_text(f"""# Reactive correction: a box falls on the arm carrying the cube
+
+Monitor at {cfg.rate:g} Hz ({cfg.monitor_mode} recall){trainings}.
 
 {cfg.n_seeds} test seeds ({seeds[0]}..{seeds[-1]}, skills alternating) per hit; a box dropped
 {cfg.hit.drop_height_m * 100:g} cm above the elbow (link 4) at {cfg.hit.speed_m_s:g} m/s at t = {cfg.hit.release_s:g} s (the carry),
@@ -118,7 +132,7 @@ grasp and place anchored to the perceived cube and goal (`sim.control.anchor_pla
 integral of q_rec - q, K_i = {g.ki:g}/s, |K_i I| <= {g.i_max_deg:g} deg and its torque at most the external torque at each joint,
 {letting_go} (chosen on seeds
 {cfg.selection_seeds[0]}..{cfg.selection_seeds[1] - 1}), {f"engaged once the monitor has flagged {g.confirm} observations in a row" if cfg.gated else "on from the start"}. Recovered: cube within 1 cm of its target and every joint within
-{cfg.band_deg:g} deg of the plan from t = {cfg.deadline_s:g} s on. Detected: the monitor's precision-weighted offline
+{cfg.band_deg:g} deg of the plan from t = {cfg.deadline_s:g} s on. Detected: the monitor's precision-weighted {cfg.monitor_mode}
 energy exceeds its whole-episode threshold at {cfg.fpr:.0%} false-positive rate at a step after the hit
 (thresholds: {", ".join(f"{c} {m['threshold']:.3g}" for c, m in result.monitor.items())}; the hit is released
 just after observation {first_hit_step(cfg) - 1}).
