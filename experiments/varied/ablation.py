@@ -43,6 +43,8 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
                                   ROBUST.with_(direct_lags=1, direct_target="hidden")),
     "direct_hidden_noise_lags3": ("robust preset, the last 3 observations added to the hidden prior through W_D",
                                   ROBUST.with_(direct_lags=3, direct_target="hidden")),
+    "direct_hidden_noise_h128": ("pathways preset with 128 hidden units (256)", PATHWAYS.with_(hidden_size=128)),
+    "direct_hidden_noise_h64": ("pathways preset with 64 hidden units (256)", PATHWAYS.with_(hidden_size=64)),
     "direct_hidden_noise_0.5": ("training noise 0.5, the last 2 observations added to the hidden prior through W_D",
                                 FAST.with_(training_noise=0.5, direct_lags=2, direct_target="hidden")),
 }
