@@ -70,6 +70,9 @@ class TemporalPC:
         self.W_F = (torch.rand(obs_size, h, generator=gen) * 2 - 1) * bound
         n_context = len(self.context_index)
         self.W_C = (torch.rand(h, n_context, generator=gen) * 2 - 1) / math.sqrt(max(n_context, 1))
+        # Where W_D p goes, read on every step: into the expected observation or the hidden prior.
+        self.direct_x = self.has_direct and config.direct_target == "observation"
+        self.direct_z = self.has_direct and config.direct_target == "hidden"
         # Zero: training starts from the paper's network and the local rule grows the pathways.
         self.W_D = torch.zeros(h if config.direct_target == "hidden" else obs_size, obs_size * config.direct_lags)
         # Precision of each observation channel in the energy, ||x - W_F f(z)||^2_Pi.
@@ -83,8 +86,6 @@ class TemporalPC:
         self.w_f = self.W_F.numpy()
         self.w_c = self.W_C.numpy()
         self.w_d = self.W_D.numpy()
-        self.direct_x = self.has_direct and self.config.direct_target == "observation"
-        self.direct_z = self.has_direct and self.config.direct_target == "hidden"
         self.pi = self.precision.numpy()
         self.pi_sqrt = np.sqrt(self.pi)
 
