@@ -120,7 +120,8 @@ class NeuralASM:
         for mode in recall_.RECALL_MODES:
             # provisional until calibrate(); one sequence cannot give a precision matrix
             covariance = SCORING.error_covariance if len(data) > 1 else "diagonal"
-            calibration = estimate(mode, 1, model.errors(data, mode, 1), "training sequences", covariance)
+            calibration = estimate(mode, 1, model.errors(data, mode, 1), "training sequences", covariance,
+                                   SCORING.spread_floor(rate_hz))
             model.calibrations[calibration.key] = calibration
         return model
 
@@ -197,7 +198,8 @@ class NeuralASM:
         covariance: Covariance = SCORING.error_covariance,
     ) -> Calibration:
         """Estimate precisions on one set of normal episodes and thresholds on another."""
-        calibration = estimate(mode, cue_steps, self.errors(precision_sequences, mode, cue_steps), source, covariance)
+        calibration = estimate(mode, cue_steps, self.errors(precision_sequences, mode, cue_steps), source, covariance,
+                               SCORING.spread_floor(self.rate_hz))
         set_thresholds(calibration, self.errors(threshold_sequences, mode, cue_steps), fprs)
         self.calibrations[calibration.key] = calibration
         return calibration

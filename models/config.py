@@ -170,10 +170,15 @@ RATE_DEFAULTS: dict[float, TPCConfig] = {DEFAULT_RATE_HZ: FAST, 40.0: FAST_40HZ}
 class ScoringConfig:
     """How prediction errors become energies, precisions and thresholds."""
 
-    # Floor on the expected spread of a normalised prediction error. Spreads estimated
-    # from ~20 episodes can be near zero for a channel that barely varies (a toggle),
-    # which would give it an unbounded precision.
+    # Floor on the expected spread of a normalised prediction error at the paper's 2 Hz.
+    # Spreads estimated from ~20 episodes can be near zero for a channel that barely varies
+    # (a toggle), which would give it an unbounded precision. A smooth channel's one-step
+    # error shrinks with the step, so the floor scales with the observation period
+    # (`spread_floor`): at 40 Hz, 0.0025. There 0.05 sat above the normal spread of most
+    # joint channels (a lag-3 linear predictor's joint errors are 0.003-0.009) and hid the
+    # first ticks of a fault under it.
     error_std_floor: float = 0.05
+    floor_rate_hz: float = 2.0  # the observation rate error_std_floor is for
     # Correlations between the channels' errors. "full": each step's errors, divided by
     # their spreads, are whitened by a precision matrix (the inverse of their
     # Ledoit-Wolf-shrunk second moment on normal episodes), so that errors moving together
@@ -184,6 +189,12 @@ class ScoringConfig:
     # decision uses unless told otherwise (the service's default, the sweep's headline).
     fprs: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
     default_fpr: float = 0.01
+
+    def spread_floor(self, rate_hz: float) -> float:
+        """The floor on error spreads of observations made at `rate_hz`."""
+        if not rate_hz > 0:
+            raise ValueError(f"rate_hz must be > 0, got {rate_hz!r}")
+        return self.error_std_floor * self.floor_rate_hz / rate_hz
 
 
 SCORING = ScoringConfig()

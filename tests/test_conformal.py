@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from models.calibration import Thresholds
+from models.config import SCORING
 from models.conformal import (
     TimeVaryingThreshold,
     binomial_interval,
@@ -130,3 +132,29 @@ def test_mcnemar_exact():
     assert mcnemar_exact(0, 10) == mcnemar_exact(10, 0)
     with pytest.raises(ValueError, match="b_only"):
         mcnemar_exact(3, -1)
+
+
+def test_the_served_episode_threshold_is_the_conformal_rank(rng):
+    # 150 calibration episodes at 1 %: rank ceil(151 * 0.99) = 150, the highest peak (np.quantile's
+    # "higher" method gives the 149th, which flags 2/151 of normal episodes on average, not 1/151).
+    energies = rng.gamma(2.0, size=(150, 15))
+    peaks = np.sort(energies.max(axis=1))
+    assert Thresholds.of(energies, 0.01).episode == peaks[-1]
+    assert Thresholds.of(energies[:120], 0.05).episode == np.sort(energies[:120].max(axis=1))[114]  # ceil(121*.95)
+    # over calibration draws the flag rate of fresh normal episodes stays within alpha
+    n, alpha = 150, 0.01
+    cal = rng.standard_normal((20000, n, 1))
+    rates = np.array([stats.norm.sf(Thresholds.of(c, alpha).episode) for c in cal])
+    assert alpha - 1 / (n + 1) <= rates.mean() <= alpha
+
+
+def test_too_few_episodes_for_the_guarantee_serve_the_highest_peak():
+    energies = np.arange(40.0).reshape(20, 2)  # 20 episodes: a 1 % guarantee needs 99
+    assert Thresholds.of(energies, 0.01).episode == 39.0
+
+
+def test_the_spread_floor_scales_with_the_observation_period():
+    assert SCORING.spread_floor(2.0) == pytest.approx(SCORING.error_std_floor)
+    assert SCORING.spread_floor(40.0) == pytest.approx(SCORING.error_std_floor / 20)
+    with pytest.raises(ValueError, match="rate_hz"):
+        SCORING.spread_floor(0.0)

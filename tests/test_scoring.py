@@ -5,6 +5,7 @@ import pytest
 
 from models import checkpoint
 from models.calibration import error_precision, error_spread
+from models.config import SCORING
 from models.fault import isolate, isolate_rows
 from models.scoring import energy
 
@@ -47,6 +48,19 @@ def test_calibration_whitens_by_default_and_diagonal_on_request(trained, skills)
     np.testing.assert_allclose(model.score(test.data, "offline").energy, energy(errors, diagonal.error_std))
     with pytest.raises(ValueError, match="covariance"):
         model.calibrate(train.data, test.data, "offline", 1, covariance="sparse")  # type: ignore[arg-type]
+
+
+def test_spreads_are_floored_at_the_floor_of_the_model_rate(trained, skills):
+    train, test = skills
+    model = checkpoint.from_bytes(checkpoint.to_bytes(trained))
+    at_2hz = model.calibrate(train.data, test.data, "online", 1).error_std
+    model.rate_hz = 40.0  # the same errors, as if observed every 25 ms
+    at_40hz = model.calibrate(train.data, test.data, "online", 1).error_std
+    floor_2hz, floor_40hz = SCORING.spread_floor(2.0), SCORING.spread_floor(40.0)
+    assert at_2hz.min() == pytest.approx(floor_2hz) and at_40hz.min() >= floor_40hz
+    below = at_40hz < floor_2hz  # spreads the 2 Hz floor hid
+    assert below.any()
+    np.testing.assert_allclose(at_40hz[~below], at_2hz[~below])
 
 
 def test_a_batch_is_isolated_and_ranked_as_each_row_alone(rng):
