@@ -73,7 +73,8 @@ class TemporalPC:
         # Where W_D p goes, read on every step: into the expected observation or the hidden prior.
         self.direct_x = self.has_direct and config.direct_target == "observation"
         self.direct_z = self.has_direct and config.direct_target == "hidden"
-        # Zero: training starts from the paper's network and the local rule grows the pathways.
+        # Zero: training starts from the paper's network and the local rule grows the pathways
+        # (unless config.direct_init says to start them from least squares: fit_direct).
         self.W_D = torch.zeros(h if config.direct_target == "hidden" else obs_size, obs_size * config.direct_lags)
         # Precision of each observation channel in the energy, ||x - W_F f(z)||^2_Pi.
         # All ones is the paper's model; values are kept in (0, 1] so the stability
@@ -116,6 +117,22 @@ class TemporalPC:
     def push(past: np.ndarray | None, x: np.ndarray) -> np.ndarray | None:
         """p for the next step: x in front, the oldest step dropped."""
         return None if past is None else np.concatenate([x, past[:, : past.shape[1] - x.shape[1]]], axis=1, dtype=past.dtype)
+
+    def fit_direct(self, sequences: np.ndarray) -> None:
+        """W_D into the observation set to the ridge regression of every step of normalised
+        sequences (N, T, D) on its past p, as recall builds p (``initial_past``, ``push``)."""
+        if not self.direct_x:
+            raise ValueError("fit_direct sets pathways into the observation; this network has none")
+        past = self.initial_past(sequences[:, 0])
+        pasts = []
+        for t in range(sequences.shape[1]):
+            pasts.append(past)
+            past = self.push(past, sequences[:, t])
+        p = np.concatenate(pasts).astype(np.float64)
+        y = sequences.transpose(1, 0, 2).reshape(-1, self.obs_size).astype(np.float64)
+        gram = p.T @ p
+        ridge = self.config.direct_ridge * np.trace(gram) / len(gram)
+        self.w_d[:] = np.linalg.solve(gram + ridge * np.eye(len(gram)), p.T @ y).T
 
     def context_of(self, x: np.ndarray) -> np.ndarray | None:
         """The context input c of a (normalised) observation batch (B, D), or None without W_C."""

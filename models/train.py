@@ -112,6 +112,7 @@ def train(
 ) -> tuple[list[float], int]:
     """Train on normalised sequences (N, T, D).
 
+    Pathways into the observation configured to start from least squares are fitted first.
     Returns the mean energy of every epoch and the epoch whose weights are kept: the
     last one, or, given held-out ``validation`` sequences, the evaluated epoch with the
     lowest recall error on them. With ~20 demonstrations the recall error on unseen
@@ -120,6 +121,8 @@ def train(
     sequences = checked_array(sequences, "sequences", net.obs_size, np.float32)
     if validation is not None:
         validation = checked_array(validation, "validation sequences", net.obs_size, np.float32)
+    if net.config.direct_init == "least_squares":
+        net.fit_direct(sequences)
     best = (np.inf, net.config.epochs - 1, None)
     rng = np.random.default_rng(net.config.seed)
     # numpy views of the parameters: updated in place, the tensors with them.

@@ -76,6 +76,45 @@ def test_without_w_f_online_recall_is_a_linear_model_of_the_last_steps(rng):
     np.testing.assert_allclose(expected[:, 1:], linear[:, :-1], rtol=1e-5, atol=1e-6)
 
 
+def test_least_squares_start_recovers_a_linear_process(rng):
+    """Sequences from a known linear process of the last two steps: fit_direct finds its
+    coefficients, and online recall with W_F = 0 then predicts within the process's noise."""
+    obs, steps = 3, 400
+    a1, a2 = np.diag([1.5, 0.9, 1.2]), np.diag([-0.6, -0.2, -0.3])
+    x = np.zeros((8, steps, obs))
+    x[:, :2] = 0.1 * rng.normal(size=(8, 2, obs))  # near the stationary spread: steps 0-1 are no AR rows
+    for t in range(2, steps):
+        x[:, t] = x[:, t - 1] @ a1.T + x[:, t - 2] @ a2.T + 0.05 * rng.normal(size=(8, obs))
+    config = SMALL.with_(hidden_size=6, direct_lags=LAGS, direct_target="observation", direct_init="least_squares")
+    net = TemporalPC(obs, config)
+    net.fit_direct(x.astype(np.float32))
+    np.testing.assert_allclose(net.w_d, np.hstack([a1, a2]), atol=0.05)
+    net.load_weights(net.W_H, torch.zeros_like(net.W_F), W_D=net.W_D)
+    errors = x[:, 1:] - recall.run(net, x.astype(np.float32), "online")[:, 1:]
+    assert np.sqrt((errors[:, 2:] ** 2).mean()) < 0.06
+
+
+def test_least_squares_start_is_refused_where_it_has_no_meaning(skills):
+    with pytest.raises(ValueError, match="direct_target='observation'"):
+        SMALL.with_(direct_lags=LAGS, direct_target="hidden", direct_init="least_squares")
+    with pytest.raises(ValueError, match="direct_init"):
+        SMALL.with_(direct_lags=LAGS, direct_target="observation", direct_init="ridge")
+    with pytest.raises(ValueError, match="no"):
+        TemporalPC(4, SMALL).fit_direct(np.zeros((2, 5, 4), np.float32))
+
+
+def test_training_starts_from_least_squares(skills):
+    """The network trained from the least-squares start keeps pathways close to it and predicts
+    the held-out sequences one step ahead better than the network grown from zero."""
+    train, test = skills
+    base = SMALL.with_(direct_lags=LAGS, direct_target="observation", epochs=60)
+    errors = {}
+    for init in ("zeros", "least_squares"):
+        model = NeuralASM.fit(train.data, train.channel_names, base.with_(direct_init=init), progress=False)
+        errors[init] = float((model.errors(test.data, "online", 1)[:, 1:] ** 2).mean())
+    assert errors["least_squares"] < errors["zeros"]
+
+
 @pytest.fixture(scope="module", params=["observation", "hidden"])
 def direct_model(skills, request):
     train, _ = skills
