@@ -7,7 +7,7 @@ import copy
 import numpy as np
 import pytest
 
-from experiments.fault_sweep.served import Onsets, flagged, percentiles_ms, subsampled
+from experiments.fault_sweep.served import Onsets, flagged, flagged_over_resplits, percentiles_ms, subsampled
 from models.fault import flag_steps
 from models.sequences import Sequences
 
@@ -54,3 +54,12 @@ def test_subsampling_and_percentiles(skills):
         subsampled(fast, 3.0)
     assert percentiles_ms(np.array([0.025, 0.05, 0.075])) == {"median_ms": 50.0, "p95_ms": 72.5}
     assert percentiles_ms(np.array([])) == {"median_ms": None, "p95_ms": None}
+
+
+def test_flagged_over_resplits_is_the_conformal_rate(rng):
+    """Over re-splits of any pool of distinct peaks, a test episode is above the calibration set's
+    conformal threshold with probability (n + 1 - k) / (n + 1): 1/151 for 150 episodes at 1 %."""
+    peaks = rng.lognormal(size=300)
+    share = flagged_over_resplits(peaks[:150], peaks[150:], 0.01)
+    assert share == pytest.approx(1 / 151, abs=1e-3)
+    assert flagged_over_resplits(peaks[:150], peaks[150:], 0.05) == pytest.approx(7 / 151, abs=3e-3)  # rank 144

@@ -49,7 +49,8 @@ def faults(
                                     "Hebbian rule and by BPTT (a measurement beyond the paper, "
                                     "experiments/varied/diagnostic.py), --seeds trainings each, against the best linear "
                                     "one-step predictor; write diagnostic.json and diagnostic.md"),
-    seeds: int = typer.Option(3, min=1, help="trainings per learner (--diagnostic) or per variant (--ablation)"),
+    seeds: int = typer.Option(3, min=1, help="trainings per learner (--diagnostic), per variant (--ablation) or "
+                              "per rate (--rate 40; the first is saved and headlines)"),
     variant: list[str] = typer.Option([], help="--ablation: only this variant (repeat for more; default: all of "
                                       "experiments/varied/ablation.py's VARIANTS)"),
     n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
@@ -71,7 +72,7 @@ def faults(
         return
     if rate != SIM.timing.observation_hz:
         _rate(rate, out or home_path(f"fault_sweep_{rate}hz"), data or home_path(set_folder(rate)), n_normal,
-              fast_epochs, parallel=parallel)
+              fast_epochs, seeds, parallel=parallel)
         return
     out = out or home_path("fault_sweep")
     data = data or home_path("data")
@@ -89,11 +90,12 @@ def faults(
     typer.echo(f"wrote {out}")
 
 
-def _rate(rate: int, out: Path, data: Path, n_normal: int, epochs: int | None, *, parallel: Parallel) -> None:
+def _rate(rate: int, out: Path, data: Path, n_normal: int, epochs: int | None, trainings: int, *,
+          parallel: Parallel) -> None:
     from experiments.fault_sweep.rate import markdown, run_rate_sweep, write
 
     out.mkdir(parents=True, exist_ok=True)
-    result = run_rate_sweep(data, out, rate, n_normal, epochs, parallel=parallel)
+    result = run_rate_sweep(data, out, rate, n_normal, epochs, trainings, parallel=parallel)
     write(result, out)
     typer.echo(markdown(result))
     typer.echo(f"wrote {out} in {result['seconds']:.0f} s")

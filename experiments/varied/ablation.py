@@ -35,6 +35,12 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
                            FAST.with_(direct_lags=3, direct_target="observation")),
     "direct_observation_noise": ("robust preset, the last 3 observations added to the expectation through W_D",
                                  ROBUST.with_(direct_lags=3, direct_target="observation")),
+    "direct_observation_ls": ("robust preset, the last 3 observations added to the expectation through W_D "
+                              "started from least squares", ROBUST.with_(direct_lags=3, direct_target="observation",
+                                                                         direct_init="least_squares")),
+    "direct_observation_ls_clean": ("no noise, the last 3 observations added to the expectation through W_D "
+                                    "started from least squares",
+                                    FAST.with_(direct_lags=3, direct_target="observation", direct_init="least_squares")),
     "direct_hidden": ("no noise, the last 2 observations added to the hidden prior through W_D",
                       FAST.with_(direct_lags=2, direct_target="hidden")),
     "direct_hidden_noise": ("pathways preset (featured): robust, the last 2 observations added to the hidden "
