@@ -7,23 +7,39 @@ site=$(echo "$1"/lib/python3*/site-packages)
 command -v strip >/dev/null || { echo "slim.sh: strip not found (apt-get install binutils)" >&2; exit 1; }
 
 # Packages that others require but the project never imports: sympy, mpmath and networkx
-# (torch.compile and torch.export only), PyOpenGL (dm_control's renderers: no display here).
-"$1/bin/pip" uninstall -q -y sympy mpmath networkx PyOpenGL
+# (torch.compile and torch.export only), PyOpenGL and glfw (dm_control's and MuJoCo's renderers:
+# no display here), labmaze (the mazes of dm_control's locomotion, cut below).
+"$1/bin/pip" uninstall -q -y sympy mpmath networkx PyOpenGL glfw labmaze
+# matplotlib and what only it requires: the experiments' figures. Those commands say so and stop
+# when it is missing (experiments/plotting.py); nothing else imports it.
+"$1/bin/pip" uninstall -q -y matplotlib fonttools contourpy kiwisolver cycler python-dateutil
 # torch's C++ headers, test suite and test programs (torch_shm_manager stays: shared memory).
 rm -rf "$site/torch/include" "$site/torch/test" "$site"/torch/lib/lib*test*.so
 find "$site/torch/bin" -type f ! -name torch_shm_manager -delete
-# pyarrow's C++ tests and headers, Arrow Flight and S3 (pyarrow.fs does without _s3fs).
-rm -rf "$site"/pyarrow/_pyarrow_cpp_tests* "$site/pyarrow/include" "$site"/pyarrow/libarrow_flight.so* \
+# pyarrow's C++ tests, headers and sources, Arrow Flight and S3 (pyarrow.fs does without _s3fs).
+# (pyarrow.lib links libarrow_substrait: it stays.)
+rm -rf "$site"/pyarrow/_pyarrow_cpp_tests* "$site/pyarrow/include" "$site/pyarrow/src" "$site"/pyarrow/libarrow_flight.so* \
     "$site"/pyarrow/libarrow_python_flight.so* "$site"/pyarrow/_flight.*.so "$site"/pyarrow/libarrow_s3.so* \
     "$site"/pyarrow/_s3fs.*.so
-# Third-party test suites: never imported by their packages.
-find "$site" -depth -type d -name tests -prune -exec rm -rf {} +
+# pyarrow's wheel holds each of its own libraries three times over (libX.so, libX.so.N and
+# libX.so.N.M.P, which an installed library has as links): the two shorter names become links.
+for lib in "$site"/pyarrow/lib*.so.*.*.*; do
+    for name in "${lib%.*.*}" "${lib%.so.*}.so"; do
+        if [ -f "$name" ] && [ ! -L "$name" ] && cmp -s "$name" "$lib"; then ln -sf "${lib##*/}" "$name"; fi
+    done
+done
+# Third-party test suites and their data: never imported by their packages.
+find "$site" -depth -type d \( -name tests -o -name testdata -o -name test_assets \) -prune -exec rm -rf {} +
+find "$site/dm_control" "$site/mujoco" -type f -name '*_test.py' -delete
+rm -rf "$site/dm_control/mujoco/testing/assets"
 # dm_control's walker, maze and suite assets: the project uses its MJCF library only.
 rm -rf "$site/dm_control/locomotion" "$site/dm_control/suite"
-# MuJoCo's experimental Studio GUI (the simulation needs no viewer).
-rm -rf "$site/mujoco/experimental"
-# C and Cython sources shipped beside the compiled modules.
-find "$site" -type f \( -name '*.c' -o -name '*.cpp' -o -name '*.pyx' -o -name '*.pxd' -o -name '*.pxi' \) -delete
+# MuJoCo's experimental Studio GUI and its Filament renderer (the simulation needs no viewer).
+rm -rf "$site/mujoco/experimental" "$site"/mujoco/_render_filament.*.so "$site/mujoco/mjrf.py"
+# C and Cython sources and C headers shipped beside the compiled modules (for building against
+# them), and type stubs (for type checkers).
+find "$site" -type f \( -name '*.c' -o -name '*.cpp' -o -name '*.h' -o -name '*.hpp' -o -name '*.pyx' \
+    -o -name '*.pxd' -o -name '*.pxi' -o -name '*.pyi' \) -delete
 # Debug symbols and symbol tables of every native file but those in the auditwheel-patched
 # *.libs folders (stripping those can break them), and of rerun's CLI.
 find "$site" -type f -name '*.so*' ! -path '*.libs/*' -exec strip --strip-unneeded {} +
@@ -31,5 +47,5 @@ strip --strip-unneeded "$site/rerun_cli/rerun"
 # Byte-code: the build writes it back only for the modules the project imports (Dockerfile).
 find "$site" -depth -type d -name __pycache__ -prune -exec rm -rf {} +
 # Check that what was cut is not needed to load them.
-"$1/bin/python" -c "import torch, llvmlite.binding, rerun, dm_control.mjcf, scipy, sklearn, mujoco, pyarrow.parquet, pyarrow.dataset, pyarrow.fs, foxglove, matplotlib"
+"$1/bin/python" -c "import torch, llvmlite.binding, rerun, dm_control.mjcf, scipy, sklearn, mujoco, pyarrow.parquet, pyarrow.dataset, pyarrow.fs, foxglove"
 "$1/bin/python" -m rerun --version

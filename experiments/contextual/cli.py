@@ -9,10 +9,11 @@ from pathlib import Path
 import typer
 
 from runtime.cli import Command, Group
-from experiments.contextual import figures, report
+from experiments.contextual import report
 from experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, QUICK
 from experiments.contextual.dataset import conditions_data
 from experiments.contextual.protocol import run_protocol
+from experiments.plotting import require_matplotlib
 from models.config import PRESETS
 from runtime.home import home_path
 from runtime.parallel import Backend
@@ -37,6 +38,9 @@ def contextual(
     if preset not in PRESETS:
         typer.secho(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}", fg="red", err=True)
         raise typer.Exit(2)
+    require_matplotlib("contextual")
+    from experiments.contextual import figures
+
     cfg = QUICK if quick else CONTEXTUAL
     cfg = cfg.with_(**{k: v for k, v in (("seeds", seeds), ("epochs", epochs)) if v is not None})
     cfg = cfg.with_(skill_seeds=min(cfg.skill_seeds, cfg.seeds))

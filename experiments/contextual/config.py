@@ -7,6 +7,12 @@ from typing import Any
 
 CONDITIONS: tuple[str, ...] = ("plan_and_execute", "plan_only", "execute_only")
 MODELS: tuple[str, ...] = ("neural_asm", "s_to_m", "sm_to_sm")
+# How reports and figures name the conditions and the models.
+LABELS = {
+    "plan_and_execute": "plan & execute", "plan_only": "plan only", "execute_only": "execute only",
+    "neural_asm": "Neural ASM", "s_to_m": "S-to-M RNN", "sm_to_sm": "SM-to-SM RNN",
+    "demonstrations": "demonstrations",
+}
 
 
 @dataclass(frozen=True)

@@ -10,16 +10,11 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig
+from experiments.contextual.config import CONDITIONS, LABELS, MODELS, SKILLS, ContextualConfig
 from experiments.contextual.dataset import JOINT_CHANNELS, hand, sensory_index
 from models.sequences import Sequences
 
 CUE_COLOURS = {"CW": "tab:red", "CCW": "tab:blue", "CW_wide": "tab:orange", "CCW_wide": "tab:cyan"}
-LABELS = {
-    "plan_and_execute": "plan & execute", "plan_only": "plan only", "execute_only": "execute only",
-    "neural_asm": "Neural ASM", "s_to_m": "S-to-M RNN", "sm_to_sm": "SM-to-SM RNN",
-    "demonstrations": "demonstrations",
-}
 
 
 def _save(fig: plt.Figure, path: Path) -> Path:

@@ -6,8 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from experiments.contextual.config import CONDITIONS, MODELS
-from experiments.contextual.figures import LABELS
+from experiments.contextual.config import CONDITIONS, LABELS, MODELS
 
 PLANNING = ("plan_and_execute", "plan_only")
 

@@ -10,6 +10,7 @@ import typer
 
 from runtime.cli import Command, Group
 from experiments.correction.config import CORRECTION
+from experiments.plotting import require_matplotlib
 from pipelines.default_model import RATE_MODES
 from runtime.home import home_path
 from sim.cli import RATE_HELP, check_rate
@@ -34,6 +35,7 @@ def correction(
     """A box hits the arm carrying the cube, under stiff and compliant control, with and without
     the memory's correction; writes correction.json, correction.md and correction.png."""
 
+    require_matplotlib("correction")
     from experiments.correction.figures import write_figure
     from experiments.correction.pipeline import run_trainings
     from experiments.correction.report import write_json, write_markdown

@@ -10,6 +10,7 @@ from pathlib import Path
 import typer
 
 from runtime.cli import Command, Group
+from experiments.plotting import require_matplotlib
 from models.config import FAITHFUL
 from runtime.home import home_path
 from runtime.parallel import Backend, Parallel
@@ -58,6 +59,9 @@ def faults(
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
 ) -> None:
     """Run the 980-fault sweep (or the varied-task benchmark) against baselines; write JSON, markdown and figures."""
+    # The sweep and the varied benchmark end with figures (not --ceiling, --diagnostic, --ablation or another rate).
+    if not (ceiling or diagnostic or ablation) if task == Task.varied else rate == SIM.timing.observation_hz:
+        require_matplotlib("faults")
     parallel = Parallel(workers, backend)
     if task == Task.varied:
         out, data = out or home_path(f"varied_{context.value}"), data or home_path("data_varied")

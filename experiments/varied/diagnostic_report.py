@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib.pyplot as plt
 import numpy as np
 
 GROUPS = ("joints", "end effector", "fingers", "finger forces and torques", "perceived context")
@@ -67,6 +66,8 @@ def per_group_markdown(results: list[dict]) -> str:
 
 def write_figure(results: list[dict], path: Path) -> Path:
     """Held-out MSE per channel group (left) and the joints' held-out MSE per step (right), per context."""
+    import matplotlib.pyplot as plt
+
     fig, axes = plt.subplots(len(results), 2, figsize=(12, 3.6 * len(results)), squeeze=False)
     colours = {"hebbian": "tab:blue", "bptt": "tab:orange", "linear": "tab:green"}
     for row, r in zip(axes, results):

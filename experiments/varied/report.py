@@ -6,8 +6,6 @@ import json
 import os
 from pathlib import Path
 
-
-import matplotlib.pyplot as plt
 import numpy as np
 
 from experiments.varied.run import VariedResult
@@ -109,6 +107,8 @@ def _diagnostics_lines(h: dict) -> list[str]:
 
 def write_figures(result: VariedResult, out: Path) -> list[Path]:
     """Detection per fault family, and normal vs out-of-range false alarms, per method."""
+    import matplotlib.pyplot as plt
+
     names = sorted(result.summaries, key=lambda n: -result.summaries[n]["episode"]["detection"])
     labels = [result.summaries[n]["label"] for n in names]
     families = list(result.summaries[names[0]]["episode"]["per_family"])
