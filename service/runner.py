@@ -10,13 +10,17 @@ for it (measured in docs/performance.md).
 What may take long or block runs in arrival order in one worker thread: compiling the
 kernels, loading or building models, opening and closing sessions' recordings, and
 handing recorded steps to the recorder (whose queue is bounded). A job first computes the
-steps queued before it, so it comes after them: a session's close after its last
-recorded step. The worker is the recordings' single owner. Recorded steps are answered
-once the worker has handed them to the recorder, and while it hands over one batch the
-next recorded steps wait and gather into the next: a server that outruns its recorder
-is slowed to its pace (its sessions wait, the loop does not), in batches as large as
-waiting makes them, instead of piling steps, and the session openings behind them, into
-the worker's queue.
+steps queued before it and hands over their records, so it comes after them: a session's
+close after its last recorded step. The worker is the recordings' single owner.
+
+Recorded steps are answered as soon as they are computed. Their records gather on the loop
+and go to the recorder together, one message every ``HANDOVER_PERIOD_S`` at most: robots
+streaming at their controllers' pace send steps one or two at a time, and a message per such
+batch cost the recorder more than writing the steps. A server that outruns its recorder is
+slowed to its pace: once ``UNHANDED_MAX`` records wait for a hand-over, further recorded steps
+wait too (their sessions wait, the loop does not) instead of piling up without bound. A
+server killed outright loses the records not yet handed over (at most ``HANDOVER_PERIOD_S``
+of steps when the recorder keeps up) beside the recorder's own unflushed second.
 """
 
 import asyncio
@@ -39,6 +43,9 @@ from service.sessions import Session
 
 log = logging.getLogger("service.runner")
 T = TypeVar("T")
+
+HANDOVER_PERIOD_S = 0.02  # recorded steps reach the recorder in one message this often at most
+UNHANDED_MAX = 4096  # records computed but not yet handed over, at most: beyond, recorded steps wait
 
 
 @dataclass
@@ -63,13 +70,22 @@ class StepOutcome:
     batch_size: int
 
 
+@dataclass(frozen=True)
+class _Record:
+    """What the recorder needs of a step: the session's recording is read when the step is
+    computed (a session closing takes it away before its records are handed over)."""
+
+    key: str
+    x: np.ndarray
+    outcome: StreamStep
+
+
 @dataclass
 class _Write:
-    """Recorded steps for the recorder, answered once handed over."""
+    """Records for the recorder; the loop hears when they are handed over."""
 
     loop: asyncio.AbstractEventLoop
     batch: StepBatch
-    answers: list[tuple["asyncio.Future[StepOutcome]", StepOutcome]]
 
 
 _STOP = object()
@@ -90,13 +106,17 @@ class Runner:
         self._jobs: "queue.SimpleQueue[_Call | _Write | object]" = queue.SimpleQueue()
         self._thread = threading.Thread()  # not started: steps are refused until ``start``
         self._pending: list[_Step] = []
-        self._held: list[_Step] = []  # recorded steps waiting for the batch before to be handed over
-        self._writes_out = 0  # batches of recorded steps with the worker, not yet handed over
+        self._held: list[_Step] = []  # recorded steps waiting while UNHANDED_MAX records wait
+        self._unhanded: list[_Record] = []  # of answered steps, not yet with the worker
+        self._writes_out = 0  # hand-overs with the worker, not yet done
+        self._handover: asyncio.TimerHandle | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None  # the loop the records were computed on
 
     def start(self) -> None:
         """Start the worker; again after ``stop`` when an app is started anew."""
         if not self._thread.is_alive():
-            self._writes_out = 0  # hand-overs the last loop did not see answered
+            self._writes_out = 0  # hand-overs the last loop did not see done
+            self._handover = None
             self._thread = threading.Thread(target=self._work, name="nasm-worker", daemon=True)
             self._thread.start()
 
@@ -104,6 +124,7 @@ class Runner:
         """Compute the queued steps, finish the queued jobs, then end the worker."""
         if self._thread.is_alive():
             self._flush(held=True)
+            self._hand_over()
             self._jobs.put(_STOP)
             self._thread.join(timeout)
 
@@ -111,6 +132,7 @@ class Runner:
         if not self._thread.is_alive():  # shutting down: e.g. closing a session's files
             return fn()
         self._flush(held=True)
+        self._hand_over()
         loop = asyncio.get_running_loop()
         future: asyncio.Future[T] = loop.create_future()
         self._jobs.put(_Call(loop, future, fn))
@@ -122,7 +144,7 @@ class Runner:
         loop = asyncio.get_running_loop()
         future: asyncio.Future[StepOutcome] = loop.create_future()
         job = _Step(future, session, x)
-        if self._writes_out and session.recording is not None:
+        if len(self._unhanded) >= UNHANDED_MAX and session.recording is not None:
             self._held.append(job)
         else:
             self._pending.append(job)
@@ -134,7 +156,7 @@ class Runner:
         while (job := self._jobs.get()) is not _STOP:
             if isinstance(job, _Write):
                 self._record(job.batch)
-                job.loop.call_soon_threadsafe(self._handed_over, job.answers)
+                job.loop.call_soon_threadsafe(self._handed_over)
                 continue
             assert isinstance(job, _Call)
             try:
@@ -175,8 +197,6 @@ class Runner:
             return
         elapsed_ms = (time.perf_counter() - start) * 1e3
         live = None if self.recorder is None else self.recorder.generation  # a replaced child lacks older files
-        recorded: list[tuple[_Step, StreamStep]] = []
-        answers: list[tuple[asyncio.Future[StepOutcome], StepOutcome]] = []
         for job, outcome in zip(jobs, results):
             if outcome is None:
                 error = BadObservation(
@@ -185,24 +205,37 @@ class Runner:
                 _settle(job.future, None, error)
                 continue
             assert outcome.decision is not None  # sessions always have a false-positive rate
-            answer = StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs))
+            _settle(job.future, StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs)), None)
             recording = job.session.recording
             if recording is not None and recording.generation == live:
-                recorded.append((job, outcome))
-                answers.append((job.future, answer))
-            else:
-                _settle(job.future, answer, None)
-        if recorded:
-            self._writes_out += 1
-            self._jobs.put(_Write(jobs[0].future.get_loop(), step_batch(recorded), answers))
+                self._unhanded.append(_Record(recording.key, job.x, outcome))
+        self._loop = jobs[0].future.get_loop()
+        if self._unhanded and self._handover is None and not self._writes_out:
+            self._handover = self._loop.call_later(HANDOVER_PERIOD_S, self._hand_over)
 
-    def _handed_over(self, answers: list[tuple["asyncio.Future[StepOutcome]", StepOutcome]]) -> None:
-        """On the loop, once the worker has handed a batch to the recorder: answer its steps
-        and compute the recorded steps that waited meanwhile."""
-        for future, outcome in answers:
-            _settle(future, outcome, None)
+    def _hand_over(self) -> None:
+        """Give the worker every record computed since the last hand-over, as one message."""
+        if self._handover is not None:
+            self._handover.cancel()
+            self._handover = None
+        if not self._unhanded:
+            return
+        batch, self._unhanded = step_batch(self._unhanded), []
+        self._writes_out += 1
+        self._jobs.put(_Write(self._loop, batch))
+
+    def _handed_over(self) -> None:
+        """On the loop, once the worker has handed records to the recorder: the next hand-over
+        may go (at once if the records reached their bound meanwhile), and the recorded steps
+        that waited for room are computed."""
         self._writes_out -= 1
-        if not self._writes_out:
+        if self._writes_out:
+            return
+        if len(self._unhanded) >= UNHANDED_MAX:
+            self._hand_over()
+        elif self._unhanded and self._handover is None:
+            self._handover = self._loop.call_later(HANDOVER_PERIOD_S, self._hand_over)
+        if self._held:
             self._flush(held=True)
 
     def _record(self, batch: StepBatch) -> None:
@@ -212,14 +245,14 @@ class Runner:
             log.exception("recording a batch of %d steps failed", len(batch.keys))
 
 
-def step_batch(recorded: list[tuple[_Step, StreamStep]]) -> StepBatch:
-    """One message for the recorder process: the batch's steps as stacked arrays."""
-    scores = [o.score for _, o in recorded]
-    decisions = [o.decision for _, o in recorded]
+def step_batch(records: list[_Record]) -> StepBatch:
+    """One message for the recorder process: the records' steps as stacked arrays."""
+    scores = [r.outcome.score for r in records]
+    decisions = [r.outcome.decision for r in records]
     return StepBatch(
-        keys=[j.session.recording.key for j, _ in recorded],  # type: ignore[union-attr]
+        keys=[r.key for r in records],
         steps=[s.step for s in scores],
-        observation=np.stack([j.x for j, _ in recorded]),
+        observation=np.stack([r.x for r in records]),
         expected=np.stack([s.expected for s in scores]),
         prediction=np.stack([s.prediction for s in scores]),
         errors=np.stack([s.weighted_errors for s in scores]),

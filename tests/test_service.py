@@ -8,6 +8,7 @@ import asyncio
 import json
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -27,6 +28,8 @@ from service.auth import HEADER
 from service.cli import app as cli_app
 from service.embedded import start_embedded
 from service.errors import TooManySessions
+from recordings.recorder import SessionRecording
+from service import runner as runner_module
 from service.runner import Runner
 from service.sessions import Session, SessionStore
 from service.settings import Settings
@@ -174,6 +177,63 @@ def test_runner_jobs_come_after_the_steps_queued_before_them(reference, episodes
         assert asyncio.run(race()) == (0, 1, 0)
     finally:
         runner.stop()
+
+
+class HeldRecorder:
+    """Stands in for the recorder process in front of the runner: keeps the batches it is
+    handed, and can be held up (a recorder slower than the server)."""
+
+    generation = 1
+
+    def __init__(self) -> None:
+        self.batches: list = []
+        self.free = threading.Event()
+
+    def write(self, batch) -> None:
+        self.free.wait(timeout=30)
+        self.batches.append(batch)
+
+
+def test_recorded_steps_are_answered_at_once_handed_over_together_and_bounded(reference, episodes, monkeypatch):
+    """Steps are answered without waiting for the recorder; their records reach it in fewer
+    messages than steps, each once and in order, before a job queued after them; and once
+    UNHANDED_MAX records wait behind a held-up recorder, further recorded steps wait too."""
+    monkeypatch.setattr(runner_module, "UNHANDED_MAX", 8)
+    recorder = HeldRecorder()
+    runner = Runner(recorder)  # type: ignore[arg-type]
+    sessions = []
+    for i in range(4):
+        session = Session(f"s{i}", "panda", reference.stream("online", 1, fpr=0.01), "r")
+        session.recording = SessionRecording(f"key{i}", {}, recorder.generation, recorder)  # type: ignore[arg-type]
+        sessions.append(session)
+
+    async def round_(t: int) -> list:
+        return [asyncio.ensure_future(runner.step(s, episodes[i, t])) for i, s in enumerate(sessions)]
+
+    async def run() -> tuple[int, bool, int]:
+        for t in range(3):  # 4 records with the held-up worker (the first hand-over), 8 waiting for it
+            done, _ = await asyncio.wait(await round_(t), timeout=10)
+            assert len(done) == 4
+            await asyncio.sleep(2 * runner_module.HANDOVER_PERIOD_S)
+        waiting = await round_(3)
+        done, _ = await asyncio.wait(waiting, timeout=0.5)
+        recorder.free.set()
+        await asyncio.wait(waiting, timeout=10)
+        answered_after = all(f.done() and f.exception() is None for f in waiting)
+        await runner.call(lambda: None)  # queued after every record
+        return len(done), answered_after, sum(len(b.keys) for b in recorder.batches)
+
+    runner.start()
+    try:
+        answered_while_held, answered_after, handed = asyncio.run(run())
+    finally:
+        recorder.free.set()
+        runner.stop()
+    assert answered_while_held == 0 and answered_after
+    assert handed == 16 and len(recorder.batches) < 16
+    for i in range(4):
+        steps = [step for b in recorder.batches for key, step in zip(b.keys, b.steps) if key == f"key{i}"]
+        assert steps == list(range(4))
 
 
 def test_websocket_episode_and_its_recordings(server, episodes):
