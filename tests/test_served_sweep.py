@@ -7,7 +7,8 @@ import copy
 import numpy as np
 import pytest
 
-from experiments.fault_sweep.served import Onsets, flagged, flagged_over_resplits, percentiles_ms, subsampled
+from experiments.fault_sweep.rate_figures import write_latency_figure
+from experiments.fault_sweep.served import Onsets, each_ms, flagged, flagged_over_resplits, percentiles_ms, subsampled
 from models.fault import flag_steps
 from models.sequences import Sequences
 
@@ -63,3 +64,14 @@ def test_flagged_over_resplits_is_the_conformal_rate(rng):
     share = flagged_over_resplits(peaks[:150], peaks[150:], 0.01)
     assert share == pytest.approx(1 / 151, abs=1e-3)
     assert flagged_over_resplits(peaks[:150], peaks[150:], 0.05) == pytest.approx(7 / 151, abs=3e-3)  # rank 144
+
+
+def test_each_latency_and_the_latency_figure(tmp_path):
+    """Every episode keeps its latency (None: never flagged), and the figure draws them per rate,
+    also where a rate flagged nothing of a kind."""
+    assert each_ms(np.array([0.025, np.nan, 0.0])) == [25.0, None, 0.0]
+    modes = {"online": {"latency_ms_each": {"lock": [25.0, None, 50.0], "falling_object": [0.0, 75.0]}}}
+    missed = {"online": {"latency_ms_each": {"lock": [None, None, None], "falling_object": [500.0, None]}}}
+    result = {"mode": "online", "fpr": 0.01, "rates": {"40": {"modes": modes}, "2": {"modes": missed}}}
+    path = write_latency_figure(result, tmp_path / "latency.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -59,13 +59,7 @@ def faults(
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
 ) -> None:
     """Run the 980-fault sweep (or the varied-task benchmark) against baselines; write JSON, markdown and figures."""
-    # The paper's sweep and the varied benchmark end with figures; --ceiling, --diagnostic, --ablation
-    # and the sweep at another rate write tables only.
-    if task == Task.varied:
-        draws = not (ceiling or diagnostic or ablation)
-    else:
-        draws = rate == SIM.timing.observation_hz
-    if draws:
+    if task == Task.paper or not (ceiling or diagnostic or ablation):  # these three write tables only
         require_matplotlib("faults")
     parallel = Parallel(workers, backend)
     if task == Task.varied:
@@ -102,10 +96,12 @@ def faults(
 def _rate(rate: int, out: Path, data: Path, n_normal: int, epochs: int | None, trainings: int, *,
           parallel: Parallel) -> None:
     from experiments.fault_sweep.rate import markdown, run_rate_sweep, write
+    from experiments.fault_sweep.rate_figures import write_latency_figure
 
     out.mkdir(parents=True, exist_ok=True)
     result = run_rate_sweep(data, out, rate, n_normal, epochs, trainings, parallel=parallel)
     write(result, out)
+    write_latency_figure(result, out / "latency.png")
     typer.echo(markdown(result))
     typer.echo(f"wrote {out} in {result['seconds']:.0f} s")
 

@@ -65,6 +65,11 @@ def percentiles_ms(seconds: np.ndarray) -> dict[str, float | None]:
             "p95_ms": round(float(np.quantile(seconds, 0.95)) * 1e3, 1)}
 
 
+def each_ms(seconds: np.ndarray) -> list[float | None]:
+    """Every episode's latency in ms, None where it was not flagged (JSON has no NaN)."""
+    return [None if np.isnan(v) else round(float(v) * 1e3, 1) for v in seconds]
+
+
 @dataclass(frozen=True)
 class Flagged:
     """The served decisions on one set: the first flag at or after each onset."""
@@ -141,5 +146,6 @@ def evaluate(model: NeuralASM, mode: str, normal_test: Sequences, locks: Onsets,
         "episodes": {"lock": len(lock.detected), "falling_object": len(hit.detected)},
         "latency": {"lock": percentiles_ms(lock.latency_s[lock.detected]),
                     "falling_object": percentiles_ms(hit.latency_s[hit.detected])},
+        "latency_ms_each": {"lock": each_ms(lock.latency_s), "falling_object": each_ms(hit.latency_s)},
         "isolation_at_detection": float((isolated == locks.label[rows]).mean()) if len(rows) else 0.0,
     }
