@@ -4,7 +4,7 @@ Writing an episode's ``.rrd`` and ``.mcap`` is Python work that holds the GIL; i
 serving process it competed with inference for it. Here one child process (spawned
 once, reused by every session) owns the open ``EpisodeRecorder`` objects, and the
 server only puts messages on a multiprocessing queue: a session opening, a batch of
-scored steps (``StepBatch``, one per inference batch), a session closing. Closing
+scored steps (``StepBatch``, what the server computed since its last one), a session closing. Closing
 returns a future that resolves once the child has finalized the session's files, so a
 caller that waits for it can read them at once. The queue is bounded (``BACKLOG``): a
 server that outruns its recorder for long is slowed to the recorder's pace rather than
@@ -56,7 +56,7 @@ log = logging.getLogger("recordings.recorder")
 _CTX = mp.get_context("spawn")  # no fork: the server has threads (uvicorn, inference, Rerun's)
 POLL_S = 1.0  # how soon a dead child (or, in the child, a dead server) is noticed
 LAYOUT_FILE = "episode.rbl"  # the layout of every session's .rrd, written beside them
-BACKLOG = 256  # messages queued for the child at most: a server faster than its recorder waits for it
+BACKLOG = 16  # messages queued for the child at most: a server faster than its recorder waits for it
 
 
 class RecorderGone(RuntimeError):

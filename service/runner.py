@@ -45,7 +45,7 @@ log = logging.getLogger("service.runner")
 T = TypeVar("T")
 
 HANDOVER_PERIOD_S = 0.02  # recorded steps reach the recorder in one message this often at most
-UNHANDED_MAX = 4096  # records computed but not yet handed over, at most: beyond, recorded steps wait
+UNHANDED_MAX = 1024  # records computed but not yet handed over, at most: beyond, recorded steps wait
 
 
 @dataclass
