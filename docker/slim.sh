@@ -16,6 +16,10 @@ command -v strip >/dev/null || { echo "slim.sh: strip not found (apt-get install
 # torch's C++ headers, test suite and test programs (torch_shm_manager stays: shared memory).
 rm -rf "$site/torch/include" "$site/torch/test" "$site"/torch/lib/lib*test*.so
 find "$site/torch/bin" -type f ! -name torch_shm_manager -delete
+# torch.compile's compilers, Dynamo and Inductor (15 MB of Python): they import sympy, gone above,
+# so they cannot load here anyway; torch imports them only on first use, and neither the service
+# (training, both transports, recovery) nor the client did under `python -X importtime`.
+rm -rf "$site/torch/_dynamo" "$site/torch/_inductor"
 # pyarrow's C++ tests, headers and sources, Arrow Flight and S3 (pyarrow.fs does without _s3fs).
 # (pyarrow.lib links libarrow_substrait: it stays.)
 rm -rf "$site"/pyarrow/_pyarrow_cpp_tests* "$site/pyarrow/include" "$site/pyarrow/src" "$site"/pyarrow/libarrow_flight.so* \
@@ -44,8 +48,28 @@ find "$site" -type f \( -name '*.c' -o -name '*.cpp' -o -name '*.h' -o -name '*.
 # *.libs folders (stripping those can break them), and of rerun's CLI.
 find "$site" -type f -name '*.so*' ! -path '*.libs/*' -exec strip --strip-unneeded {} +
 strip --strip-unneeded "$site/rerun_cli/rerun"
+# rerun's CLI (239 MiB) runs only to recover a .rrd cut short by a crash. It is kept compressed
+# (zstd, 72 MB) and a launcher under its name unpacks it into memory and runs it: 0.4 s more
+# per run, what UPX would do (Debian 12 has no upx package). zstandard is in the venv for mcap.
+cli="$site/rerun_cli/rerun"
+"$1/bin/python" -c "if True:
+    import sys, zstandard
+    with open(sys.argv[1], 'rb') as src, open(sys.argv[1] + '.zst', 'wb') as dst:
+        zstandard.ZstdCompressor(level=9, threads=-1).copy_stream(src, dst)" "$cli"
+cat > "$cli" <<LAUNCHER
+#!$1/bin/python
+# rerun's CLI, packed by docker/slim.sh into rerun.zst beside this file: unpacked into memory, run.
+import os, sys, zstandard
+fd = os.memfd_create("rerun", 0)
+with open(os.path.realpath(__file__) + ".zst", "rb") as src, open(fd, "wb", closefd=False) as dst:
+    zstandard.ZstdDecompressor().copy_stream(src, dst)
+os.execv(f"/proc/self/fd/{fd}", ["rerun", *sys.argv[1:]])
+LAUNCHER
 # Byte-code: the build writes it back only for the modules the project imports (Dockerfile).
 find "$site" -depth -type d -name __pycache__ -prune -exec rm -rf {} +
 # Check that what was cut is not needed to load them.
 "$1/bin/python" -c "import torch, llvmlite.binding, rerun, dm_control.mjcf, scipy, sklearn, mujoco, pyarrow.parquet, pyarrow.dataset, pyarrow.fs, foxglove"
+# (not torch.optim's optimizers: their constructors import torch._dynamo, so sympy; the project's
+# training has an Adam of its own, models/kernels.py)
+"$1/bin/python" -c "import torch; m = torch.nn.Linear(4, 2); m(torch.zeros(3, 4)).sum().backward()"
 "$1/bin/python" -m rerun --version
