@@ -7,8 +7,10 @@ site=$(echo "$1"/lib/python3*/site-packages)
 command -v strip >/dev/null || { echo "slim.sh: strip not found (apt-get install binutils)" >&2; exit 1; }
 
 # Packages that others require but the project never imports: sympy, mpmath and networkx
-# (torch.compile and torch.export only), PyOpenGL and glfw (dm_control's and MuJoCo's renderers:
-# no display here), labmaze (the mazes of dm_control's locomotion, cut below).
+# (torch.compile and torch.export; torch.optim's optimizers too, whose constructors import
+# Dynamo: the project trains with an Adam of its own, models/kernels.py), PyOpenGL and glfw
+# (dm_control's and MuJoCo's renderers: no display here), labmaze (the mazes of dm_control's
+# locomotion, cut below). Dynamo and Inductor stay (15 MB): adding sympy brings them back.
 "$1/bin/pip" uninstall -q -y sympy mpmath networkx PyOpenGL glfw labmaze
 # matplotlib and what only it requires: the experiments' figures. Those commands say so and stop
 # when it is missing (experiments/plotting.py); nothing else imports it.
@@ -16,10 +18,6 @@ command -v strip >/dev/null || { echo "slim.sh: strip not found (apt-get install
 # torch's C++ headers, test suite and test programs (torch_shm_manager stays: shared memory).
 rm -rf "$site/torch/include" "$site/torch/test" "$site"/torch/lib/lib*test*.so
 find "$site/torch/bin" -type f ! -name torch_shm_manager -delete
-# torch.compile's compilers, Dynamo and Inductor (15 MB of Python): they import sympy, gone above,
-# so they cannot load here anyway; torch imports them only on first use, and neither the service
-# (training, both transports, recovery) nor the client did under `python -X importtime`.
-rm -rf "$site/torch/_dynamo" "$site/torch/_inductor"
 # pyarrow's C++ tests, headers and sources, Arrow Flight and S3 (pyarrow.fs does without _s3fs).
 # (pyarrow.lib links libarrow_substrait: it stays.)
 rm -rf "$site"/pyarrow/_pyarrow_cpp_tests* "$site/pyarrow/include" "$site/pyarrow/src" "$site"/pyarrow/libarrow_flight.so* \
@@ -69,7 +67,6 @@ LAUNCHER
 find "$site" -depth -type d -name __pycache__ -prune -exec rm -rf {} +
 # Check that what was cut is not needed to load them.
 "$1/bin/python" -c "import torch, llvmlite.binding, rerun, dm_control.mjcf, scipy, sklearn, mujoco, pyarrow.parquet, pyarrow.dataset, pyarrow.fs, foxglove"
-# (not torch.optim's optimizers: their constructors import torch._dynamo, so sympy; the project's
-# training has an Adam of its own, models/kernels.py)
+# (not torch.optim's optimizers: their constructors import torch._dynamo, so sympy)
 "$1/bin/python" -c "import torch; m = torch.nn.Linear(4, 2); m(torch.zeros(3, 4)).sum().backward()"
 "$1/bin/python" -m rerun --version
