@@ -7,8 +7,10 @@ site=$(echo "$1"/lib/python3*/site-packages)
 command -v strip >/dev/null || { echo "slim.sh: strip not found (apt-get install binutils)" >&2; exit 1; }
 
 # Packages that others require but the project never imports: sympy, mpmath and networkx
-# (torch.compile and torch.export only), PyOpenGL and glfw (dm_control's and MuJoCo's renderers:
-# no display here), labmaze (the mazes of dm_control's locomotion, cut below).
+# (torch.compile and torch.export; torch.optim's optimizers too, whose constructors import
+# Dynamo: the project trains with an Adam of its own, models/kernels.py), PyOpenGL and glfw
+# (dm_control's and MuJoCo's renderers: no display here), labmaze (the mazes of dm_control's
+# locomotion, cut below). Dynamo and Inductor stay (15 MB): adding sympy brings them back.
 "$1/bin/pip" uninstall -q -y sympy mpmath networkx PyOpenGL glfw labmaze
 # matplotlib and what only it requires: the experiments' figures. Those commands say so and stop
 # when it is missing (experiments/plotting.py); nothing else imports it.
@@ -44,8 +46,27 @@ find "$site" -type f \( -name '*.c' -o -name '*.cpp' -o -name '*.h' -o -name '*.
 # *.libs folders (stripping those can break them), and of rerun's CLI.
 find "$site" -type f -name '*.so*' ! -path '*.libs/*' -exec strip --strip-unneeded {} +
 strip --strip-unneeded "$site/rerun_cli/rerun"
+# rerun's CLI (239 MiB) runs only to recover a .rrd cut short by a crash. It is kept compressed
+# (zstd, 72 MB) and a launcher under its name unpacks it into memory and runs it: 0.4 s more
+# per run, what UPX would do (Debian 12 has no upx package). zstandard is in the venv for mcap.
+cli="$site/rerun_cli/rerun"
+"$1/bin/python" -c "if True:
+    import sys, zstandard
+    with open(sys.argv[1], 'rb') as src, open(sys.argv[1] + '.zst', 'wb') as dst:
+        zstandard.ZstdCompressor(level=9, threads=-1).copy_stream(src, dst)" "$cli"
+cat > "$cli" <<LAUNCHER
+#!$1/bin/python
+# rerun's CLI, packed by docker/slim.sh into rerun.zst beside this file: unpacked into memory, run.
+import os, sys, zstandard
+fd = os.memfd_create("rerun", 0)
+with open(os.path.realpath(__file__) + ".zst", "rb") as src, open(fd, "wb", closefd=False) as dst:
+    zstandard.ZstdDecompressor().copy_stream(src, dst)
+os.execv(f"/proc/self/fd/{fd}", ["rerun", *sys.argv[1:]])
+LAUNCHER
 # Byte-code: the build writes it back only for the modules the project imports (Dockerfile).
 find "$site" -depth -type d -name __pycache__ -prune -exec rm -rf {} +
 # Check that what was cut is not needed to load them.
 "$1/bin/python" -c "import torch, llvmlite.binding, rerun, dm_control.mjcf, scipy, sklearn, mujoco, pyarrow.parquet, pyarrow.dataset, pyarrow.fs, foxglove"
+# (not torch.optim's optimizers: their constructors import torch._dynamo, so sympy)
+"$1/bin/python" -c "import torch; m = torch.nn.Linear(4, 2); m(torch.zeros(3, 4)).sum().backward()"
 "$1/bin/python" -m rerun --version
