@@ -37,6 +37,7 @@ import websockets
 
 from bench_service import SESSION, build_model, free_port, wait_until_up, warm_fleet
 from recordings.readers import read_mcap
+from sim.config import SIM
 
 HAPROXY_CFG = Path(__file__).resolve().parent.parent / "docker" / "haproxy.cfg"
 SESSIONS = 64
@@ -145,7 +146,7 @@ def main() -> None:
         sys.exit("bench_balancer: --via-balancer needs at least 2 replicas (one is killed)")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        episodes = build_model(folder)
+        episodes = build_model(folder, SIM.timing.observation_hz)  # the paper's 2 Hz, 15-step episodes
 
         port = free_port()
         direct = start_replica(folder, "direct", port)
