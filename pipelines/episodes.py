@@ -21,6 +21,13 @@ from sim.dataset import generate, load_episodes, set_folder
 from sim.episode import Episode
 
 MIN_HELD_OUT = 60
+DEFAULT_N_NORMAL = 400  # held-out normal episodes simulated when none is asked for
+
+
+class SetMismatch(ValueError):
+    """An episode set already in the data folder is not the one asked for (another rate, another
+    size): simulating over it would silently change earlier results, using it would silently
+    measure something else."""
 
 
 def as_sequences(episodes: list[Episode], columns: np.ndarray | None = None,
@@ -81,20 +88,31 @@ def ensure_sets(data_dir: Path, kinds: tuple[str, ...], simulate: Simulate) -> d
     return out
 
 
-def paper_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int = 400,
+def paper_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int | None = None,
                parallel: Parallel = Parallel(), rate: float = SIM.timing.observation_hz) -> dict[str, list[Episode]]:
-    """The paper task's sets (sim/dataset.py) observed at `rate`, simulated where missing; a
-    set found at another rate is refused (a folder holds one rate: `sim.dataset.set_folder`)."""
-    sets = ensure_sets(data_dir, kinds, lambda kind, folder: generate(
-        kind, folder, workers=parallel.workers, n_normal=n_normal, backend=parallel.backend, rate=rate))
-    for kind, episodes in sets.items():
+    """The paper task's sets (sim/dataset.py) observed at `rate`, simulated where missing
+    (`n_normal` held-out normal episodes, `DEFAULT_N_NORMAL` when None). The sets already there
+    are checked before anything is simulated: one at another rate is refused (a folder holds one
+    rate: `sim.dataset.set_folder`), and so is a normal set of another size than an `n_normal`
+    given."""
+    folder = Path(data_dir)
+    found = {kind: load_episodes(folder / f"{kind}.mcap") for kind in kinds if (folder / f"{kind}.mcap").exists()}
+    for kind, episodes in found.items():
         if episodes and episodes[0].rate_hz != rate:
-            raise ValueError(f"{Path(data_dir) / kind}.mcap holds episodes at {episodes[0].rate_hz:g} Hz, "
-                             f"not {rate:g} Hz: use the folder {set_folder(rate)!r} of the data home for that rate")
-    return sets
+            raise SetMismatch(f"{folder / kind}.mcap holds episodes at {episodes[0].rate_hz:g} Hz, not {rate:g} Hz: "
+                              f"use the folder {set_folder(rate)!r} of the data home for that rate")
+    if n_normal is not None and "normal" in found and len(found["normal"]) != n_normal:
+        raise SetMismatch(f"{folder / 'normal'}.mcap holds {len(found['normal'])} held-out normal episodes, not the "
+                          f"{n_normal} asked for: give another data folder (the other sets can be linked into it) "
+                          f"or move that file away to simulate {n_normal}")
+    missing = tuple(kind for kind in kinds if kind not in found)
+    simulated = ensure_sets(folder, missing, lambda kind, into: generate(
+        kind, into, workers=parallel.workers, n_normal=n_normal or DEFAULT_N_NORMAL, backend=parallel.backend,
+        rate=rate))
+    return {kind: found[kind] if kind in found else simulated[kind] for kind in kinds}
 
 
-def load_normal_sets(data_dir: Path, n_normal: int = 400, parallel: Parallel = Parallel(),
+def load_normal_sets(data_dir: Path, n_normal: int | None = None, parallel: Parallel = Parallel(),
                      rate: float = SIM.timing.observation_hz) -> NormalSets:
     sets = paper_sets(data_dir, ("demos", "normal"), n_normal, parallel, rate)
     return split_normal(sets["demos"], sets["normal"])

@@ -12,6 +12,7 @@ import typer
 from runtime.cli import Command, Group
 from experiments.plotting import require_matplotlib
 from models.config import FAITHFUL
+from pipelines.episodes import SetMismatch
 from runtime.home import home_path
 from runtime.parallel import Backend, Parallel
 from sim.dataset import set_folder
@@ -54,7 +55,8 @@ def faults(
                               "per rate (--rate 40; the first is saved and headlines)"),
     variant: list[str] = typer.Option([], help="--ablation: only this variant (repeat for more; default: all of "
                                       "experiments/varied/ablation.py's VARIANTS)"),
-    n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
+    n_normal: int | None = typer.Option(None, min=60, help="held-out normal episodes: simulated when the data "
+                                        "folder has none (default 400); a set already there must hold this many"),
     workers: int = typer.Option(2, min=1, help="simulation processes (CPUs of a local Ray instance)"),
     backend: Backend = typer.Option("processes", help="processes (this machine) or ray (RAY_ADDRESS or a local instance)"),
 ) -> None:
@@ -73,12 +75,20 @@ def faults(
         else:
             _varied(context.value, out, data, fast_epochs, paper_epochs, parallel=parallel)
         return
-    if rate != SIM.timing.observation_hz:
-        _rate(rate, out or home_path(f"fault_sweep_{rate}hz"), data or home_path(set_folder(rate)), n_normal,
-              fast_epochs, seeds, parallel=parallel)
-        return
-    out = out or home_path("fault_sweep")
-    data = data or home_path("data")
+    try:
+        if rate != SIM.timing.observation_hz:
+            _rate(rate, out or home_path(f"fault_sweep_{rate}hz"), data or home_path(set_folder(rate)), n_normal,
+                  fast_epochs, seeds, parallel=parallel)
+        else:
+            _paper(out or home_path("fault_sweep"), data or home_path("data"), paper_epochs, n_normal, fast_epochs,
+                   parallel=parallel)
+    except SetMismatch as exc:
+        typer.secho(str(exc), fg="red", err=True)
+        raise typer.Exit(2) from exc
+
+
+def _paper(out: Path, data: Path, paper_epochs: int, n_normal: int | None, fast_epochs: int | None, *,
+           parallel: Parallel) -> None:
     from experiments.fault_sweep.figures import write_figures
     from experiments.fault_sweep.report import write_csv, write_json, write_markdown
     from experiments.fault_sweep.run import run_sweep
@@ -93,7 +103,7 @@ def faults(
     typer.echo(f"wrote {out}")
 
 
-def _rate(rate: int, out: Path, data: Path, n_normal: int, epochs: int | None, trainings: int, *,
+def _rate(rate: int, out: Path, data: Path, n_normal: int | None, epochs: int | None, trainings: int, *,
           parallel: Parallel) -> None:
     from experiments.fault_sweep.rate import markdown, run_rate_sweep, write
     from experiments.fault_sweep.rate_figures import write_latency_figure

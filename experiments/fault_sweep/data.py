@@ -44,5 +44,5 @@ def make_benchmark(sets: dict[str, list[Episode]]) -> Benchmark:
     )
 
 
-def load_benchmark(data_dir: Path, n_normal: int = 400, *, parallel: Parallel = Parallel()) -> Benchmark:
+def load_benchmark(data_dir: Path, n_normal: int | None = None, *, parallel: Parallel = Parallel()) -> Benchmark:
     return make_benchmark(paper_sets(data_dir, SETS, n_normal, parallel))

@@ -37,7 +37,7 @@ def at_rate(normal: NormalSets, rate_hz: float) -> NormalSets:
                                               (normal.demos, normal.precision, normal.calibration, normal.normal_test)))
 
 
-def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int = 400, epochs: int | None = None,
+def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | None = None, epochs: int | None = None,
                    trainings: int = 1, *, parallel: Parallel = Parallel()) -> dict:
     """Train, calibrate, save and score the default network at `rate` and at 2 Hz, `trainings`
     times each (seeds 0, 1, ...); training 0 is saved and gives the headline (`detection`,

@@ -82,7 +82,7 @@ def train_models(bench: Benchmark, configs: dict[str, TPCConfig], provenance: di
     }
 
 
-def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, n_normal: int = 400,
+def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, n_normal: int | None = None,
               fast_epochs: int | None = None, *, parallel: Parallel = Parallel()) -> SweepResult:
     bench = load_benchmark(data_dir, n_normal, parallel=parallel)
     configs = {

@@ -26,7 +26,7 @@ from experiments.fault_sweep.run import score_methods, train_models
 from experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
 from logs.sources import load_log_sequences
 from models.config import FAST
-from pipelines.episodes import paper_sets
+from pipelines.episodes import SetMismatch, paper_sets
 from runtime.parallel import Parallel
 from runtime.home import home_path
 from sim.episode import Episode
@@ -75,12 +75,17 @@ def main(
     out: Path = typer.Option(home_path("robot_logs"), help="bags, mapping and results"),
     jitter_s: float = typer.Option(0.002, help="largest shift of a bag time stamp (s)"),
     epochs: int | None = typer.Option(None, help="override the default model's epochs"),
-    n_normal: int = typer.Option(400, min=60, help="held-out normal episodes to simulate"),
+    n_normal: int | None = typer.Option(None, min=60, help="held-out normal episodes: simulated when the data "
+                                        "folder has none (default 400); a set already there must hold this many"),
     workers: int = typer.Option(2, min=1, help="simulation processes"),
 ) -> None:
     """Train from native files and from bags; score both on the 980 faults; write results.{json,md}."""
     start = time.perf_counter()
-    native = paper_sets(data, SETS, n_normal, Parallel(workers))
+    try:
+        native = paper_sets(data, SETS, n_normal, Parallel(workers))
+    except SetMismatch as exc:
+        typer.secho(str(exc), fg="red", err=True)
+        raise typer.Exit(2) from exc
     sources = {"native": native, "bags": through_bags(native, out / "bags", jitter_s)}
     config = FAST if epochs is None else FAST.with_(epochs=epochs)
     results: dict[str, dict] = {}
