@@ -106,10 +106,10 @@ def paper_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int | None = No
                           f"{n_normal} asked for: give another data folder (the other sets can be linked into it) "
                           f"or move that file away to simulate {n_normal}")
     missing = tuple(kind for kind in kinds if kind not in found)
-    simulated = ensure_sets(folder, missing, lambda kind, into: generate(
+    sets = found | ensure_sets(folder, missing, lambda kind, into: generate(
         kind, into, workers=parallel.workers, n_normal=n_normal or DEFAULT_N_NORMAL, backend=parallel.backend,
         rate=rate))
-    return {kind: found[kind] if kind in found else simulated[kind] for kind in kinds}
+    return {kind: sets[kind] for kind in kinds}
 
 
 def load_normal_sets(data_dir: Path, n_normal: int | None = None, parallel: Parallel = Parallel(),

@@ -210,8 +210,13 @@ class Runner:
             if recording is not None and recording.generation == live:
                 self._unhanded.append(_Record(recording.key, job.x, outcome))
         self._loop = jobs[0].future.get_loop()
+        self._schedule_hand_over()
+
+    def _schedule_hand_over(self) -> None:
+        """A hand-over of the waiting records in ``HANDOVER_PERIOD_S``, unless one is due already
+        or with the worker (its end schedules the next)."""
         if self._unhanded and self._handover is None and not self._writes_out:
-            self._handover = self._loop.call_later(HANDOVER_PERIOD_S, self._hand_over)
+            self._handover = self._loop.call_later(HANDOVER_PERIOD_S, self._hand_over)  # type: ignore[union-attr]
 
     def _hand_over(self) -> None:
         """Give the worker every record computed since the last hand-over, as one message."""
@@ -233,8 +238,8 @@ class Runner:
             return
         if len(self._unhanded) >= UNHANDED_MAX:
             self._hand_over()
-        elif self._unhanded and self._handover is None:
-            self._handover = self._loop.call_later(HANDOVER_PERIOD_S, self._hand_over)
+        else:
+            self._schedule_hand_over()
         if self._held:
             self._flush(held=True)
 
