@@ -121,10 +121,13 @@ class CorrectionGains:
     # and does not engage if the arm got there first. None: never.
     yield_torque: float = 0.9  # fraction of the joint's torque limit
     yield_s: float | None = 0.1
-    # Consecutive flagged observations before the correction engages: one flag may be a false
-    # alarm, or a blow that is already over (a 40 kg box that slides off the forearm by itself,
-    # which a correction engaged at once keeps on the arm into the place).
-    confirm: int = 2
+    # How long the flags must keep coming (each within `confirm_s` of the last) before the
+    # correction engages: one flag may be a false alarm, or a blow that is already over (a 40 kg
+    # box that slides off the forearm by itself, which a correction engaged at once keeps on the
+    # arm into the place). A time, so it means the same at every rate: at 2 Hz any value in
+    # (0, 0.5] is two flagged observations in a row; 0.25 s was chosen at 40 Hz on the selection
+    # seeds (docs/rate.md), where two flagged ticks in a row (50 ms) engaged during the blow.
+    confirm_s: float = 0.25
     # Letting go, the offset decays with this time constant: a set-point step under a heavy
     # load would slam the hand down (at 80 kg m/s it drags the cube 5-7 mm through the fingers).
     release_s: float = 0.05
@@ -136,8 +139,8 @@ class CorrectionGains:
             raise ValueError(f"yield_torque must be in (0, 1], got {self.yield_torque}")
         if self.yield_s is not None and not self.yield_s > 0:
             raise ValueError(f"yield_s must be > 0 or None, got {self.yield_s}")
-        if not (isinstance(self.confirm, int) and self.confirm >= 1):
-            raise ValueError(f"confirm must be an int >= 1, got {self.confirm!r}")
+        if not self.confirm_s >= 0:
+            raise ValueError(f"confirm_s must be >= 0, got {self.confirm_s!r}")
         if not self.release_s > 0:
             raise ValueError(f"release_s must be > 0, got {self.release_s}")
 

@@ -22,9 +22,10 @@ correction holds the arm up against a load, and when the load goes (a box slidin
 forearm) the offset goes with it in the same tick, instead of springing the hand up by the
 offset while the integral unwinds. With a `detector` (the memory's monitor: does the energy of
 the observations so far say something is wrong?) the correction stays off until the monitor
-has flagged two observations in a row, and the arm is a plain compliant arm until then: one
-flag may be a false alarm, or a blow that is already over, and a correction engaged at once
-would hold a heavy box on the arm that would have slid off. A joint at 90 % of its torque
+has kept flagging for a quarter of a second (at 2 Hz: two observations in a row), and the arm
+is a plain compliant arm until then: one flag may be a false alarm, or a blow that is already
+over, and a correction engaged at once would hold a heavy box on the arm that would have slid
+off. A joint at 90 % of its torque
 limit for 0.1 s is holding a load the arm should not hold, which on a collaborative arm may be
 a person: the correction lets go for the rest of the episode (or never engages, if the arm was
 there before the monitor flagged), its offset decaying within ~0.1 s rather than in one tick
@@ -84,9 +85,10 @@ def anchor_plan(joints: np.ndarray, skill: str, cube_xy: np.ndarray) -> np.ndarr
 
 class PlanCorrection:
     """Correction hook: q* = q_rec + K_i I, I the leaky, clipped integral of q_rec - q, its
-    torque bounded by the external torque; with a `detector`, engaged once it has flagged
-    `gains.confirm` observations in a row. `engaged_step` and `yielded_step` count observations
-    (at 2 Hz the skill layer's steps, at 40 Hz the ticks), as the monitor's flags do."""
+    torque bounded by the external torque; with a `detector`, engaged once its flags have kept
+    coming, each within `gains.confirm_s` of the last, for `gains.confirm_s`. `engaged_step` and
+    `yielded_step` count observations (at 2 Hz the skill layer's steps, at 40 Hz the ticks), as
+    the monitor's flags do."""
 
     def __init__(self, gains: CorrectionGains = SIM.correction, detector: Detector | None = None) -> None:
         self.gains, self.detector = gains, detector
@@ -94,7 +96,9 @@ class PlanCorrection:
         self.previous: np.ndarray | None = None
         self.engaged_step: int | None = None if detector is not None else 0
         self.seen = 0
-        self.flags = 0  # consecutive observations the detector flagged
+        self.tick = 0  # control ticks so far: observations are timed by them, at any rate
+        self.flagged_since: int | None = None  # tick of the first flag of the flags still coming
+        self.last_flag = 0  # tick of the latest flag
         self.loaded_s = 0.0  # how long a joint has been at the yield torque, engaged or not
         self.overloaded = False
         self.yielded_step: int | None = None
@@ -109,11 +113,10 @@ class PlanCorrection:
         loaded = (np.abs(state.torque) >= g.yield_torque * TAU_MAX).any()
         self.loaded_s = self.loaded_s + dt if loaded else 0.0
         self.overloaded |= g.yield_s is not None and self.loaded_s >= g.yield_s
+        self.tick += 1
         if self.engaged_step is None and len(state.observations) > self.seen:
             self.seen = len(state.observations)
-            self.flags = self.flags + 1 if self.detector(state.observations) else 0
-            if self.flags >= g.confirm:
-                self.engaged_step = self.seen - 1
+            self._confirm(bool(self.detector(state.observations)))
         if self.engaged_step is None:
             return state.target
         if self.overloaded and self.yielded_step is None:
@@ -127,6 +130,18 @@ class PlanCorrection:
         held = np.minimum(np.radians(g.i_max_deg), np.abs(state.external_torque) / state.stiffness)
         self.offset = np.clip(g.ki * self.integral, -held, held)
         return state.target + self.offset
+
+    def _confirm(self, flagged: bool) -> None:
+        """Engage once flags have kept coming for `confirm_s`, none more than `confirm_s` apart."""
+        window = round(self.gains.confirm_s * SIM.timing.control_hz)  # in ticks
+        if flagged:
+            if self.flagged_since is None:
+                self.flagged_since = self.tick
+            self.last_flag = self.tick
+            if self.tick - self.flagged_since >= window:
+                self.engaged_step = self.seen - 1
+        elif self.flagged_since is not None and self.tick - self.last_flag >= window:
+            self.flagged_since = None
 
 
 def execute_recalled(recalled: np.ndarray, skill: str, seed: int, correction: PlanCorrection | None = None,

@@ -29,6 +29,7 @@ from recordings.readers import read_mcap, read_rrd_series
 from service.embedded import start_embedded
 from service.settings import Settings
 from sim.channels import CHANNEL_NAMES
+from sim.config import SIM
 from sim.runner import run_episode
 from sim.skills import SKILLS
 
@@ -93,9 +94,14 @@ def test_the_correction_engages_on_the_first_confirmed_flag_at_40_hz(model_dir, 
                      quiet=True, rate=RATE, controller="compliant", correct=True)
     flags = [m["fault"] for m in read_mcap(s.service_recordings["mcap"])["/fault"]]
     assert len(flags) == TICKS and s.detected
-    confirmed = next(k for k in range(1, TICKS) if flags[k - 1] and flags[k])  # two flagged ticks in a row
+    # confirmed: the first flag that ends SIM.correction.confirm_s of flags each within that of the last
+    window = round(SIM.correction.confirm_s * RATE)
+    ticks = np.flatnonzero(flags)
+    runs = np.split(ticks, np.flatnonzero(np.diff(ticks) >= window) + 1)
+    confirmed = min(int(run[np.searchsorted(run - run[0], window)]) for run in runs if run[-1] - run[0] >= window)
     assert s.correction == {"engaged_step": confirmed, "yielded_step": None}
-    assert 160 < s.first_flag_step <= confirmed < 200  # within a second of the release at 4 s (tick 160)
+    assert 160 < s.first_flag_step < 200  # flagged within a second of the release at 4 s (tick 160)
+    assert confirmed >= s.first_flag_step + window  # engaged no sooner than confirm_s after the first flag
     assert read_mcap(s.recordings["mcap"])["/metadata"][0]["correction"]["engaged_step"] == confirmed
 
 

@@ -100,7 +100,7 @@ def test_correction_holds_no_more_than_the_external_torque_it_feels():
 
 def test_correction_waits_for_the_monitor_and_lets_go_of_a_load_it_should_not_hold():
     flags = iter([False, False, True])
-    gains = CorrectionGains(ki=4.0, leak=0.0, i_max_deg=3.0, yield_torque=0.9, yield_s=0.5, confirm=1)
+    gains = CorrectionGains(ki=4.0, leak=0.0, i_max_deg=3.0, yield_torque=0.9, yield_s=0.5, confirm_s=0.0)
     hook = PlanCorrection(gains, lambda obs: next(flags))
     target, pinned = np.ones(7), np.zeros(7)  # a load holds the arm 57 deg off its plan
     near_limit = 0.92 * TAU_MAX * [1, 0, 0, 0, 0, 0, 0]  # ... and joint 1 pushes at 92 % of its torque limit
@@ -117,19 +117,34 @@ def test_correction_waits_for_the_monitor_and_lets_go_of_a_load_it_should_not_ho
     np.testing.assert_allclose(outputs[-1], target, atol=np.radians(0.05))  # within 0.25 s
 
 
-def test_correction_engages_on_consecutive_flags_only():
+def test_at_2_hz_the_correction_engages_on_two_flags_in_a_row_only():
     flags = iter([False, True, False, True, True, True])  # one flag alone, then two in a row
-    hook = PlanCorrection(CorrectionGains(confirm=2), lambda obs: next(flags))
+    hook = PlanCorrection(CorrectionGains(confirm_s=0.25), lambda obs: next(flags))
     for tick in range(100):
         state = _state(np.zeros(7), np.ones(7), tick)
-        state.observations = np.zeros((1 + tick // 20, N_CHANNELS))
+        state.observations = np.zeros((1 + tick // 20, N_CHANNELS))  # one observation per 20 ticks
         hook(state)
     assert hook.engaged_step == 4  # observations 3 and 4 flagged; observation 1 alone did not engage it
 
 
+def test_at_40_hz_the_correction_engages_once_flags_have_kept_coming_for_confirm_s():
+    # ticks 5-7 flagged, then a gap of 10 ticks (0.25 s): forgotten; from tick 20 flags every
+    # other tick (gaps under 0.25 s) until tick 30, 10 ticks (0.25 s) after the first of them
+    flagged = {5, 6, 7} | set(range(20, 40, 2))
+    seen = []
+    hook = PlanCorrection(CorrectionGains(confirm_s=0.25), lambda obs: len(obs) - 1 in flagged)
+    for tick in range(60):
+        state = _state(np.zeros(7), np.ones(7), tick)
+        state.observations = np.zeros((tick + 1, N_CHANNELS))  # an observation every tick
+        hook(state)
+        seen.append(hook.engaged_step)
+    assert hook.engaged_step == 30
+    assert seen[29] is None  # not a tick earlier
+
+
 def test_correction_never_engages_on_an_arm_already_at_its_torque_limit():
     flags = iter([False, True, True])
-    gains = CorrectionGains(ki=4.0, leak=0.0, i_max_deg=3.0, yield_torque=0.9, yield_s=0.25, confirm=1)
+    gains = CorrectionGains(ki=4.0, leak=0.0, i_max_deg=3.0, yield_torque=0.9, yield_s=0.25, confirm_s=0.0)
     hook = PlanCorrection(gains, lambda obs: next(flags))
     target, pinned, at_limit = np.ones(7), np.zeros(7), TAU_MAX * [1, 0, 0, 0, 0, 0, 0]
     outputs = []
