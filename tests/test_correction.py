@@ -223,11 +223,12 @@ def test_a_small_run_at_40_hz_over_two_trainings_gives_each_training_and_their_m
     from experiments.correction.report import write_json
 
     config = CORRECTION.with_(n_seeds=1, momenta=(40.0,), monitor=MonitorSeeds(per_split=3), epochs=10, rate=40.0,
-                              monitor_mode="online", trainings=2, controllers=("compliant",))
+                              trainings=2, controllers=("compliant",))
     result = run_trainings(config, progress=False)
     write_json(result, tmp_path / "correction.json")
     payload = json.loads((tmp_path / "correction.json").read_text())
     assert payload["rate_hz"] == 40.0 and payload["model"]["rate_hz"] == 40.0
+    assert payload["config"]["monitor_mode"] == "online"  # the 40 Hz default's, with no mode given
     [row] = payload["results"]
     assert len(row["per_training"]) == 2
     for c in ("none", "corrected"):

@@ -11,7 +11,6 @@ import typer
 from runtime.cli import Command, Group
 from experiments.correction.config import CORRECTION
 from experiments.plotting import require_matplotlib
-from pipelines.default_model import RATE_MODES
 from runtime.home import home_path
 from sim.cli import RATE_HELP, check_rate
 from sim.config import SIM
@@ -42,7 +41,7 @@ def correction(
 
     try:
         config = CORRECTION.with_(n_seeds=seeds, test_seed=first_seed, epochs=epochs, rate=float(rate),
-                                  monitor_mode=RATE_MODES[rate], trainings=trainings)
+                                  trainings=trainings)
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--seeds / --first-seed") from exc
     out.mkdir(parents=True, exist_ok=True)

@@ -11,7 +11,9 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from models.config import SCORING
+from models.recall import RECALL_MODES
 from pipelines.compliant import SERVED_MONITOR, MonitorSeeds
+from pipelines.default_model import RATE_MODES
 from sim.config import CONTROLLERS, RATES, SIM, CorrectionGains, ElbowHit
 
 
@@ -28,7 +30,7 @@ class CorrectionConfig:
     band_deg: float = 2.0
     deadline_s: float = 6.0
     fpr: float = SCORING.default_fpr  # the monitor's false-positive rate (whole normal episodes)
-    monitor_mode: str = "offline"
+    mode: str | None = None  # the monitor's recall mode; None: the rate's (`monitor_mode`)
     controllers: tuple[str, ...] = CONTROLLERS
     gains: CorrectionGains = SIM.correction
     gated: bool = True  # the correction engages once the monitor has flagged (False: from the start)
@@ -41,6 +43,8 @@ class CorrectionConfig:
     def __post_init__(self) -> None:
         if self.rate not in RATES:
             raise ValueError(f"rate must be one of {', '.join(map(str, RATES))} Hz, got {self.rate!r}")
+        if self.mode is not None and self.mode not in RECALL_MODES:
+            raise ValueError(f"mode must be one of {', '.join(RECALL_MODES)} or None, got {self.mode!r}")
         if self.trainings < 1:
             raise ValueError(f"trainings must be >= 1, got {self.trainings}")
         tests = range(self.test_seed, self.test_seed + self.n_seeds)
@@ -51,6 +55,12 @@ class CorrectionConfig:
             if tests.start < seeds.stop and seeds.start < tests.stop:
                 raise ValueError(f"test seeds {tests.start}..{tests.stop - 1} overlap the {name} seeds "
                                  f"{seeds.start}..{seeds.stop - 1}")
+
+    @property
+    def monitor_mode(self) -> str:
+        """`mode`, else the rate's (`RATE_MODES`: offline at 2 Hz, online at 40), so that a
+        config given another rate monitors as that rate's default does."""
+        return RATE_MODES[self.rate] if self.mode is None else self.mode
 
     @property
     def test_seeds(self) -> list[int]:

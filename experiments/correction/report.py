@@ -78,6 +78,7 @@ def write_json(result: Result, path: Path) -> None:
         "results": summarise(result),
         "undisturbed": undisturbed(result),
         "config": asdict(result.config) | {"test_seeds": result.config.test_seeds,
+                                           "monitor_mode": result.config.monitor_mode,
                                            "correction_gains": asdict(result.config.gains),
                                            "impedance": asdict(SIM.impedance), "servo": asdict(SIM.servo)},
         "monitor": result.monitor,
