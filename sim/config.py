@@ -125,9 +125,10 @@ class CorrectionGains:
     # correction engages: one flag may be a false alarm, or a blow that is already over (a 40 kg
     # box that slides off the forearm by itself, which a correction engaged at once keeps on the
     # arm into the place). A time, so it means the same at every rate: at 2 Hz any value in
-    # (0, 0.5] is two flagged observations in a row; 0.25 s was chosen at 40 Hz on the selection
-    # seeds (docs/rate.md), where two flagged ticks in a row (50 ms) engaged during the blow.
-    confirm_s: float = 0.25
+    # (0, 0.5] is two flagged observations in a row. 0.5 s was chosen at 40 Hz on the selection
+    # seeds (docs/rate.md): the shortest time that lowered recovery nowhere, where two flagged
+    # ticks in a row (25 ms) engaged during the blow and held a 40 kg box on the arm.
+    confirm_s: float = 0.5
     # Letting go, the offset decays with this time constant: a set-point step under a heavy
     # load would slam the hand down (at 80 kg m/s it drags the cube 5-7 mm through the fingers).
     release_s: float = 0.05

@@ -22,7 +22,7 @@ correction holds the arm up against a load, and when the load goes (a box slidin
 forearm) the offset goes with it in the same tick, instead of springing the hand up by the
 offset while the integral unwinds. With a `detector` (the memory's monitor: does the energy of
 the observations so far say something is wrong?) the correction stays off until the monitor
-has kept flagging for a quarter of a second (at 2 Hz: two observations in a row), and the arm
+has kept flagging for half a second (at 2 Hz: two observations in a row), and the arm
 is a plain compliant arm until then: one flag may be a false alarm, or a blow that is already
 over, and a correction engaged at once would hold a heavy box on the arm that would have slid
 off. A joint at 90 % of its torque

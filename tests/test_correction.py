@@ -119,7 +119,7 @@ def test_correction_waits_for_the_monitor_and_lets_go_of_a_load_it_should_not_ho
 
 def test_at_2_hz_the_correction_engages_on_two_flags_in_a_row_only():
     flags = iter([False, True, False, True, True, True])  # one flag alone, then two in a row
-    hook = PlanCorrection(CorrectionGains(confirm_s=0.25), lambda obs: next(flags))
+    hook = PlanCorrection(CorrectionGains(), lambda obs: next(flags))  # the default confirmation
     for tick in range(100):
         state = _state(np.zeros(7), np.ones(7), tick)
         state.observations = np.zeros((1 + tick // 20, N_CHANNELS))  # one observation per 20 ticks
