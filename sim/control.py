@@ -22,15 +22,14 @@ correction holds the arm up against a load, and when the load goes (a box slidin
 forearm) the offset goes with it in the same tick, instead of springing the hand up by the
 offset while the integral unwinds. With a `detector` (the memory's monitor: does the energy of
 the observations so far say something is wrong?) the correction stays off until the monitor
-has kept flagging for half a second (at 2 Hz: two observations in a row), and the arm
-is a plain compliant arm until then: one flag may be a false alarm, or a blow that is already
-over, and a correction engaged at once would hold a heavy box on the arm that would have slid
-off. A joint at 90 % of its torque
-limit for 0.1 s is holding a load the arm should not hold, which on a collaborative arm may be
-a person: the correction lets go for the rest of the episode (or never engages, if the arm was
-there before the monitor flagged), its offset decaying within ~0.1 s rather than in one tick
-(a set-point step under a heavy load slams the hand down), and the arm yields as the
-compliant controller alone would. There is no proportional term on e: it would stiffen the
+has kept flagging for half a second (at 2 Hz: two observations in a row), and the arm is a
+plain compliant arm until then: one flag may be a false alarm, or a blow that is already over,
+and a correction engaged at once would hold a heavy box on the arm that would have slid off.
+A joint at 90 % of its torque limit for 0.1 s is holding a load the arm should not hold, which
+on a collaborative arm may be a person: the correction lets go for the rest of the episode (or
+never engages, if the arm was there before the monitor flagged), its offset decaying within
+~0.1 s rather than in one tick (a set-point step under a heavy load slams the hand down), and
+the arm yields as the compliant controller alone would. There is no proportional term on e: it would stiffen the
 compliant arm during the impact itself (the hook runs at 40 Hz, the impact lasts
 milliseconds), which is what a compliant controller is there to avoid; the integral only
 grows while the error persists (a box resting on the arm, a load the gravity compensation does
