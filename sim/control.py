@@ -29,9 +29,9 @@ A joint at 90 % of its torque limit for 0.1 s is holding a load the arm should n
 on a collaborative arm may be a person: the correction lets go for the rest of the episode (or
 never engages, if the arm was there before the monitor flagged), its offset decaying within
 ~0.1 s rather than in one tick (a set-point step under a heavy load slams the hand down), and
-the arm yields as the compliant controller alone would. There is no proportional term on e: it would stiffen the
-compliant arm during the impact itself (the hook runs at 40 Hz, the impact lasts
-milliseconds), which is what a compliant controller is there to avoid; the integral only
+the arm yields as the compliant controller alone would. There is no proportional term on e:
+it would stiffen the compliant arm during the impact itself (the hook runs at 40 Hz, the impact
+lasts milliseconds), which is what a compliant controller is there to avoid; the integral only
 grows while the error persists (a box resting on the arm, a load the gravity compensation does
 not know). The leak, the clip and the torque bound are anti-windup. `SIM.correction` holds the
 gains.
