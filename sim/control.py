@@ -96,6 +96,7 @@ class PlanCorrection:
         self.engaged_step: int | None = None if detector is not None else 0
         self.seen = 0
         self.tick = 0  # control ticks so far: observations are timed by them, at any rate
+        self.confirm_ticks = round(gains.confirm_s * SIM.timing.control_hz)
         self.flagged_since: int | None = None  # tick of the first flag of the flags still coming
         self.last_flag = 0  # tick of the latest flag
         self.loaded_s = 0.0  # how long a joint has been at the yield torque, engaged or not
@@ -132,14 +133,13 @@ class PlanCorrection:
 
     def _confirm(self, flagged: bool) -> None:
         """Engage once flags have kept coming for `confirm_s`, none more than `confirm_s` apart."""
-        window = round(self.gains.confirm_s * SIM.timing.control_hz)  # in ticks
         if flagged:
             if self.flagged_since is None:
                 self.flagged_since = self.tick
             self.last_flag = self.tick
-            if self.tick - self.flagged_since >= window:
+            if self.tick - self.flagged_since >= self.confirm_ticks:
                 self.engaged_step = self.seen - 1
-        elif self.flagged_since is not None and self.tick - self.last_flag >= window:
+        elif self.flagged_since is not None and self.tick - self.last_flag >= self.confirm_ticks:
             self.flagged_since = None
 
 
