@@ -16,7 +16,6 @@ from logs.errors import LogError
 from models.asm import NeuralASM
 from models.calibration import Calibration
 from models.fault import ThresholdKind, flag_steps, isolate, threshold_for
-from models.scoring import step_rows
 from models.sequences import Sequences
 
 
@@ -24,7 +23,7 @@ def _flags(model: NeuralASM, seqs: Sequences, mode: str, cal: Calibration, fpr: 
            kind: ThresholdKind) -> list[dict[str, Any]]:
     result = model.score(seqs.data, mode, 1, True)
     flags, _ = flag_steps(result.energy, cal, fpr, kind)
-    weighted = result.errors / step_rows(cal.error_std, result.errors.shape[1])[None]
+    weighted = cal.weigh(result.errors)
     numbers = seqs.provenance.get("episode_numbers", list(range(len(seqs.data))))
     rows = []
     for i, e in enumerate(result.energy):

@@ -121,7 +121,7 @@ class NeuralASM:
             # provisional until calibrate(); one sequence cannot give a precision matrix
             covariance = SCORING.error_covariance if len(data) > 1 else "diagonal"
             calibration = estimate(mode, 1, model.errors(data, mode, 1), "training sequences", covariance,
-                                   SCORING.spread_floor(rate_hz))
+                                   SCORING.spread_floor(rate_hz), SCORING.centres_errors(rate_hz))
             model.calibrations[calibration.key] = calibration
         return model
 
@@ -185,7 +185,7 @@ class NeuralASM:
         expected = self.normaliser.denormalise(x - errors)
         if cal is None:
             return SequenceScore(expected, errors, energy(errors))
-        return SequenceScore(expected, errors, energy(errors, cal.error_std, cal.error_precision))
+        return SequenceScore(expected, errors, cal.energy(errors))
 
     def calibrate(
         self,
@@ -199,7 +199,7 @@ class NeuralASM:
     ) -> Calibration:
         """Estimate precisions on one set of normal episodes and thresholds on another."""
         calibration = estimate(mode, cue_steps, self.errors(precision_sequences, mode, cue_steps), source, covariance,
-                               SCORING.spread_floor(self.rate_hz))
+                               SCORING.spread_floor(self.rate_hz), SCORING.centres_errors(self.rate_hz))
         set_thresholds(calibration, self.errors(threshold_sequences, mode, cue_steps), fprs)
         self.calibrations[calibration.key] = calibration
         return calibration
@@ -325,19 +325,23 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
 def weigh_step(
     errors: np.ndarray, calibrations: Sequence[Calibration | None], steps: Sequence[int]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Errors (B, D) of one step of each stream divided by their spreads, and their energies.
+    """Errors (B, D) of one step of each stream, less the step's mean error where calibrated so,
+    divided by their spreads (as `Calibration.weigh`), and their energies.
 
     A batch's streams usually share one calibration (one model and recall setting): its
     tables are then read for every row in one indexing."""
     first = calibrations[0]
     if first is not None and all(c is first for c in calibrations):
         at = np.minimum(steps, len(first.error_std) - 1)
-        weighted = errors / first.error_std[at]
+        centred = errors if first.error_mean is None else errors - first.error_mean[at]
+        weighted = centred / first.error_std[at]
         return weighted, quadratic(weighted, None if first.error_precision is None else first.error_precision[at])
     width = errors.shape[1]
     # np.array, not np.stack: the same result for equal shapes, at a tenth of the overhead.
     spread = np.array([np.ones(width) if c is None else step_row(c.error_std, t) for c, t in zip(calibrations, steps)])
-    weighted = errors / spread
+    mean = np.array([np.zeros(width) if c is None or c.error_mean is None else step_row(c.error_mean, t)
+                     for c, t in zip(calibrations, steps)])
+    weighted = (errors - mean) / spread
     if all(c is None or c.error_precision is None for c in calibrations):
         return weighted, quadratic(weighted, None)
     precision = np.array([

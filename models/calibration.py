@@ -3,8 +3,10 @@
 A calibration belongs to one recall setting (mode, cue length). It holds the expected
 spread of each channel's normalised prediction error at each step and, optionally, the
 precision matrix of the errors divided by those spreads at each step (together, the
-precisions of the observation layer), and energy thresholds at chosen false-positive
-rates: one for all steps, one per step, and one for an episode's peak energy. Spreads and thresholds
+precisions of the observation layer), at some rates each step's mean error (what the
+expectation gets wrong on every normal episode alike, taken out before weighing), and energy
+thresholds at chosen false-positive rates: one for all steps, one per step, and one for an
+episode's peak energy. Spreads and thresholds
 should come from different normal episodes; estimating both on the same ones makes
 the measured false-positive rate optimistic.
 """
@@ -19,7 +21,7 @@ from sklearn.covariance import LedoitWolf
 
 from models.config import SCORING, Covariance
 from models.conformal import episode_threshold
-from models.scoring import energy
+from models.scoring import quadratic, step_rows
 
 
 @dataclass
@@ -33,10 +35,23 @@ class Calibration:
     thresholds: dict[float, float] = field(default_factory=dict)
     step_thresholds: dict[float, np.ndarray] = field(default_factory=dict)
     episode_thresholds: dict[float, float] = field(default_factory=dict)
+    error_mean: np.ndarray | None = None  # (T, D) mean error per step; None: errors taken as centred
 
     @property
     def key(self) -> str:
         return calibration_key(self.mode, self.cue_steps)
+
+    def weigh(self, errors: np.ndarray) -> np.ndarray:
+        """Normalised errors (..., T, D), less each step's mean error, divided by their spreads:
+        what the energy whitens and what isolation ranks."""
+        steps = errors.shape[-2]
+        centred = errors if self.error_mean is None else errors - step_rows(self.error_mean, steps)
+        return centred.astype(np.float64) / step_rows(self.error_std, steps)
+
+    def energy(self, errors: np.ndarray) -> np.ndarray:
+        """Energy per step (..., T) of normalised errors (..., T, D)."""
+        precision = None if self.error_precision is None else step_rows(self.error_precision, errors.shape[-2])
+        return quadratic(self.weigh(errors), precision)
 
 
 def calibration_key(mode: str, cue_steps: int) -> str:
@@ -62,15 +77,19 @@ def error_precision(errors: np.ndarray, error_std: np.ndarray) -> np.ndarray:
 
 def estimate(
     mode: str, cue_steps: int, errors: np.ndarray, source: str, covariance: Covariance = SCORING.error_covariance,
-    floor: float = SCORING.error_std_floor,
+    floor: float = SCORING.error_std_floor, centred: bool = False,
 ) -> Calibration:
     """Precisions (no thresholds yet) from normalised errors (N, T, D) of normal episodes; the
-    spreads floored at `floor` (`ScoringConfig.spread_floor` of the episodes' rate)."""
+    spreads floored at `floor` (`ScoringConfig.spread_floor` of the episodes' rate). With
+    `centred` (`ScoringConfig.centres_errors` of the rate), each step's mean error is kept and
+    the spreads and precisions are those of the errors less it."""
     if covariance not in ("full", "diagonal"):
         raise ValueError(f"covariance must be 'full' or 'diagonal', got {covariance!r}")
-    spread = error_spread(errors, floor)
-    precision = error_precision(errors, spread) if covariance == "full" else None
-    return Calibration(mode, cue_steps, spread, source, precision)
+    mean = errors.astype(np.float64).mean(axis=0) if centred else None
+    residual = errors if mean is None else errors - mean
+    spread = error_spread(residual, floor)
+    precision = error_precision(residual, spread) if covariance == "full" else None
+    return Calibration(mode, cue_steps, spread, source, precision, error_mean=mean)
 
 
 def quantile_threshold(energies: np.ndarray, fpr: float) -> float:
@@ -114,7 +133,7 @@ def set_thresholds(
     fprs: tuple[float, ...] = SCORING.fprs,
 ) -> None:
     """Thresholds from normalised errors (N, T, D) of normal episodes, weighted energy."""
-    e = energy(errors, calibration.error_std, calibration.error_precision)
+    e = calibration.energy(errors)
     for fpr in fprs:
         t = Thresholds.of(e, fpr)
         calibration.thresholds[fpr] = t.step

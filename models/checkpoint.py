@@ -2,8 +2,9 @@
 
 Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``W_D`` (with direct pathways only), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
 calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
-``calibration.<key>.step_thresholds`` and, when errors are whitened,
-``calibration.<key>.error_precision`` (absent: channels weighed independently). The header entry ``neural_asm`` is a JSON
+``calibration.<key>.step_thresholds``, when errors are whitened
+``calibration.<key>.error_precision`` (absent: channels weighed independently) and, at rates whose
+calibrations centre the errors, ``calibration.<key>.error_mean`` (absent: errors taken as centred). The header entry ``neural_asm`` is a JSON
 document with the format version, the TPCConfig, the channel names, each
 calibration's thresholds and source, the data provenance, the training energy
 curve, the observation rate the model learnt at (``rate_hz``; files without it are 2 Hz),
@@ -81,6 +82,8 @@ def to_bytes(model: NeuralASM) -> bytes:
         tensors[f"calibration.{key}.error_std"] = _f64(cal.error_std)
         if cal.error_precision is not None:
             tensors[f"calibration.{key}.error_precision"] = _f64(cal.error_precision)
+        if cal.error_mean is not None:
+            tensors[f"calibration.{key}.error_mean"] = _f64(cal.error_mean)
         if fprs:
             tensors[f"calibration.{key}.step_thresholds"] = _f64(
                 np.stack([cal.step_thresholds[f] for f in fprs])
@@ -165,6 +168,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
             fprs = [float(f) for f in c["fprs"]]
             steps = tensors.get(f"calibration.{c['key']}.step_thresholds")
             precision = tensors.get(f"calibration.{c['key']}.error_precision")
+            mean = tensors.get(f"calibration.{c['key']}.error_mean")
             calibrations[c["key"]] = Calibration(
                 mode=c["mode"],
                 cue_steps=int(c["cue_steps"]),
@@ -174,6 +178,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
                 thresholds=dict(zip(fprs, c["thresholds"])),
                 step_thresholds={f: steps[i].numpy() for i, f in enumerate(fprs)},
                 episode_thresholds=dict(zip(fprs, c["episode_thresholds"])),
+                error_mean=None if mean is None else mean.numpy(),
             )
     except (KeyError, TypeError, ValueError) as exc:
         raise CheckpointError(f"{where} does not match its own metadata: {exc}") from exc
@@ -182,6 +187,9 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
     for cal in calibrations.values():
         if cal.error_std.ndim != 2 or cal.error_std.shape[1] != len(names):
             raise CheckpointError(f"{where}: calibration {cal.key} has shape {cal.error_std.shape}")
+        if cal.error_mean is not None and cal.error_mean.shape != cal.error_std.shape:
+            raise CheckpointError(f"{where}: calibration {cal.key} has mean errors of shape {cal.error_mean.shape}, "
+                                  f"spreads of shape {cal.error_std.shape}")
         if cal.error_precision is not None and cal.error_precision.shape != (len(cal.error_std), len(names), len(names)):
             raise CheckpointError(
                 f"{where}: calibration {cal.key} has precision matrices of shape {cal.error_precision.shape}"

@@ -118,6 +118,20 @@ def test_the_rate_is_stored_and_older_checkpoints_are_2_hz(trained, tmp_path):
         checkpoint.from_bytes(_rewrite_header(data, lambda m: m.__setitem__("rate_hz", -1)))
 
 
+def test_each_steps_mean_error_is_stored_and_checked(trained, skills, tmp_path):
+    """A 40 Hz calibration's mean errors survive the round trip; a table of the wrong shape is refused."""
+    train, test = skills
+    model = copy.deepcopy(trained)
+    model.rate_hz = 40.0
+    cal = model.calibrate(train.data, test.data, "online", 1)
+    loaded = checkpoint.load(checkpoint.save(model, tmp_path / "m.safetensors"))
+    assert np.array_equal(loaded.calibration("online", 1).error_mean, cal.error_mean)
+    assert np.array_equal(loaded.score(test.data, "online").energy, model.score(test.data, "online").energy)
+    cal.error_mean = cal.error_mean[:, :-1]
+    with pytest.raises(CheckpointError, match="mean errors"):
+        checkpoint.from_bytes(checkpoint.to_bytes(model))
+
+
 def test_failed_write_leaves_previous_checkpoint_intact(trained, tmp_path, monkeypatch):
     path = checkpoint.save(trained, tmp_path / "m.safetensors")
     before = path.read_bytes()

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from models import checkpoint
+from models.asm import weigh_step
 from models.calibration import error_precision, error_spread
 from models.config import SCORING
 from models.fault import isolate, isolate_rows
@@ -50,17 +51,51 @@ def test_calibration_whitens_by_default_and_diagonal_on_request(trained, skills)
         model.calibrate(train.data, test.data, "offline", 1, covariance="sparse")  # type: ignore[arg-type]
 
 
+def rms(errors: np.ndarray) -> np.ndarray:
+    return np.sqrt((errors.astype(np.float64) ** 2).mean(axis=0))
+
+
 def test_spreads_are_floored_at_the_floor_of_the_model_rate(trained, skills):
+    """At 2 Hz the spreads are the errors' RMS; at 40 Hz that of the errors less each step's
+    mean; each floored at its rate's floor."""
     train, test = skills
     model = checkpoint.from_bytes(checkpoint.to_bytes(trained))
+    errors = model.errors(train.data, "online", 1).astype(np.float64)
     at_2hz = model.calibrate(train.data, test.data, "online", 1).error_std
     model.rate_hz = 40.0  # the same errors, as if observed every 25 ms
     at_40hz = model.calibrate(train.data, test.data, "online", 1).error_std
     floor_2hz, floor_40hz = SCORING.spread_floor(2.0), SCORING.spread_floor(40.0)
-    assert at_2hz.min() == pytest.approx(floor_2hz) and at_40hz.min() >= floor_40hz
-    below = at_40hz < floor_2hz  # spreads the 2 Hz floor hid
-    assert below.any()
-    np.testing.assert_allclose(at_40hz[~below], at_2hz[~below])
+    assert at_2hz.min() == pytest.approx(floor_2hz) and (at_40hz < floor_2hz).any()  # spreads the 2 Hz floor hid
+    np.testing.assert_allclose(at_2hz, np.maximum(rms(errors), floor_2hz))
+    np.testing.assert_allclose(at_40hz, np.maximum(rms(errors - errors.mean(axis=0)), floor_40hz))
+
+
+def test_at_40_hz_each_steps_mean_error_is_taken_out_before_weighing(trained, skills):
+    """The error every normal episode makes alike at a step weighs nothing at 40 Hz; at 2 Hz
+    errors are weighed as they are. Whole episodes and streamed steps agree, alone or batched
+    with a stream weighed otherwise."""
+    train, test = skills
+    model = checkpoint.from_bytes(checkpoint.to_bytes(trained))
+    assert model.calibrate(train.data, test.data, "online", 1).error_mean is None
+    model.rate_hz = 40.0
+    cal = model.calibrate(train.data, test.data, "online", 1)
+    errors = model.errors(train.data, "online", 1)
+    np.testing.assert_allclose(cal.error_mean, errors.mean(axis=0), rtol=1e-5)
+    assert np.abs(cal.energy(cal.error_mean[None])).max() < 1e-9
+    assert (cal.energy(np.zeros_like(cal.error_mean)[None]) > 0).any()  # no error is no longer the expected one
+    test_errors = model.errors(test.data, "online", 1)
+    np.testing.assert_allclose(model.score(test.data, "online").energy,
+                               energy(test_errors - cal.error_mean, cal.error_std, cal.error_precision))
+    stream = model.stream("online", 1)
+    streamed = [stream.step(x) for x in test.data[0]]
+    np.testing.assert_allclose([s.energy for s in streamed], model.score(test.data[:1], "online").energy[0], rtol=1e-4)
+    np.testing.assert_allclose([s.weighted_errors for s in streamed], cal.weigh(test_errors[:1])[0], rtol=1e-4, atol=1e-4)
+    step = 3
+    weighted, energies = weigh_step(np.stack([errors[0, step], errors[0, step]]), [cal, None], [step, step])
+    np.testing.assert_allclose(weighted[0], cal.weigh(errors[:1])[0, step])
+    np.testing.assert_allclose(energies[0], cal.energy(errors[:1])[0, step])
+    np.testing.assert_allclose(energies[1], energy(errors[:1])[0, step])
+
 
 
 def test_a_batch_is_isolated_and_ranked_as_each_row_alone(rng):

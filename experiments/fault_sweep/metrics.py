@@ -18,7 +18,7 @@ from experiments.twins import VISIBLE_K, visible_from, whitened_deviation
 from models.calibration import Thresholds, estimate
 from models.config import SCORING
 from models.fault import isolated_joint, joint_channels
-from models.scoring import energy, step_rows
+from models.scoring import energy
 
 FPRS = SCORING.fprs  # the thresholds a model calibrates
 MAIN_FPR = SCORING.default_fpr  # the one its decisions use
@@ -70,9 +70,8 @@ def weigh(errors: Errors, weighting: str, demo_spread: dict[str, np.ndarray] | N
     elif weighting in ("precision", "whitened"):  # as the model's own calibration does it
         cal = estimate("sweep", 1, errors.precision, "precision split",
                        "full" if weighting == "whitened" else "diagonal")
-        e = {k: energy(getattr(errors, k), cal.error_std, cal.error_precision) for k in sets}
-        spread = step_rows(cal.error_std, errors.faults.shape[1])
-        return Weighted(e["calibration"], e["normal_test"], e["faults"], errors.faults / spread)
+        e = {k: cal.energy(getattr(errors, k)) for k in sets}
+        return Weighted(e["calibration"], e["normal_test"], e["faults"], cal.weigh(errors.faults))
     elif weighting == "demo_std":
         assert demo_spread is not None
         std = {k: np.maximum(demo_spread[k], SCORING.error_std_floor) for k in sets}

@@ -23,7 +23,6 @@ from models.asm import NeuralASM
 from models.config import SCORING
 from models.calibration import conformal_episode_threshold
 from models.fault import flag_steps, is_fault, isolated_joint, threshold_for
-from models.scoring import step_rows
 from models.sequences import Sequences
 
 THRESHOLD = "episode"  # the service's default threshold kind
@@ -90,7 +89,7 @@ def flagged(model: NeuralASM, mode: str, data: np.ndarray, onset_s: np.ndarray, 
     detected = after.any(axis=1)
     first = np.where(detected, after.argmax(axis=1), -1)
     latency = np.where(detected, times[first] - onset_s, np.nan)
-    weighted = score.errors / step_rows(calibration.error_std, data.shape[1])
+    weighted = calibration.weigh(score.errors)
     return Flagged(detected, first, latency, weighted)
 
 

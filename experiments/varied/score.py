@@ -24,7 +24,6 @@ from models.calibration import Thresholds, estimate
 from models.config import SCORING
 from models.conformal import TimeVaryingThreshold, binomial_interval, mcnemar_exact
 from models.normaliser import Normaliser
-from models.scoring import energy
 from sim.config import SIM
 from sim.varied import channel_groups
 
@@ -55,7 +54,7 @@ def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> tuple[
         x = norm.normalise(arrays.data)
         errors[key] = x - method.expected(x, arrays.labels)
     cal = estimate("varied", 1, errors["precision"], "precision split", "full")
-    return {key: energy(e, cal.error_std, cal.error_precision) for key, e in errors.items()}, held_out_error(
+    return {key: cal.energy(e) for key, e in errors.items()}, held_out_error(
         errors["precision"], bench.channel_names)
 
 
