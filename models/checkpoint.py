@@ -38,9 +38,11 @@ from runtime.version import __version__
 
 # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
 # digest; 5: the inference solver in the config; 6: the observation rate (older: 2 Hz) and
-# optional W_D (direct pathways).
-FORMAT_VERSION = 6
-READABLE_VERSIONS = (2, 3, 4, 5, 6)  # older files simply have no precision matrices, context input, digest, rate or W_D
+# optional W_D (direct pathways); 7: optional mean errors per step in calibrations (a reader
+# that ignored them would weigh a 40 Hz model's errors uncentred against centred thresholds).
+FORMAT_VERSION = 7
+READABLE_VERSIONS = (2, 3, 4, 5, 6, 7)  # older files simply have no precision matrices, context input, digest, rate,
+# W_D or mean errors
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
 MAX_ABS_WEIGHT = 1e3

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from models import checkpoint
 from models.asm import NeuralASM
-from models.config import FAST, RATE_DEFAULTS, TPCConfig
+from models.config import FAST, RATE_DEFAULTS, SCORING, TPCConfig
 from models.sequences import Sequences
 from pipelines.episodes import NormalSets, load_normal_sets
 from runtime.home import home_path
@@ -24,6 +24,7 @@ DEFAULT_NAME = "panda"
 # The recall mode the default model monitors in per rate: at 40 Hz offline recall rolls 300
 # ticks from one cue and drifts off the episode (docs/rate.md), so it is online.
 RATE_MODES: dict[float, str] = {SIM.timing.observation_hz: "offline", 40.0: "online"}
+CALIBRATION_SOURCE = "held-out normal episodes (simulated Panda)"
 
 
 def train_calibrated(
@@ -38,7 +39,7 @@ def train_calibrated(
     model = NeuralASM.fit(demos.data, channel_names, config, progress=progress, provenance=provenance,
                           validation=precision.data, labels=demos.labels, rate_hz=demos.rate_hz)
     for mode in ("offline", "online"):
-        model.calibrate(precision.data, calibration.data, mode, 1, source="held-out normal episodes (simulated Panda)")
+        model.calibrate(precision.data, calibration.data, mode, 1, source=CALIBRATION_SOURCE)
     return model
 
 
@@ -58,15 +59,30 @@ def model_name(rate: float = SIM.timing.observation_hz) -> str:
     return DEFAULT_NAME if rate == SIM.timing.observation_hz else f"{DEFAULT_NAME}-{rate:g}hz"
 
 
+def calibrated_as_now(model: NeuralASM) -> bool:
+    """Whether every calibration weighs errors as this release does at the model's rate (a 40 Hz
+    checkpoint calibrated before calibrations took each step's mean error out does not)."""
+    centred = SCORING.centres_errors(model.rate_hz)
+    return all((c.error_mean is not None) == centred for c in model.calibrations.values())
+
+
 def ensure_default_model(models_dir: Path, data_dir: Path | None = None, progress: bool = True,
                          rate: float = SIM.timing.observation_hz) -> Path:
     """Return models_dir/<model_name(rate)>.safetensors, simulating data observed at `rate` and
-    training it (the rate's default network, `RATE_DEFAULTS`) if missing."""
+    training it (the rate's default network, `RATE_DEFAULTS`) if missing, recalibrating it if
+    its calibrations are of an older rule."""
     path = Path(models_dir) / f"{model_name(rate)}.safetensors"
-    if path.exists():
+    existing = checkpoint.load(path) if path.exists() else None
+    if existing is not None and calibrated_as_now(existing):
         return path
     data_dir = home_path(set_folder(rate)) if data_dir is None else Path(data_dir)
     bench = load_normal_sets(data_dir, rate=rate)
+    if existing is not None:
+        if progress:
+            print(f"recalibrating {path} (its calibrations are of an older rule)", flush=True)
+        for mode in ("offline", "online"):
+            existing.calibrate(bench.precision.data, bench.calibration.data, mode, 1, source=CALIBRATION_SOURCE)
+        return checkpoint.save(existing, path)
     model = train_calibrated(
         bench.demos, bench.precision, bench.calibration, bench.channel_names, RATE_DEFAULTS[rate],
         progress=progress, provenance=provenance_of(bench, data_dir),

@@ -9,6 +9,7 @@ from models.calibration import error_precision, error_spread
 from models.config import SCORING
 from models.fault import isolate, isolate_rows
 from models.scoring import energy
+from pipelines.default_model import calibrated_as_now
 
 
 @pytest.fixture
@@ -111,3 +112,16 @@ def test_a_batch_is_isolated_and_ranked_as_each_row_alone(rng):
     assert ranked[0] == ["force_x", "joint1", "joint2", "force_y", "joint3"]
     assert isolated[0] == "joint1"
     assert isolate(errors[3], names) == (isolated[3], ranked[3], sizes[3])
+
+
+def test_a_40_hz_model_calibrated_by_the_older_rule_is_told_apart(trained, skills):
+    """The default model's cache recalibrates a 40 Hz checkpoint whose calibrations keep no mean errors."""
+    train, test = skills
+    model = checkpoint.from_bytes(checkpoint.to_bytes(trained))
+    assert calibrated_as_now(model)
+    model.rate_hz = 40.0  # calibrated at 2 Hz, as a 40 Hz checkpoint of the older rule was
+    assert not calibrated_as_now(model)
+    model.calibrate(train.data, test.data, "online", 1)
+    assert not calibrated_as_now(model)  # offline still of the older rule
+    model.calibrate(train.data, test.data, "offline", 1)
+    assert calibrated_as_now(model)
