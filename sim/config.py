@@ -107,6 +107,15 @@ class Impedance:
     damping: tuple[float, ...] = (50.0, 50.0, 50.0, 50.0, 30.0, 25.0, 15.0)  # Nm s/rad
 
 
+# How long the correction waits for the flags to keep coming, per observation rate (Hz), each
+# chosen on the correction experiment's selection seeds as the shortest time that lowered
+# recovery by no more than 5 points anywhere, in any of five trainings (docs/rate.md). At 2 Hz,
+# 0.5 s: two flagged observations in a row (1.0 s, three in a row, loses the 40 kg m/s gains).
+# At 40 Hz, 1.0 s: with each tick's mean error taken out the monitor flags from the blow's own
+# tick, and 0.5 s engaged while a 40 kg box was still on the arm (-10 points at 80 kg m/s).
+CONFIRM_S: dict[float, float] = {2.0: 0.5, 40.0: 1.0}
+
+
 @dataclass(frozen=True)
 class CorrectionGains:
     """The memory's reactive correction (sim/control.py): q* = q_rec + K_i I, I the leaky
@@ -121,14 +130,12 @@ class CorrectionGains:
     # and does not engage if the arm got there first. None: never.
     yield_torque: float = 0.9  # fraction of the joint's torque limit
     yield_s: float | None = 0.1
-    # How long the flags must keep coming (each within `confirm_s` of the last) before the
+    # How long the flags must keep coming (each within that time of the last) before the
     # correction engages: one flag may be a false alarm, or a blow that is already over (a 40 kg
     # box that slides off the forearm by itself, which a correction engaged at once keeps on the
-    # arm into the place). A time, so it means the same at every rate: at 2 Hz any value in
-    # (0, 0.5] is two flagged observations in a row. 0.5 s was chosen at 40 Hz on the selection
-    # seeds (docs/rate.md): the shortest time that lowered recovery nowhere, where two flagged
-    # ticks in a row (25 ms) engaged during the blow and held a 40 kg box on the arm.
-    confirm_s: float = 0.5
+    # arm into the place). None: the observation rate's own (`CONFIRM_S`), else one time for
+    # every rate.
+    confirm_s: float | None = None
     # Letting go, the offset decays with this time constant: a set-point step under a heavy
     # load would slam the hand down (at 80 kg m/s it drags the cube 5-7 mm through the fingers).
     release_s: float = 0.05
@@ -140,10 +147,19 @@ class CorrectionGains:
             raise ValueError(f"yield_torque must be in (0, 1], got {self.yield_torque}")
         if self.yield_s is not None and not self.yield_s > 0:
             raise ValueError(f"yield_s must be > 0 or None, got {self.yield_s}")
-        if not self.confirm_s >= 0:
-            raise ValueError(f"confirm_s must be >= 0, got {self.confirm_s!r}")
+        if self.confirm_s is not None and not self.confirm_s >= 0:
+            raise ValueError(f"confirm_s must be >= 0 or None, got {self.confirm_s!r}")
         if not self.release_s > 0:
             raise ValueError(f"release_s must be > 0, got {self.release_s}")
+
+    def confirm_at(self, rate_hz: float) -> float:
+        """How long flags must keep coming at observation rate `rate_hz` (s)."""
+        if self.confirm_s is not None:
+            return self.confirm_s
+        if rate_hz not in CONFIRM_S:
+            raise ValueError(f"no confirmation time chosen for {rate_hz:g} Hz; have {sorted(CONFIRM_S)} Hz "
+                             "(or give confirm_s)")
+        return CONFIRM_S[rate_hz]
 
 
 @dataclass(frozen=True)

@@ -84,19 +84,21 @@ def anchor_plan(joints: np.ndarray, skill: str, cube_xy: np.ndarray) -> np.ndarr
 
 class PlanCorrection:
     """Correction hook: q* = q_rec + K_i I, I the leaky, clipped integral of q_rec - q, its
-    torque bounded by the external torque; with a `detector`, engaged once its flags have kept
-    coming, each within `gains.confirm_s` of the last, for `gains.confirm_s`. `engaged_step` and
+    torque bounded by the external torque; with a `detector` of observations made at `rate` Hz,
+    engaged once its flags have kept coming, each within `gains.confirm_at(rate)` of the last, for
+    that time. `engaged_step` and
     `yielded_step` count observations (at 2 Hz the skill layer's steps, at 40 Hz the ticks), as
     the monitor's flags do."""
 
-    def __init__(self, gains: CorrectionGains = SIM.correction, detector: Detector | None = None) -> None:
+    def __init__(self, gains: CorrectionGains = SIM.correction, detector: Detector | None = None,
+                 rate: float = SIM.timing.observation_hz) -> None:
         self.gains, self.detector = gains, detector
         self.integral = np.zeros(N_JOINTS)
         self.previous: np.ndarray | None = None
         self.engaged_step: int | None = None if detector is not None else 0
         self.seen = 0
         self.tick = 0  # control ticks so far: observations are timed by them, at any rate
-        self.confirm_ticks = round(gains.confirm_s * SIM.timing.control_hz)
+        self.confirm_ticks = round(gains.confirm_at(rate) * SIM.timing.control_hz)
         self.flagged_since: int | None = None  # tick of the first flag of the flags still coming
         self.last_flag = 0  # tick of the latest flag
         self.loaded_s = 0.0  # how long a joint has been at the yield torque, engaged or not
@@ -132,7 +134,7 @@ class PlanCorrection:
         return state.target + self.offset
 
     def _confirm(self, flagged: bool) -> None:
-        """Engage once flags have kept coming for `confirm_s`, none more than `confirm_s` apart."""
+        """Engage once flags have kept coming for the confirmation time, none further apart."""
         if flagged:
             if self.flagged_since is None:
                 self.flagged_since = self.tick

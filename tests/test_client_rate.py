@@ -94,14 +94,14 @@ def test_the_correction_engages_on_the_first_confirmed_flag_at_40_hz(model_dir, 
                      quiet=True, rate=RATE, controller="compliant", correct=True)
     flags = [m["fault"] for m in read_mcap(s.service_recordings["mcap"])["/fault"]]
     assert len(flags) == TICKS and s.detected
-    # confirmed: the first flag that ends SIM.correction.confirm_s of flags each within that of the last
-    window = round(SIM.correction.confirm_s * RATE)
+    # confirmed: the first flag that ends SIM.correction.confirm_at(RATE) of flags each within that of the last
+    window = round(SIM.correction.confirm_at(RATE) * RATE)
     ticks = np.flatnonzero(flags)
     runs = np.split(ticks, np.flatnonzero(np.diff(ticks) >= window) + 1)
     confirmed = min(int(run[np.searchsorted(run - run[0], window)]) for run in runs if run[-1] - run[0] >= window)
     assert s.correction == {"engaged_step": confirmed, "yielded_step": None}
     assert 160 < s.first_flag_step < 200  # flagged within a second of the release at 4 s (tick 160)
-    assert confirmed >= s.first_flag_step + window  # engaged no sooner than confirm_s after the first flag
+    assert confirmed >= s.first_flag_step + window  # engaged no sooner than that after the first flag
     assert read_mcap(s.recordings["mcap"])["/metadata"][0]["correction"]["engaged_step"] == confirmed
 
 

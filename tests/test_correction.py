@@ -127,6 +127,15 @@ def test_at_2_hz_the_correction_engages_on_two_flags_in_a_row_only():
     assert hook.engaged_step == 4  # observations 3 and 4 flagged; observation 1 alone did not engage it
 
 
+def test_each_rate_waits_its_own_confirmation_time_unless_one_is_given():
+    assert CorrectionGains().confirm_at(2.0) == 0.5 and CorrectionGains().confirm_at(40.0) == 1.0
+    assert CorrectionGains(confirm_s=0.25).confirm_at(40.0) == 0.25
+    with pytest.raises(ValueError, match="10 Hz"):
+        CorrectionGains().confirm_at(10.0)
+    default_40hz = PlanCorrection(CorrectionGains(), lambda obs: True, rate=40.0)
+    assert default_40hz.confirm_ticks == round(1.0 * SIM.timing.control_hz)
+
+
 def test_at_40_hz_the_correction_engages_once_flags_have_kept_coming_for_confirm_s():
     # ticks 5-7 flagged, then a gap of 10 ticks (0.25 s): forgotten; from tick 20 flags every
     # other tick (gaps under 0.25 s) until tick 30, 10 ticks (0.25 s) after the first of them

@@ -87,7 +87,7 @@ def _run(recalled: np.ndarray, skill: str, seed: int, controller: str, correctio
     """One execution; corrected runs are gated by a fresh served session of `monitor`."""
     try:
         gate = ServedMonitor(monitor, config.monitor_mode, config.fpr) if config.gated else None
-        hook = PlanCorrection(config.gains, gate) if correction == "corrected" else None
+        hook = PlanCorrection(config.gains, gate, config.rate) if correction == "corrected" else None
         return execute_recalled(recalled, skill, seed, hook, controller, disturbance, rate=config.rate)
     except SimulationError as exc:
         return repr(exc)

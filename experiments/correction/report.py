@@ -80,6 +80,7 @@ def write_json(result: Result, path: Path) -> None:
         "config": asdict(result.config) | {"test_seeds": result.config.test_seeds,
                                            "monitor_mode": result.config.monitor_mode,
                                            "correction_gains": asdict(result.config.gains),
+                                           "confirm_s": result.config.gains.confirm_at(result.config.rate),
                                            "impedance": asdict(SIM.impedance), "servo": asdict(SIM.servo)},
         "monitor": result.monitor,
         "model": result.model,
@@ -132,7 +133,7 @@ its mass setting the momentum. Plan: the Neural ASM's offline recall from the fi
 grasp and place anchored to the perceived cube and goal (`sim.control.anchor_plan`). Correction: q* = q_rec + K_i I, I the leaky ({g.leak:g}/s)
 integral of q_rec - q, K_i = {g.ki:g}/s, |K_i I| <= {g.i_max_deg:g} deg and its torque at most the external torque at each joint,
 {letting_go} (chosen on seeds
-{cfg.selection_seeds[0]}..{cfg.selection_seeds[1] - 1}), {f"engaged once the monitor has kept flagging for {g.confirm_s:g} s" if cfg.gated else "on from the start"}. Recovered: cube within 1 cm of its target and every joint within
+{cfg.selection_seeds[0]}..{cfg.selection_seeds[1] - 1}), {f"engaged once the monitor has kept flagging for {g.confirm_at(cfg.rate):g} s" if cfg.gated else "on from the start"}. Recovered: cube within 1 cm of its target and every joint within
 {cfg.band_deg:g} deg of the plan from t = {cfg.deadline_s:g} s on. Detected: the monitor's precision-weighted {cfg.monitor_mode}
 energy exceeds its whole-episode threshold at {cfg.fpr:.0%} false-positive rate at a step after the hit
 (thresholds: {", ".join(f"{c} {m['threshold']:.3g}" for c, m in result.monitor.items())}; the hit is released
