@@ -121,7 +121,7 @@ class NeuralASM:
             # provisional until calibrate(); one sequence cannot give a precision matrix
             covariance = SCORING.error_covariance if len(data) > 1 else "diagonal"
             calibration = estimate(mode, 1, model.errors(data, mode, 1), "training sequences", covariance,
-                                   SCORING.spread_floor(rate_hz), SCORING.centres_errors(rate_hz))
+                                   SCORING.spread_floor(rate_hz), SCORING.centres_errors(rate_hz), labels)
             model.calibrations[calibration.key] = calibration
         return model
 
@@ -196,10 +196,13 @@ class NeuralASM:
         fprs: tuple[float, ...] = SCORING.fprs,
         source: str = "held-out normal episodes",
         covariance: Covariance = SCORING.error_covariance,
+        labels: Sequence[str] | None = None,
     ) -> Calibration:
-        """Estimate precisions on one set of normal episodes and thresholds on another."""
+        """Estimate precisions on one set of normal episodes and thresholds on another; `labels`
+        name the skills of the precision episodes (where calibrations centre errors, each
+        skill's mean error is its own; without them, one mean for all)."""
         calibration = estimate(mode, cue_steps, self.errors(precision_sequences, mode, cue_steps), source, covariance,
-                               SCORING.spread_floor(self.rate_hz), SCORING.centres_errors(self.rate_hz))
+                               SCORING.spread_floor(self.rate_hz), SCORING.centres_errors(self.rate_hz), labels)
         set_thresholds(calibration, self.errors(threshold_sequences, mode, cue_steps), fprs)
         self.calibrations[calibration.key] = calibration
         return calibration
@@ -236,6 +239,8 @@ class SkillStream:
             raise ValueError("a fault threshold needs weighted errors: one calibration sets both")
         self.model = model
         self.calibration = model.weighting(mode, cue_steps, weighted)
+        # each skill's misfit to the steps so far: which skill's mean errors to take out (`Calibration.centre_step`)
+        self.misfit = np.zeros(len(self.calibration.skills) if self.calibration is not None else 0)
         self.fpr = fpr
         self.threshold = threshold
         if fpr is not None:
@@ -301,7 +306,7 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     x = model.normaliser.normalise(observations)
     expected = batch.step(x)
     errors = x - expected
-    weighted, energies = weigh_step(errors, [s.calibration for s in streams], steps)
+    weighted, energies, misfits = weigh_step(errors, [s.calibration for s in streams], steps, [s.misfit for s in streams])
     expected_raw = model.normaliser.denormalise(expected)
     prediction = model.normaliser.denormalise(batch.forecast())
     finite = np.isfinite(energies) & np.isfinite(prediction).all(1) & np.isfinite(expected_raw).all(1)
@@ -309,6 +314,7 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     for i, r in enumerate(recallers):
         if finite[i]:
             r.advance_as(batch, i)
+            streams[i].misfit = misfits[i]
             scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i]))
         else:
             scores.append(None)
@@ -323,29 +329,31 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
 
 
 def weigh_step(
-    errors: np.ndarray, calibrations: Sequence[Calibration | None], steps: Sequence[int]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Errors (B, D) of one step of each stream, less the step's mean error where calibrated so,
-    divided by their spreads (as `Calibration.weigh`), and their energies.
+    errors: np.ndarray, calibrations: Sequence[Calibration | None], steps: Sequence[int], misfits: Sequence[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Errors (B, D) of one step of each stream, centred and divided by their spreads (as
+    `Calibration.weigh`), their energies, and each stream's skill misfits with this step added.
 
     A batch's streams usually share one calibration (one model and recall setting): its
     tables are then read for every row in one indexing."""
     first = calibrations[0]
     if first is not None and all(c is first for c in calibrations):
         at = np.minimum(steps, len(first.error_std) - 1)
-        centred = errors if first.error_mean is None else errors - first.error_mean[at]
+        centred, misfit = first.centre_step(errors, np.asarray(steps), np.array(misfits))
         weighted = centred / first.error_std[at]
-        return weighted, quadratic(weighted, None if first.error_precision is None else first.error_precision[at])
+        return (weighted, quadratic(weighted, None if first.error_precision is None else first.error_precision[at]),
+                list(misfit))
     width = errors.shape[1]
+    rows = [(e, m) if c is None else tuple(a[0] for a in c.centre_step(e[None], np.array([t]), m[None]))
+            for e, c, t, m in zip(errors, calibrations, steps, misfits)]
     # np.array, not np.stack: the same result for equal shapes, at a tenth of the overhead.
     spread = np.array([np.ones(width) if c is None else step_row(c.error_std, t) for c, t in zip(calibrations, steps)])
-    mean = np.array([np.zeros(width) if c is None or c.error_mean is None else step_row(c.error_mean, t)
-                     for c, t in zip(calibrations, steps)])
-    weighted = (errors - mean) / spread
+    weighted = np.array([e for e, _ in rows]) / spread
+    misfit = [m for _, m in rows]
     if all(c is None or c.error_precision is None for c in calibrations):
-        return weighted, quadratic(weighted, None)
+        return weighted, quadratic(weighted, None), misfit
     precision = np.array([
         np.eye(width) if c is None or c.error_precision is None else step_row(c.error_precision, t)
         for c, t in zip(calibrations, steps)
     ])
-    return weighted, quadratic(weighted, precision)
+    return weighted, quadratic(weighted, precision), misfit

@@ -3,10 +3,10 @@
 A calibration belongs to one recall setting (mode, cue length). It holds the expected
 spread of each channel's normalised prediction error at each step and, optionally, the
 precision matrix of the errors divided by those spreads at each step (together, the
-precisions of the observation layer), at some rates each step's mean error (what the
-expectation gets wrong on every normal episode alike, taken out before weighing), and energy
-thresholds at chosen false-positive rates: one for all steps, one per step, and one for an
-episode's peak energy. Spreads and thresholds
+precisions of the observation layer), at some rates each skill's mean error at each step (what
+the expectation gets wrong on every normal episode of the skill alike, taken out before
+weighing: see `Calibration.centre`), and energy thresholds at chosen false-positive rates: one
+for all steps, one per step, and one for an episode's peak energy. Spreads and thresholds
 should come from different normal episodes; estimating both on the same ones makes
 the measured false-positive rate optimistic.
 """
@@ -14,6 +14,7 @@ the measured false-positive rate optimistic.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,18 +36,47 @@ class Calibration:
     thresholds: dict[float, float] = field(default_factory=dict)
     step_thresholds: dict[float, np.ndarray] = field(default_factory=dict)
     episode_thresholds: dict[float, float] = field(default_factory=dict)
-    error_mean: np.ndarray | None = None  # (T, D) mean error per step; None: errors taken as centred
+    # (S, T, D) each skill's mean error per step; None: errors taken as centred
+    error_mean: np.ndarray | None = None
+    skills: tuple[str, ...] = ()  # whose means error_mean's rows are
 
     @property
     def key(self) -> str:
         return calibration_key(self.mode, self.cue_steps)
 
+    def centre(self, errors: np.ndarray) -> np.ndarray:
+        """Errors (..., T, D) of whole episodes less, at each step, the mean error of the skill
+        whose means explain the episode's steps before it best (the least sum of squared errors
+        divided by their spreads; before any, the skills' average): the memory recognises the
+        skill by its systematic errors, as a session does step by step (`centre_step`)."""
+        if self.error_mean is None:
+            return errors.astype(np.float64)
+        steps, width = errors.shape[-2:]
+        flat = errors.reshape(-1, steps, width).astype(np.float64)
+        means = self.error_mean[:, np.minimum(np.arange(steps), len(self.error_std) - 1)]  # (S, T, D)
+        misfit = (((flat[:, None] - means[None]) / step_rows(self.error_std, steps)) ** 2).sum(-1)  # (N, S, T)
+        before = np.cumsum(misfit, axis=2)[..., :-1]
+        pick = np.concatenate([np.full((len(flat), 1), -1), before.argmin(axis=1)], axis=1)  # (N, T); -1: average
+        with_average = np.concatenate([means, means.mean(axis=0, keepdims=True)])
+        return (flat - with_average[pick, np.arange(steps)]).reshape(errors.shape)
+
+    def centre_step(self, errors: np.ndarray, steps: np.ndarray, misfit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One step (B, D) of streams at `steps` (B,), less each stream's recognised skill's mean
+        error, given each skill's misfit to the stream's steps so far (B, S); and the misfits
+        with this step added. What `centre` does to whole episodes."""
+        if self.error_mean is None:
+            return errors, misfit
+        at = np.minimum(steps, len(self.error_std) - 1)
+        means = self.error_mean[:, at]  # (S, B, D)
+        pick = np.where(steps == 0, -1, misfit.argmin(axis=1))
+        with_average = np.concatenate([means, means.mean(axis=0, keepdims=True)])
+        added = (((errors[None] - means) / self.error_std[at][None]) ** 2).sum(-1).T  # (B, S)
+        return errors - with_average[pick, np.arange(len(errors))], misfit + added
+
     def weigh(self, errors: np.ndarray) -> np.ndarray:
-        """Normalised errors (..., T, D), less each step's mean error, divided by their spreads:
-        what the energy whitens and what isolation ranks."""
-        steps = errors.shape[-2]
-        centred = errors if self.error_mean is None else errors - step_rows(self.error_mean, steps)
-        return centred.astype(np.float64) / step_rows(self.error_std, steps)
+        """Normalised errors (..., T, D), centred (`centre`), divided by their spreads: what the
+        energy whitens and what isolation ranks."""
+        return self.centre(errors) / step_rows(self.error_std, errors.shape[-2])
 
     def energy(self, errors: np.ndarray) -> np.ndarray:
         """Energy per step (..., T) of normalised errors (..., T, D)."""
@@ -77,19 +107,27 @@ def error_precision(errors: np.ndarray, error_std: np.ndarray) -> np.ndarray:
 
 def estimate(
     mode: str, cue_steps: int, errors: np.ndarray, source: str, covariance: Covariance = SCORING.error_covariance,
-    floor: float = SCORING.error_std_floor, centred: bool = False,
+    floor: float = SCORING.error_std_floor, centred: bool = False, labels: Sequence[str] | None = None,
 ) -> Calibration:
     """Precisions (no thresholds yet) from normalised errors (N, T, D) of normal episodes; the
     spreads floored at `floor` (`ScoringConfig.spread_floor` of the episodes' rate). With
-    `centred` (`ScoringConfig.centres_errors` of the rate), each step's mean error is kept and
-    the spreads and precisions are those of the errors less it."""
+    `centred` (`ScoringConfig.centres_errors` of the rate), each skill's mean error per step is
+    kept (the episodes' `labels`; without them, one mean for all) and the spreads and precisions
+    are those of the errors less their own skill's mean."""
     if covariance not in ("full", "diagonal"):
         raise ValueError(f"covariance must be 'full' or 'diagonal', got {covariance!r}")
-    mean = errors.astype(np.float64).mean(axis=0) if centred else None
-    residual = errors if mean is None else errors - mean
+    if labels is not None and len(labels) != len(errors):
+        raise ValueError(f"{len(labels)} skill labels for {len(errors)} episodes")
+    mean, skills, residual = None, (), errors
+    if centred:
+        names = np.full(len(errors), "all") if labels is None else np.asarray(labels).astype(str)
+        skills, index = np.unique(names, return_inverse=True)
+        mean = np.stack([errors[index == i].astype(np.float64).mean(axis=0) for i in range(len(skills))])
+        residual = errors - mean[index]
     spread = error_spread(residual, floor)
     precision = error_precision(residual, spread) if covariance == "full" else None
-    return Calibration(mode, cue_steps, spread, source, precision, error_mean=mean)
+    return Calibration(mode, cue_steps, spread, source, precision, error_mean=mean,
+                       skills=tuple(str(s) for s in skills))
 
 
 def quantile_threshold(energies: np.ndarray, fpr: float) -> float:

@@ -4,7 +4,8 @@ Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``W_D`` (with d
 calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.step_thresholds``, when errors are whitened
 ``calibration.<key>.error_precision`` (absent: channels weighed independently) and, at rates whose
-calibrations centre the errors, ``calibration.<key>.error_mean`` (absent: errors taken as centred). The header entry ``neural_asm`` is a JSON
+calibrations centre the errors, ``calibration.<key>.error_mean`` (each skill's mean error per step,
+the skills named in the calibration's metadata; absent: errors taken as centred). The header entry ``neural_asm`` is a JSON
 document with the format version, the TPCConfig, the channel names, each
 calibration's thresholds and source, the data provenance, the training energy
 curve, the observation rate the model learnt at (``rate_hz``; files without it are 2 Hz),
@@ -38,7 +39,7 @@ from runtime.version import __version__
 
 # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
 # digest; 5: the inference solver in the config; 6: the observation rate (older: 2 Hz) and
-# optional W_D (direct pathways); 7: optional mean errors per step in calibrations (a reader
+# optional W_D (direct pathways); 7: optional mean errors per skill and step in calibrations (a reader
 # that ignored them would weigh a 40 Hz model's errors uncentred against centred thresholds).
 FORMAT_VERSION = 7
 READABLE_VERSIONS = (2, 3, 4, 5, 6, 7)  # older files simply have no precision matrices, context input, digest, rate,
@@ -96,6 +97,7 @@ def to_bytes(model: NeuralASM) -> bytes:
                 "mode": cal.mode,
                 "cue_steps": cal.cue_steps,
                 "source": cal.source,
+                "skills": list(cal.skills),
                 "fprs": fprs,
                 "thresholds": [cal.thresholds[f] for f in fprs],
                 "episode_thresholds": [cal.episode_thresholds[f] for f in fprs],
@@ -181,6 +183,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
                 step_thresholds={f: steps[i].numpy() for i, f in enumerate(fprs)},
                 episode_thresholds=dict(zip(fprs, c["episode_thresholds"])),
                 error_mean=None if mean is None else mean.numpy(),
+                skills=tuple(str(k) for k in c.get("skills", [])),
             )
     except (KeyError, TypeError, ValueError) as exc:
         raise CheckpointError(f"{where} does not match its own metadata: {exc}") from exc
@@ -189,9 +192,9 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
     for cal in calibrations.values():
         if cal.error_std.ndim != 2 or cal.error_std.shape[1] != len(names):
             raise CheckpointError(f"{where}: calibration {cal.key} has shape {cal.error_std.shape}")
-        if cal.error_mean is not None and cal.error_mean.shape != cal.error_std.shape:
-            raise CheckpointError(f"{where}: calibration {cal.key} has mean errors of shape {cal.error_mean.shape}, "
-                                  f"spreads of shape {cal.error_std.shape}")
+        if cal.error_mean is not None and cal.error_mean.shape != (len(cal.skills), *cal.error_std.shape):
+            raise CheckpointError(f"{where}: calibration {cal.key} has mean errors of shape {cal.error_mean.shape} "
+                                  f"for {len(cal.skills)} skill(s) and spreads of shape {cal.error_std.shape}")
         if cal.error_precision is not None and cal.error_precision.shape != (len(cal.error_std), len(names), len(names)):
             raise CheckpointError(
                 f"{where}: calibration {cal.key} has precision matrices of shape {cal.error_precision.shape}"

@@ -10,6 +10,7 @@ or NORMAL's episodes alternate between the two roles.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -38,14 +39,16 @@ def _load(source: str, mapping: Path | None, model: NeuralASM, skip_bad: bool) -
     return seqs
 
 
-def calibrate_model(model: NeuralASM, precision: np.ndarray, thresholds: np.ndarray, source: str) -> dict[str, Any]:
-    """Calibrate every recall mode on cue length 1 (what sessions use); the thresholds per mode."""
+def calibrate_model(model: NeuralASM, precision: np.ndarray, thresholds: np.ndarray, source: str,
+                    labels: Sequence[str] | None = None) -> dict[str, Any]:
+    """Calibrate every recall mode on cue length 1 (what sessions use); the thresholds per mode.
+    `labels` name the skills of the precision episodes."""
     if min(len(precision), len(thresholds)) < MIN_EPISODES:
         raise ValueError(f"calibration needs at least {MIN_EPISODES} normal episodes for the precisions and "
                          f"{MIN_EPISODES} for the thresholds; got {len(precision)} and {len(thresholds)}")
     report: dict[str, Any] = {"precision_episodes": len(precision), "threshold_episodes": len(thresholds), "modes": {}}
     for mode in RECALL_MODES:
-        cal = model.calibrate(precision, thresholds, mode, 1, source=source)
+        cal = model.calibrate(precision, thresholds, mode, 1, source=source, labels=labels)
         report["modes"][mode] = {"episode_thresholds": {str(f): t for f, t in sorted(cal.episode_thresholds.items())},
                                  "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}
     return report
@@ -69,13 +72,14 @@ def calibrate(
         raise fail(exc) from None
     seqs = _load(normal, mapping, model, skip_bad)
     if precision is None:
-        spread, held = seqs.data[0::2], seqs.data[1::2]
+        spread, held, labels = seqs.data[0::2], seqs.data[1::2], seqs.labels[0::2]
         source = f"{normal}: episodes alternate between precisions and thresholds"
     else:
-        spread, held = _load(precision, mapping, model, skip_bad).data, seqs.data
+        spread_seqs = _load(precision, mapping, model, skip_bad)
+        spread, held, labels = spread_seqs.data, seqs.data, spread_seqs.labels
         source = f"precisions from {precision}, thresholds from {normal}"
     try:
-        report = calibrate_model(model, spread, held, source)
+        report = calibrate_model(model, spread, held, source, labels)
     except ValueError as exc:
         raise fail(exc) from None
     target = checkpoint.save(model, out or model_path)

@@ -104,11 +104,12 @@ def calibrated_for(model: NeuralASM, controller: str, seeds: MonitorSeeds, modes
     """A copy of `model` whose only calibrations come from undisturbed runs under `controller`
     (of `planner`'s plans, default `model`'s)."""
     spreads, thresholds = undisturbed(model, controller, seeds, planner)
+    skills = [skill_of(s) for s in range(seeds.first, seeds.first + seeds.per_split)]  # the spread split's
     monitor = copy.deepcopy(model)
     monitor.calibrations.clear()
     for mode in modes:
         monitor.calibrate(spreads, thresholds, mode, 1, fprs=fprs,
-                          source=f"undisturbed recalled plans, {controller} control")
+                          source=f"undisturbed recalled plans, {controller} control", labels=skills)
     return monitor
 
 

@@ -39,7 +39,7 @@ def train_calibrated(
     model = NeuralASM.fit(demos.data, channel_names, config, progress=progress, provenance=provenance,
                           validation=precision.data, labels=demos.labels, rate_hz=demos.rate_hz)
     for mode in ("offline", "online"):
-        model.calibrate(precision.data, calibration.data, mode, 1, source=CALIBRATION_SOURCE)
+        model.calibrate(precision.data, calibration.data, mode, 1, source=CALIBRATION_SOURCE, labels=precision.labels)
     return model
 
 
@@ -81,7 +81,8 @@ def ensure_default_model(models_dir: Path, data_dir: Path | None = None, progres
         if progress:
             print(f"recalibrating {path} (its calibrations are of an older rule)", flush=True)
         for mode in ("offline", "online"):
-            existing.calibrate(bench.precision.data, bench.calibration.data, mode, 1, source=CALIBRATION_SOURCE)
+            existing.calibrate(bench.precision.data, bench.calibration.data, mode, 1, source=CALIBRATION_SOURCE,
+                               labels=bench.precision.labels)
         return checkpoint.save(existing, path)
     model = train_calibrated(
         bench.demos, bench.precision, bench.calibration, bench.channel_names, RATE_DEFAULTS[rate],

@@ -119,15 +119,16 @@ def test_the_rate_is_stored_and_older_checkpoints_are_2_hz(trained, tmp_path):
 
 
 def test_each_steps_mean_error_is_stored_and_checked(trained, skills, tmp_path):
-    """A 40 Hz calibration's mean errors survive the round trip; a table of the wrong shape is refused."""
+    """A 40 Hz calibration's mean errors per skill survive the round trip; a table of the wrong shape is refused."""
     train, test = skills
     model = copy.deepcopy(trained)
     model.rate_hz = 40.0
-    cal = model.calibrate(train.data, test.data, "online", 1)
+    cal = model.calibrate(train.data, test.data, "online", 1, labels=train.labels)
     loaded = checkpoint.load(checkpoint.save(model, tmp_path / "m.safetensors"))
     assert np.array_equal(loaded.calibration("online", 1).error_mean, cal.error_mean)
+    assert loaded.calibration("online", 1).skills == cal.skills and len(cal.skills) == 3
     assert np.array_equal(loaded.score(test.data, "online").energy, model.score(test.data, "online").energy)
-    cal.error_mean = cal.error_mean[:, :-1]
+    cal.error_mean = cal.error_mean[:2]
     with pytest.raises(CheckpointError, match="mean errors"):
         checkpoint.from_bytes(checkpoint.to_bytes(model))
 

@@ -71,47 +71,38 @@ def test_spreads_are_floored_at_the_floor_of_the_model_rate(trained, skills):
     np.testing.assert_allclose(at_40hz, np.maximum(rms(errors - errors.mean(axis=0)), floor_40hz))
 
 
-def test_at_40_hz_each_steps_mean_error_is_taken_out_before_weighing(trained, skills):
-    """The error every normal episode makes alike at a step weighs nothing at 40 Hz; at 2 Hz
-    errors are weighed as they are. Whole episodes and streamed steps agree, alone or batched
-    with a stream weighed otherwise."""
+def test_at_40_hz_each_skills_mean_error_is_taken_out_before_weighing(trained, skills):
+    """The error every normal episode of a skill makes alike at a step weighs nothing at 40 Hz,
+    once the episode's steps before it have shown which skill it is; at 2 Hz errors are weighed
+    as they are. Whole episodes and streamed steps agree, alone or batched with a stream weighed
+    otherwise."""
     train, test = skills
     model = checkpoint.from_bytes(checkpoint.to_bytes(trained))
-    assert model.calibrate(train.data, test.data, "online", 1).error_mean is None
+    assert model.calibrate(train.data, test.data, "online", 1, labels=train.labels).error_mean is None
     model.rate_hz = 40.0
-    cal = model.calibrate(train.data, test.data, "online", 1)
+    cal = model.calibrate(train.data, test.data, "online", 1, labels=train.labels)
     errors = model.errors(train.data, "online", 1)
-    np.testing.assert_allclose(cal.error_mean, errors.mean(axis=0), rtol=1e-5)
-    assert np.abs(cal.energy(cal.error_mean[None])).max() < 1e-9
-    assert (cal.energy(np.zeros_like(cal.error_mean)[None]) > 0).any()  # no error is no longer the expected one
+    assert cal.skills == tuple(sorted(set(map(str, train.labels)))) and len(cal.skills) == 3
+    for k, skill in enumerate(cal.skills):
+        np.testing.assert_allclose(cal.error_mean[k], errors[train.labels.astype(str) == skill].mean(axis=0), rtol=1e-5)
+    as_each_skill = cal.energy(cal.error_mean)  # an episode erring exactly as each skill does on average
+    assert np.abs(as_each_skill[:, 1:]).max() < 1e-9 and (as_each_skill[:, 0] > 0).any()  # recognised from step 1
     test_errors = model.errors(test.data, "online", 1)
-    np.testing.assert_allclose(model.score(test.data, "online").energy,
-                               energy(test_errors - cal.error_mean, cal.error_std, cal.error_precision))
     stream = model.stream("online", 1)
     streamed = [stream.step(x) for x in test.data[0]]
     np.testing.assert_allclose([s.energy for s in streamed], model.score(test.data[:1], "online").energy[0], rtol=1e-4)
     np.testing.assert_allclose([s.weighted_errors for s in streamed], cal.weigh(test_errors[:1])[0], rtol=1e-4, atol=1e-4)
-    step = 3
-    weighted, energies = weigh_step(np.stack([errors[0, step], errors[0, step]]), [cal, None], [step, step])
-    np.testing.assert_allclose(weighted[0], cal.weigh(errors[:1])[0, step])
-    np.testing.assert_allclose(energies[0], cal.energy(errors[:1])[0, step])
-    np.testing.assert_allclose(energies[1], energy(errors[:1])[0, step])
-
-
-
-def test_a_batch_is_isolated_and_ranked_as_each_row_alone(rng):
-    names = ("joint1", "joint2", "joint3", "force_x", "force_y")
-    errors = rng.standard_normal((6, 5))
-    errors[0] = [0.5, -0.5, 0.1, 3.0, 0.5]  # ties keep channel order; the force leads, joint1 is isolated
-    isolated, ranked, sizes = isolate_rows(errors, names)
-    for row, joint, channels, size in zip(errors, isolated, ranked, sizes):
-        by_size = sorted(range(5), key=lambda i: -abs(row[i]))  # sorted() is stable
-        assert channels == [names[i] for i in by_size]
-        assert size == [abs(row[i]) for i in by_size]
-        assert joint == names[max(range(3), key=lambda i: abs(row[i]))]
-    assert ranked[0] == ["force_x", "joint1", "joint2", "force_y", "joint3"]
-    assert isolated[0] == "joint1"
-    assert isolate(errors[3], names) == (isolated[3], ranked[3], sizes[3])
+    pooled = model.calibrate(train.data, test.data, "offline", 1)  # no labels: one mean for all
+    assert pooled.skills == ("all",)
+    offline = model.errors(train.data, "offline", 1)
+    np.testing.assert_allclose(pooled.weigh(errors[:1]), (errors[:1] - offline.mean(axis=0)) / pooled.error_std,
+                               rtol=1e-5, atol=1e-6)
+    calibrations, misfit = [cal, None, pooled], [np.zeros(3), np.zeros(0), np.zeros(1)]
+    for t in range(4):  # the misfits carried from step to step pick the skill as whole episodes do
+        weighted, energies, misfit = weigh_step(np.stack([errors[0, t]] * 3), calibrations, [t] * 3, misfit)
+        np.testing.assert_allclose(weighted[0], cal.weigh(errors[:1])[0, t], rtol=1e-6)
+        np.testing.assert_allclose(energies, [cal.energy(errors[:1])[0, t], energy(errors[:1])[0, t],
+                                              pooled.energy(errors[:1])[0, t]], rtol=1e-6)
 
 
 def test_a_40_hz_model_calibrated_by_the_older_rule_is_told_apart(trained, skills):
