@@ -113,7 +113,7 @@ def estimate(
     spreads floored at `floor` (`ScoringConfig.spread_floor` of the episodes' rate). With
     `centred` (`ScoringConfig.centres_errors` of the rate), each skill's mean error per step is
     kept (the episodes' `labels`; without them, one mean for all) and the spreads and precisions
-    are those of the errors less their own skill's mean."""
+    are those of the errors centred as `Calibration.centre` centres them."""
     if covariance not in ("full", "diagonal"):
         raise ValueError(f"covariance must be 'full' or 'diagonal', got {covariance!r}")
     if labels is not None and len(labels) != len(errors):
@@ -123,7 +123,12 @@ def estimate(
         names = np.full(len(errors), "all") if labels is None else np.asarray(labels).astype(str)
         skills, index = np.unique(names, return_inverse=True)
         mean = np.stack([errors[index == i].astype(np.float64).mean(axis=0) for i in range(len(skills))])
-        residual = errors - mean[index]
+        # The spreads are those of the errors as sessions centre them, the skill recognised (by
+        # the spreads about each episode's own skill's mean): at the first step, before any
+        # recognition, the errors less the skills' average spread wider.
+        recognising = Calibration(mode, cue_steps, error_spread(errors - mean[index], floor), source,
+                                  error_mean=mean, skills=tuple(skills))
+        residual = recognising.centre(errors)
     spread = error_spread(residual, floor)
     precision = error_precision(residual, spread) if covariance == "full" else None
     return Calibration(mode, cue_steps, spread, source, precision, error_mean=mean,
