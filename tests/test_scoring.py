@@ -116,3 +116,18 @@ def test_a_40_hz_model_calibrated_by_the_older_rule_is_told_apart(trained, skill
     assert not calibrated_as_now(model)  # offline still of the older rule
     model.calibrate(train.data, test.data, "offline", 1)
     assert calibrated_as_now(model)
+
+
+def test_a_batch_is_isolated_and_ranked_as_each_row_alone(rng):
+    names = ("joint1", "joint2", "joint3", "force_x", "force_y")
+    errors = rng.standard_normal((6, 5))
+    errors[0] = [0.5, -0.5, 0.1, 3.0, 0.5]  # ties keep channel order; the force leads, joint1 is isolated
+    isolated, ranked, sizes = isolate_rows(errors, names)
+    for row, joint, channels, size in zip(errors, isolated, ranked, sizes):
+        by_size = sorted(range(5), key=lambda i: -abs(row[i]))  # sorted() is stable
+        assert channels == [names[i] for i in by_size]
+        assert size == [abs(row[i]) for i in by_size]
+        assert joint == names[max(range(3), key=lambda i: abs(row[i]))]
+    assert ranked[0] == ["force_x", "joint1", "joint2", "force_y", "joint3"]
+    assert isolated[0] == "joint1"
+    assert isolate(errors[3], names) == (isolated[3], ranked[3], sizes[3])
