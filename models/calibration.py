@@ -53,12 +53,11 @@ class Calibration:
             return errors.astype(np.float64)
         steps, width = errors.shape[-2:]
         flat = errors.reshape(-1, steps, width).astype(np.float64)
-        means = self.error_mean[:, np.minimum(np.arange(steps), len(self.error_std) - 1)]  # (S, T, D)
-        misfit = (((flat[:, None] - means[None]) / step_rows(self.error_std, steps)) ** 2).sum(-1)  # (N, S, T)
+        means = self._means_at(np.arange(steps))
+        misfit = (((flat[:, None] - means[None, :-1]) / step_rows(self.error_std, steps)) ** 2).sum(-1)  # (N, S, T)
         before = np.cumsum(misfit, axis=2)[..., :-1]
-        pick = np.concatenate([np.full((len(flat), 1), -1), before.argmin(axis=1)], axis=1)  # (N, T); -1: average
-        with_average = np.concatenate([means, means.mean(axis=0, keepdims=True)])
-        return (flat - with_average[pick, np.arange(steps)]).reshape(errors.shape)
+        pick = np.concatenate([np.full((len(flat), 1), -1), before.argmin(axis=1)], axis=1)  # (N, T)
+        return (flat - means[pick, np.arange(steps)]).reshape(errors.shape)
 
     def centre_step(self, errors: np.ndarray, steps: np.ndarray, misfit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One step (B, D) of streams at `steps` (B,), less each stream's recognised skill's mean
@@ -66,12 +65,17 @@ class Calibration:
         with this step added. What `centre` does to whole episodes."""
         if self.error_mean is None:
             return errors, misfit
-        at = np.minimum(steps, len(self.error_std) - 1)
-        means = self.error_mean[:, at]  # (S, B, D)
+        means = self._means_at(steps)
         pick = np.where(steps == 0, -1, misfit.argmin(axis=1))
-        with_average = np.concatenate([means, means.mean(axis=0, keepdims=True)])
-        added = (((errors[None] - means) / self.error_std[at][None]) ** 2).sum(-1).T  # (B, S)
-        return errors - with_average[pick, np.arange(len(errors))], misfit + added
+        spread = self.error_std[np.minimum(steps, len(self.error_std) - 1)]
+        added = (((errors[None] - means[:-1]) / spread[None]) ** 2).sum(-1).T  # (B, S)
+        return errors - means[pick, np.arange(len(errors))], misfit + added
+
+    def _means_at(self, steps: np.ndarray) -> np.ndarray:
+        """Each skill's mean error at `steps` and, last, the skills' average (S + 1, len(steps), D):
+        row -1 is what a step loses before any step has shown the skill."""
+        means = self.error_mean[:, np.minimum(steps, len(self.error_std) - 1)]
+        return np.concatenate([means, means.mean(axis=0, keepdims=True)])
 
     def weigh(self, errors: np.ndarray) -> np.ndarray:
         """Normalised errors (..., T, D), centred (`centre`), divided by their spreads: what the
@@ -121,18 +125,18 @@ def estimate(
     mean, skills, residual = None, (), errors
     if centred:
         names = np.full(len(errors), "all") if labels is None else np.asarray(labels).astype(str)
-        skills, index = np.unique(names, return_inverse=True)
+        unique, index = np.unique(names, return_inverse=True)
+        skills = tuple(str(name) for name in unique)
         mean = np.stack([errors[index == i].astype(np.float64).mean(axis=0) for i in range(len(skills))])
         # The spreads are those of the errors as sessions centre them, the skill recognised (by
         # the spreads about each episode's own skill's mean): at the first step, before any
         # recognition, the errors less the skills' average spread wider.
         recognising = Calibration(mode, cue_steps, error_spread(errors - mean[index], floor), source,
-                                  error_mean=mean, skills=tuple(skills))
+                                  error_mean=mean, skills=skills)
         residual = recognising.centre(errors)
     spread = error_spread(residual, floor)
     precision = error_precision(residual, spread) if covariance == "full" else None
-    return Calibration(mode, cue_steps, spread, source, precision, error_mean=mean,
-                       skills=tuple(str(s) for s in skills))
+    return Calibration(mode, cue_steps, spread, source, precision, error_mean=mean, skills=skills)
 
 
 def quantile_threshold(energies: np.ndarray, fpr: float) -> float:
