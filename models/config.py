@@ -201,11 +201,13 @@ class ScoringConfig:
     # first ticks of a fault under it.
     error_std_floor: float = 0.05
     floor_rate_hz: float = 2.0  # the observation rate error_std_floor is for
-    # Rates whose calibrations also take each step's mean error on normal episodes out of the
-    # errors before weighing them. At 40 Hz the expectation errs systematically where the plan's
-    # 0.5 s segments change pace, by as much as a locked joint departs in its first ticks; the mean
-    # removed, the sweep isolates more locks and flags every falling object at the blow's tick
-    # (docs/rate.md). At 2 Hz it has not been measured, and the varied benchmark runs that rule.
+    # Rates whose calibrations also take each skill's mean error per step on normal episodes out
+    # of the errors before weighing them, the skill recognised from the steps before
+    # (`Calibration.centre`). At 40 Hz the expectation errs systematically where a skill's plan
+    # changes pace, by as much as a locked joint departs in its first ticks; centred, the sweep
+    # isolates 95 % of the locks (67 % before) and flags every falling object at the blow's tick
+    # (docs/rate.md). At 2 Hz the varied benchmark, which runs the same rule, gained nothing
+    # from it (docs/varied_levers.md).
     centred_rates_hz: tuple[float, ...] = (40.0,)
     # Correlations between the channels' errors. "full": each step's errors, divided by
     # their spreads, are whitened by a precision matrix (the inverse of their
@@ -225,7 +227,7 @@ class ScoringConfig:
         return self.error_std_floor * self.floor_rate_hz / rate_hz
 
     def centres_errors(self, rate_hz: float) -> bool:
-        """Whether calibrations of observations made at `rate_hz` remove each step's mean error."""
+        """Whether calibrations of observations made at `rate_hz` take each skill's mean error out."""
         return any(math.isclose(rate_hz, r) for r in self.centred_rates_hz)
 
 

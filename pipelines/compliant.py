@@ -133,8 +133,8 @@ def compliant_episode(model: NeuralASM, skill: str, seed: int, hit: FallingObjec
                       planner: NeuralASM | None = None) -> tuple[Episode, PlanCorrection | None]:
     """The plan `planner` (default: the monitor `model`) recalls from the first observation,
     executed under compliant control and observed at `model`'s rate; with `corrected`, the
-    correction engages once the served monitor has kept flagging for `SIM.correction.confirm_at`
-    its rate."""
+    correction engages once the served monitor has kept flagging for the confirmation time of
+    its rate (`SIM.correction.confirm_at`)."""
     correction = PlanCorrection(SIM.correction, ServedMonitor(model, mode, fpr), model.rate_hz) if corrected else None
     plan = recall_plan(planner_of(model, planner), skill, seed)
     episode = execute_recalled(plan, skill, seed, correction, CONTROLLER, hit, fault, rate=model.rate_hz)

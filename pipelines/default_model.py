@@ -38,6 +38,12 @@ def train_calibrated(
 ) -> NeuralASM:
     model = NeuralASM.fit(demos.data, channel_names, config, progress=progress, provenance=provenance,
                           validation=precision.data, labels=demos.labels, rate_hz=demos.rate_hz)
+    return calibrated(model, precision, calibration)
+
+
+def calibrated(model: NeuralASM, precision: Sequences, calibration: Sequences) -> NeuralASM:
+    """`model` calibrated in both recall modes, cued from one observation: spreads (and each
+    skill's mean errors, where its rate centres them) from `precision`, thresholds from `calibration`."""
     for mode in ("offline", "online"):
         model.calibrate(precision.data, calibration.data, mode, 1, source=CALIBRATION_SOURCE, labels=precision.labels)
     return model
@@ -61,7 +67,7 @@ def model_name(rate: float = SIM.timing.observation_hz) -> str:
 
 def calibrated_as_now(model: NeuralASM) -> bool:
     """Whether every calibration weighs errors as this release does at the model's rate (a 40 Hz
-    checkpoint calibrated before calibrations took each step's mean error out does not)."""
+    checkpoint calibrated before calibrations took each skill's mean error out does not)."""
     centred = SCORING.centres_errors(model.rate_hz)
     return all((c.error_mean is not None) == centred for c in model.calibrations.values())
 
@@ -80,10 +86,7 @@ def ensure_default_model(models_dir: Path, data_dir: Path | None = None, progres
     if existing is not None:
         if progress:
             print(f"recalibrating {path} (its calibrations are of an older rule)", flush=True)
-        for mode in ("offline", "online"):
-            existing.calibrate(bench.precision.data, bench.calibration.data, mode, 1, source=CALIBRATION_SOURCE,
-                               labels=bench.precision.labels)
-        return checkpoint.save(existing, path)
+        return checkpoint.save(calibrated(existing, bench.precision, bench.calibration), path)
     model = train_calibrated(
         bench.demos, bench.precision, bench.calibration, bench.channel_names, RATE_DEFAULTS[rate],
         progress=progress, provenance=provenance_of(bench, data_dir),

@@ -22,8 +22,8 @@ correction holds the arm up against a load, and when the load goes (a box slidin
 forearm) the offset goes with it in the same tick, instead of springing the hand up by the
 offset while the integral unwinds. With a `detector` (the memory's monitor: does the energy of
 the observations so far say something is wrong?) the correction stays off until the monitor
-has kept flagging for half a second (at 2 Hz: two observations in a row), and the arm is a
-plain compliant arm until then: one flag may be a false alarm, or a blow that is already over,
+has kept flagging for a time chosen per observation rate (`sim.config.CONFIRM_S`: at 2 Hz two
+observations in a row, at 40 Hz one second), and the arm is a plain compliant arm until then: one flag may be a false alarm, or a blow that is already over,
 and a correction engaged at once would hold a heavy box on the arm that would have slid off.
 A joint at 90 % of its torque limit for 0.1 s is holding a load the arm should not hold, which
 on a collaborative arm may be a person: the correction lets go for the rest of the episode (or
@@ -86,9 +86,8 @@ class PlanCorrection:
     """Correction hook: q* = q_rec + K_i I, I the leaky, clipped integral of q_rec - q, its
     torque bounded by the external torque; with a `detector` of observations made at `rate` Hz,
     engaged once its flags have kept coming, each within `gains.confirm_at(rate)` of the last, for
-    that time. `engaged_step` and
-    `yielded_step` count observations (at 2 Hz the skill layer's steps, at 40 Hz the ticks), as
-    the monitor's flags do."""
+    that time. `engaged_step` and `yielded_step` count observations (at 2 Hz the skill layer's
+    steps, at 40 Hz the ticks), as the monitor's flags do."""
 
     def __init__(self, gains: CorrectionGains = SIM.correction, detector: Detector | None = None,
                  rate: float = SIM.timing.observation_hz) -> None:
