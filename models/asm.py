@@ -22,7 +22,7 @@ from models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_fo
 from models.normaliser import Normaliser
 from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
 from models.sequences import checked_array
-from models.tpc import TemporalPC
+from models.tpc import TemporalPC, relative_precision
 from models.train import train
 
 
@@ -36,12 +36,11 @@ def channel_precision(sequences: np.ndarray, labels: np.ndarray | None, floor: f
     """Relative precision of each channel from normalised demonstrations (N, T, D).
 
     A channel's spread is the RMS over steps of its std across the sequences of one
-    skill. Channels steadier than the median channel get precision 1; noisier ones
-    (finger forces at contact, say) (median / spread)^2, down to ``floor``.
+    skill; noisier channels (finger forces at contact, say) are trusted less
+    (``relative_precision``).
     """
     groups = [sequences] if labels is None else [sequences[labels == k] for k in np.unique(labels)]
-    spread = np.sqrt(np.mean([g.var(axis=0).mean(axis=0) for g in groups], axis=0))
-    return np.clip((np.median(spread) / np.maximum(spread, 1e-9)) ** 2, floor, 1.0)
+    return relative_precision(np.sqrt(np.mean([g.var(axis=0).mean(axis=0) for g in groups], axis=0)), floor)
 
 
 def context_index(channel_names: Sequence[str], context_channels: Sequence[str], config: TPCConfig) -> tuple[int, ...]:
@@ -109,7 +108,7 @@ class NeuralASM:
         data = as_sequences(sequences, len(channel_names))
         normaliser = Normaliser.fit(data)
         net = TemporalPC(len(channel_names), config, context_index(channel_names, context_channels, config))
-        if config.observation_precision == "demo_spread":
+        if config.observation_precision in ("demo_spread", "learned"):
             net.set_precision(channel_precision(normaliser.normalise(data), labels))
         held_out = None
         if validation is not None and config.keep_best_on_held_out:

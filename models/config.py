@@ -56,8 +56,10 @@ class TPCConfig:
     wf_max_norm: float | None = 3.0
     # Precision of the observation channels in the energy: "uniform" is the paper's
     # identity; "demo_spread" trusts each channel in inverse proportion to its spread
-    # across demonstrations of a skill, relative to the median channel, in [0.05, 1].
-    observation_precision: Literal["uniform", "demo_spread"] = "demo_spread"
+    # across demonstrations of a skill, relative to the median channel, in [0.05, 1];
+    # "learned" starts there and learns them from the relaxed errors (models/train.py, beyond
+    # the paper).
+    observation_precision: Literal["uniform", "demo_spread", "learned"] = "demo_spread"
     # With held-out sequences given to NeuralASM.fit, keep the weights of the epoch that
     # recalls them best instead of the last epoch's (the paper keeps the last).
     keep_best_on_held_out: bool = True
@@ -107,9 +109,9 @@ class TPCConfig:
             raise ValueError(
                 f"TPCConfig.initial_state must be 'zeros' or 'random', got {self.initial_state!r}"
             )
-        if self.observation_precision not in ("uniform", "demo_spread"):
+        if self.observation_precision not in ("uniform", "demo_spread", "learned"):
             raise ValueError(
-                "TPCConfig.observation_precision must be 'uniform' or 'demo_spread', "
+                "TPCConfig.observation_precision must be 'uniform', 'demo_spread' or 'learned', "
                 f"got {self.observation_precision!r}"
             )
         if self.direct_lags < 0:

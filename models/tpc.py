@@ -48,6 +48,14 @@ def stable_wf_norm(inference_rate: float, margin: float = 0.5) -> float:
     return math.sqrt(margin * (2.0 / inference_rate - 1.0))
 
 
+def relative_precision(spread: np.ndarray, floor: float = 0.05) -> np.ndarray:
+    """Channel precisions from their spreads (D,), relative to the median channel: channels
+    steadier than the median get 1, noisier ones (median / spread)^2, down to ``floor``. Kept
+    in (0, 1] so that the bound on W_F that keeps inference stable holds whatever they are."""
+    spread = np.asarray(spread, np.float64)
+    return np.clip((np.median(spread) / np.maximum(spread, 1e-9)) ** 2, floor, 1.0)
+
+
 class TemporalPC:
     """Weights W_H (H x H), W_F (D x H), optionally W_C (H x C) and W_D (D or H x L*D), and the
     inference and learning rules.

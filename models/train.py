@@ -17,7 +17,7 @@ from models.config import Optimizer, TPCConfig
 from models.kernels import adam_step
 from models.recall import run
 from models.sequences import checked_array
-from models.tpc import TemporalPC
+from models.tpc import TemporalPC, relative_precision
 
 EpochCallback = Callable[[int, float], None]
 
@@ -71,11 +71,13 @@ def train_epoch(
     rate: float,
     rng: np.random.Generator,
 ) -> float:
-    """One pass over all sequences (N, T, D), normalised; returns mean energy per step."""
-    n, steps, _ = sequences.shape
+    """One pass over all sequences (N, T, D), normalised; returns the mean energy per step and
+    each channel's mean squared error at the relaxed state (D,)."""
+    n, steps, width = sequences.shape
     batch = net.config.batch_size or n
     order = rng.permutation(n)
     total, count = 0.0, 0
+    weighted_sq, rows = np.zeros(width), 0
     for start in range(0, n, batch):
         x_seq = sequences[order[start : start + batch]]
         if net.config.training_noise > 0:
@@ -92,8 +94,10 @@ def train_epoch(
             net.project()
             total += energy
             count += 1
+            weighted_sq += (terms[1][0].astype(np.float64) ** 2).sum(axis=0)  # W_F's post: Pi eps_x
+            rows += len(x)
             zhat, past = z, net.push(past, x)
-    return total / count
+    return total / count, weighted_sq / rows / net.pi.astype(np.float64) ** 2
 
 
 def recall_error(net: TemporalPC, sequences: np.ndarray) -> float:
@@ -113,6 +117,10 @@ def train(
     """Train on normalised sequences (N, T, D).
 
     Pathways into the observation configured to start from least squares are fitted first.
+    With learned precisions (``config.observation_precision``) each channel's precision is set
+    after every epoch to the inverse of its mean squared error at the relaxed states, relative
+    to the median channel: the fixed point of the local rule dPi_i ~ 1 - Pi_i eps_i^2 (beyond
+    the paper), so that channels the hidden state cannot explain weigh less in what it learns.
     Returns the mean energy of every epoch and the epoch whose weights are kept: the
     last one, or, given held-out ``validation`` sequences, the evaluated epoch with the
     lowest recall error on them. With ~20 demonstrations the recall error on unseen
@@ -123,21 +131,23 @@ def train(
         validation = checked_array(validation, "validation sequences", net.obs_size, np.float32)
     if net.config.direct_init == "least_squares":
         net.fit_direct(sequences)
-    best = (np.inf, net.config.epochs - 1, None)
+    best = (np.inf, net.config.epochs - 1, None, None)
     rng = np.random.default_rng(net.config.seed)
     # numpy views of the parameters: updated in place, the tensors with them.
     update = WeightUpdate([w.numpy() for w in net.parameters], net.config.optimizer)
     history: list[float] = []
     bar = tqdm(range(net.config.epochs), desc="training", unit="epoch", disable=not progress)
     for epoch in bar:
-        energy = train_epoch(net, sequences, update, learning_rate(net.config, epoch), rng)
+        energy, channel_mse = train_epoch(net, sequences, update, learning_rate(net.config, epoch), rng)
         if not np.isfinite(energy):
             raise FloatingPointError(f"energy became {energy} at epoch {epoch}")
+        if net.config.observation_precision == "learned":
+            net.set_precision(relative_precision(np.sqrt(channel_mse)))
         history.append(energy)
         if validation is not None and ((epoch + 1) % eval_every == 0 or epoch + 1 == net.config.epochs):
             error = recall_error(net, validation)
             if error < best[0]:
-                best = (error, epoch, [w.copy() for w in update.weights])
+                best = (error, epoch, [w.copy() for w in update.weights], net.pi.copy())
             bar.set_postfix(energy=f"{energy:.4g}", held_out=f"{error:.4g}", refresh=False)
         else:
             bar.set_postfix(energy=f"{energy:.4g}", refresh=False)
@@ -146,4 +156,5 @@ def train(
     if best[2] is not None:
         for weight, kept in zip(update.weights, best[2]):
             np.copyto(weight, kept)
+        net.set_precision(best[3])
     return history, best[1]

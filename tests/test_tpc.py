@@ -8,8 +8,8 @@ from models import recall
 from models.asm import NeuralASM, channel_precision
 from models.config import FAITHFUL, TPCConfig
 from models.kernels import spectral_norm
-from models.tpc import TemporalPC, stable_wf_norm
-from models.train import WeightUpdate, learning_rate, recall_error
+from models.tpc import TemporalPC, relative_precision, stable_wf_norm
+from models.train import WeightUpdate, learning_rate, recall_error, train
 
 from conftest import SMALL
 
@@ -287,3 +287,21 @@ def test_a_step_with_non_finite_outputs_leaves_the_stream_as_it_was(trained, ski
         a, b = failed.step(x), clean.step(x)
         np.testing.assert_array_equal(a.prediction, b.prediction)
         assert a.energy == b.energy
+
+
+def test_learned_precision_is_the_inverse_relaxed_error_relative_to_the_median(rng):
+    """One epoch with weights that barely move: each channel's precision afterwards is what its
+    mean squared error at the relaxed states (replayed here with the starting weights) says."""
+    x = (rng.standard_normal((6, 8, 5)) * np.array([0.1, 0.2, 1.0, 3.0, 0.5])).astype(np.float32)
+    cfg = TPCConfig(hidden_size=16, epochs=1, learning_rate=1e-12, observation_precision="learned")
+    net = TemporalPC(5, cfg)
+    replay = TemporalPC(5, cfg)
+    zhat, sq = replay.initial_state(len(x)), np.zeros(5)
+    for t in range(x.shape[1]):
+        z = replay.infer(replay.prior(zhat), x[:, t])
+        sq += ((x[:, t] - replay.observe(z)) ** 2).sum(axis=0)
+        zhat = z
+    train(net, x, progress=False)
+    expected = relative_precision(np.sqrt(sq / (x.shape[0] * x.shape[1])))
+    np.testing.assert_allclose(net.pi, expected, rtol=1e-4)
+    assert net.pi[3] < net.pi[2] < 1.0  # the noisiest channels are trusted least

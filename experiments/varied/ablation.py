@@ -51,6 +51,8 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
                                   ROBUST.with_(direct_lags=3, direct_target="hidden")),
     "direct_hidden_noise_h128": ("pathways preset with 128 hidden units (256)", PATHWAYS.with_(hidden_size=128)),
     "direct_hidden_noise_h64": ("pathways preset with 64 hidden units (256)", PATHWAYS.with_(hidden_size=64)),
+    "learned_precision": ("pathways preset, observation precisions learned from the relaxed errors (demo spread)",
+                          PATHWAYS.with_(observation_precision="learned")),
     "direct_hidden_noise_0.5": ("training noise 0.5, the last 2 observations added to the hidden prior through W_D",
                                 FAST.with_(training_noise=0.5, direct_lags=2, direct_target="hidden")),
 }
