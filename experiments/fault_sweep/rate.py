@@ -17,6 +17,7 @@ from tqdm.auto import tqdm
 
 from experiments.fault_sweep.data import SETS
 from experiments.fault_sweep.served import Onsets, evaluate, subsampled
+from experiments.twins import VISIBLE_K
 from models import checkpoint
 from models.config import RATE_DEFAULTS, TPCConfig
 from models.recall import RECALL_MODES
@@ -46,9 +47,9 @@ def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | N
     sets = paper_sets(data_dir, SETS + HIT_SETS, n_normal, parallel, rate)
     normal = split_normal(sets["demos"], sets["normal"])
     locks = Onsets.against(as_sequences(sets["faults"]), np.array([e.fault.joint for e in sets["faults"]]),
-                           as_sequences(sets["twins"]))
+                           as_sequences(sets["twins"]), normal.precision)
     momenta = np.array([round(e.disturbance.mass_kg * e.disturbance.speed_m_s, 6) for e in sets["hits"]])
-    hits = Onsets.against(as_sequences(sets["hits"]), momenta, as_sequences(sets["hit_twins"]))
+    hits = Onsets.against(as_sequences(sets["hits"]), momenta, as_sequences(sets["hit_twins"]), normal.precision)
     by_rate = {}
     rates = list(dict.fromkeys((rate, SIM.timing.observation_hz)))
     with tqdm(total=len(rates) * trainings, desc="trainings") as bar:
@@ -85,6 +86,9 @@ def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | N
                      "normal_calibration": len(normal.calibration), "normal_test": len(normal.normal_test),
                      "lock": len(locks.onset_s), "falling_object": len(hits.onset_s)},
         "onset": "first 40 Hz tick at which the observations differ from the same seed's twin",
+        "visible_onset": (f"first 40 Hz tick at which some channel departs from the twin by more than {VISIBLE_K:g} "
+                          "normal standard deviations (per skill, tick and channel over the precision split; "
+                          "experiments.twins): latency.<kind>.from_visible counts from it"),
         "rates": by_rate,
         "seconds": round(time.perf_counter() - start, 1),
     }
