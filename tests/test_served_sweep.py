@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from experiments.fault_sweep.rate_figures import write_latency_figure
+from experiments.fault_sweep.rate import markdown, spread
 from experiments.fault_sweep.served import (Flagged, Onsets, each_ms, flagged, flagged_over_resplits, from_visible,
                                             latency_ms, percentiles_ms, subsampled)
 from models.fault import flag_steps
@@ -79,6 +80,29 @@ def test_latency_from_the_visible_onset():
                    np.array([0.375, np.nan, np.nan, np.nan]), np.zeros((4, 1, 4)))
     entry = latency_ms(at_2, onsets, 2.0)
     assert entry["median_ms"] == 375.0 and entry["from_visible"]["median_ms"] == 225.0  # 0.5 s - 11 / 40 s
+
+
+def evaluated(lock_p95_from_visible: float, locks_before_visible: int) -> dict:
+    """What `served.evaluate` gives, the numbers `rate.spread` summarises."""
+    def kind(p95: float, before: int) -> dict:
+        return {"median_ms": 0.0, "p95_ms": 500.0, "from_visible": {"median_ms": -25.0, "p95_ms": p95,
+                                                                     "flagged_before_visible": before,
+                                                                     "never_visible": 3}}
+
+    return {"normal_episodes_flagged": 0.03, "normal_episodes_flagged_resplits": 0.007,
+            "detection": {"lock": 0.997, "falling_object": 1.0}, "isolation_at_detection": 0.95,
+            "latency": {"lock": kind(lock_p95_from_visible, locks_before_visible), "falling_object": kind(0.0, 0)}}
+
+
+def test_latency_from_the_visible_onset_across_trainings_and_in_the_table():
+    runs = [evaluated(150.0, 600), evaluated(170.0, 650)]
+    across = spread(runs)
+    assert across["lock_latency_from_visible_p95_ms"] == {"mean": 160.0, "min": 150.0, "max": 170.0}
+    assert across["lock_latency_p95_ms"] == {"mean": 500.0, "min": 500.0, "max": 500.0}
+    table = markdown({"rate_hz": 40.0, "trainings": 2, "latency": runs[0]["latency"],
+                      "rates": {"40": {"across_trainings": {"online": across}}}})
+    assert "| 40 Hz | online | -25 / 160 (150-170) | 625 (600-650) | -25 / 0 | 0 |" in table
+    assert "3 locks and 3 falling objects never depart so far" in table
 
 
 def test_flags_are_the_services_and_count_from_the_onset(calibrated):
