@@ -44,6 +44,13 @@ def consequences(fault_success: np.ndarray, twin_success: np.ndarray, visible: n
     return np.where(twin_success, label, "unattributed")
 
 
+def first_visible_steps(deviation: np.ndarray, k: float = VISIBLE_K) -> np.ndarray:
+    """Each episode's first step at which some channel departs by more than k normal standard
+    deviations (-1 if none): from there on a monitor can be asked to see the fault."""
+    visible = deviation.max(axis=2) > k
+    return np.where(visible.any(axis=1), visible.argmax(axis=1), -1)
+
+
 def visible_from(deviation: np.ndarray, first_step: np.ndarray, k: float = VISIBLE_K) -> np.ndarray:
     """Whether some channel departs by more than k normal standard deviations at or after `first_step`."""
     steps = np.arange(deviation.shape[1])

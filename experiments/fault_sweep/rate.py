@@ -17,6 +17,7 @@ from tqdm.auto import tqdm
 
 from experiments.fault_sweep.data import SETS
 from experiments.fault_sweep.served import Onsets, evaluate, subsampled
+from experiments.twins import VISIBLE_K
 from models import checkpoint
 from models.config import RATE_DEFAULTS, TPCConfig
 from models.recall import RECALL_MODES
@@ -26,6 +27,7 @@ from runtime.parallel import Parallel
 from sim.config import SIM
 
 HIT_SETS = ("hits", "hit_twins")
+KINDS = ("lock", "falling_object")  # the headline's fault kinds
 # The recall mode of the headline: online. At 40 Hz offline recall rolls 300 steps forward from
 # one cue and drifts from the episode (held-out offline error 1.3 normalised units against 0.2
 # online), so a 40 Hz session monitors in online recall; both modes are in `rates`.
@@ -46,9 +48,9 @@ def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | N
     sets = paper_sets(data_dir, SETS + HIT_SETS, n_normal, parallel, rate)
     normal = split_normal(sets["demos"], sets["normal"])
     locks = Onsets.against(as_sequences(sets["faults"]), np.array([e.fault.joint for e in sets["faults"]]),
-                           as_sequences(sets["twins"]))
+                           as_sequences(sets["twins"]), normal.precision)
     momenta = np.array([round(e.disturbance.mass_kg * e.disturbance.speed_m_s, 6) for e in sets["hits"]])
-    hits = Onsets.against(as_sequences(sets["hits"]), momenta, as_sequences(sets["hit_twins"]))
+    hits = Onsets.against(as_sequences(sets["hits"]), momenta, as_sequences(sets["hit_twins"]), normal.precision)
     by_rate = {}
     rates = list(dict.fromkeys((rate, SIM.timing.observation_hz)))
     with tqdm(total=len(rates) * trainings, desc="trainings") as bar:
@@ -85,6 +87,9 @@ def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | N
                      "normal_calibration": len(normal.calibration), "normal_test": len(normal.normal_test),
                      "lock": len(locks.onset_s), "falling_object": len(hits.onset_s)},
         "onset": "first 40 Hz tick at which the observations differ from the same seed's twin",
+        "visible_onset": (f"first 40 Hz tick at which some channel departs from the twin by more than {VISIBLE_K:g} "
+                          "normal standard deviations (per skill, tick and channel over the precision split; "
+                          "experiments.twins): latency.<kind>.from_visible counts from it"),
         "rates": by_rate,
         "seconds": round(time.perf_counter() - start, 1),
     }
@@ -100,6 +105,8 @@ SPREAD_KEYS = {
     "lock_latency_p95_ms": ("latency", "lock", "p95_ms"),
     "falling_object_latency_median_ms": ("latency", "falling_object", "median_ms"),
     "falling_object_latency_p95_ms": ("latency", "falling_object", "p95_ms"),
+    **{f"{kind}_latency_from_visible_{key}": ("latency", kind, "from_visible", key)
+       for kind in KINDS for key in ("median_ms", "p95_ms", "flagged_before_visible")},
     "isolation_at_detection": ("isolation_at_detection",),
 }
 
@@ -125,6 +132,10 @@ def pct(x: float) -> str:
 
 def ms(x: float | None) -> str:
     return "-" if x is None else f"{x:.0f}"
+
+
+def count(x: float) -> str:
+    return f"{x:.0f}"
 
 
 def spread_cell(entry: dict, format_value) -> str:
@@ -155,7 +166,29 @@ def markdown(result: dict) -> str:
                          f"| {spread_cell(m['falling_object_latency_median_ms'], ms)} / "
                          f"{spread_cell(m['falling_object_latency_p95_ms'], ms)} "
                          f"| {spread_cell(m['isolation_at_detection'], pct)} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + [""] + from_visible_lines(result)) + "\n"
+
+
+def from_visible_lines(result: dict) -> list[str]:
+    """The latencies counted from the first tick at which the fault is visible instead, and how
+    many faults the monitor flags before that tick: what a lock that stays within the normal
+    spread for a while does to the latency from the onset."""
+    never = {kind: result["latency"][kind]["from_visible"]["never_visible"] for kind in KINDS}
+    lines = [f"From the first tick at which the fault departs from its twin by more than {VISIBLE_K:g} normal "
+             "standard deviations in some channel to the first flag (ms; negative: flagged before it); "
+             f"{never['lock']} locks and {never['falling_object']} falling objects never depart so far and are "
+             "left out.", "",
+             "| rate | recall | lock latency median / p95 | locks flagged before visible "
+             "| falling-object latency median / p95 | falling objects flagged before visible |",
+             "|---|---|---|---|---|---|"]
+    for hz, entry in result["rates"].items():
+        for mode, m in entry["across_trainings"].items():
+            cells = [f"{spread_cell(m[f'{kind}_latency_from_visible_median_ms'], ms)} / "
+                     f"{spread_cell(m[f'{kind}_latency_from_visible_p95_ms'], ms)} "
+                     f"| {spread_cell(m[f'{kind}_latency_from_visible_flagged_before_visible'], count)}"
+                     for kind in KINDS]
+            lines.append(f"| {hz} Hz | {mode} | {' | '.join(cells)} |")
+    return lines
 
 
 def write(result: dict, out_dir: Path) -> None:
