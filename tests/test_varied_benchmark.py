@@ -14,7 +14,7 @@ from experiments.varied.ceiling import ceiling, ceiling_markdown, oracle_rates
 from experiments.varied.data import make_benchmark
 from experiments.varied.methods import train_neural_asm
 from experiments.varied.score import headline, score_all
-from models.config import FAST, PATHWAYS
+from models.config import FAST, PRECISE
 from models.detectors import ConditionalTemplate, PerSkillZScore
 from runtime.parallel import Parallel, parallel_map
 from sim.episode import Episode
@@ -169,13 +169,13 @@ def test_ceiling_oracles_see_what_the_context_explains(bench, tmp_path):
 def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path):
     """The benchmark's episode rule is the served one: the same model streamed through a real
     service flags exactly the normal episodes, and detects exactly the faults, the benchmark does.
-    The model has the featured network's form (direct pathways into the hidden state)."""
+    The model has the featured network's form (direct pathways into the hidden state, learned precisions)."""
     from client.transport import WebSocketTransport
     from models import checkpoint
     from service.embedded import start_embedded
     from service.settings import Settings
 
-    model = train_neural_asm(bench, PATHWAYS.with_(epochs=3, hidden_size=32), progress=False)
+    model = train_neural_asm(bench, PRECISE.with_(epochs=3, hidden_size=32), progress=False)
     summaries, outcomes = score_all(bench, neural_asm_methods(model, "nasm", "Neural ASM"), model.normaliser)
     benchmark = outcomes[("nasm_online", "episode")]
     checkpoint.save(model, tmp_path / "varied.safetensors")

@@ -120,11 +120,11 @@ def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_
             parallel: Parallel) -> None:
     from experiments.varied.report import write_figures, write_json, write_markdown
     from experiments.varied.run import run_varied
-    from models.config import PATHWAYS
+    from models.config import PRECISE
 
     start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
-    fast = PATHWAYS if fast_epochs is None else PATHWAYS.with_(epochs=fast_epochs)
+    fast = PRECISE if fast_epochs is None else PRECISE.with_(epochs=fast_epochs)
     result = run_varied(data, out, context, fast, min(paper_epochs, VARIED_PAPER_EPOCHS), parallel=parallel)
     write_json(result, out / "fault_sweep.json", time.perf_counter() - start)
     write_markdown(result, out / "fault_sweep.md")

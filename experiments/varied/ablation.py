@@ -20,7 +20,7 @@ from experiments.methods import neural_asm_methods
 from experiments.varied.methods import train_neural_asm
 from experiments.varied.score import ALPHA, score_all
 from models.asm import NeuralASM
-from models.config import FAST, PATHWAYS, ROBUST, TPCConfig
+from models.config import FAST, PATHWAYS, PRECISE, ROBUST, TPCConfig
 from runtime.parallel import Parallel
 from sim.varied import channel_groups
 
@@ -43,7 +43,7 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
                                     FAST.with_(direct_lags=3, direct_target="observation", direct_init="least_squares")),
     "direct_hidden": ("no noise, the last 2 observations added to the hidden prior through W_D",
                       FAST.with_(direct_lags=2, direct_target="hidden")),
-    "direct_hidden_noise": ("pathways preset (featured): robust, the last 2 observations added to the hidden "
+    "direct_hidden_noise": ("pathways preset: robust, the last 2 observations added to the hidden "
                             "prior through W_D", PATHWAYS),
     "direct_hidden_noise_lags1": ("robust preset, the last observation added to the hidden prior through W_D",
                                   ROBUST.with_(direct_lags=1, direct_target="hidden")),
@@ -51,8 +51,8 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
                                   ROBUST.with_(direct_lags=3, direct_target="hidden")),
     "direct_hidden_noise_h128": ("pathways preset with 128 hidden units (256)", PATHWAYS.with_(hidden_size=128)),
     "direct_hidden_noise_h64": ("pathways preset with 64 hidden units (256)", PATHWAYS.with_(hidden_size=64)),
-    "learned_precision": ("pathways preset, observation precisions learned from the relaxed errors (demo spread)",
-                          PATHWAYS.with_(observation_precision="learned")),
+    "learned_precision": ("precise preset (featured): pathways, observation precisions learned from the relaxed "
+                          "errors", PRECISE),
     "direct_hidden_noise_0.5": ("training noise 0.5, the last 2 observations added to the hidden prior through W_D",
                                 FAST.with_(training_noise=0.5, direct_lags=2, direct_target="hidden")),
 }

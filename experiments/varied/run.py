@@ -5,9 +5,10 @@ baseline of `models.detectors` on the same demonstrations, scores all on the sam
 (experiments/varied/score.py) and writes the results. The featured Neural ASM, the one a
 varied-task service ships, is the default network in online recall, decided before any test
 episode was scored: on a varied task the hidden state must follow the episode (its speed, its
-route), which offline recall from a one-step cue cannot. Its preset, `PATHWAYS`, is the default
+route), which offline recall from a one-step cue cannot. Its preset, `PRECISE`, is the default
 network trained on noisy observations with the last two observations driving its hidden state's
-prior, chosen by held-out error (models/config.py, experiments/varied/ablation.py).
+prior and its channels' precisions learned from its errors, chosen by held-out error
+(models/config.py, experiments/varied/ablation.py).
 
 Every rate is also given as a share of the oracle's: the exact expectation given each episode's
 context and start posture (experiments/varied/ceiling.py), whose replicate episodes are
@@ -25,7 +26,7 @@ from experiments.methods import Method, neural_asm_methods
 from experiments.varied.methods import baseline_methods, train_neural_asm
 from experiments.varied.score import ALPHA, headline, score_all
 from models import checkpoint
-from models.config import FAITHFUL, PATHWAYS, TPCConfig
+from models.config import FAITHFUL, PRECISE, TPCConfig
 from runtime.parallel import Parallel
 
 FEATURED = "nasm_online"
@@ -40,10 +41,10 @@ class VariedResult:
     configs: dict[str, dict]
 
 
-def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = PATHWAYS, paper_epochs: int = 200,
+def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = PRECISE, paper_epochs: int = 200,
                *, parallel: Parallel = Parallel(), alpha: float = ALPHA, diagnostics: bool = True) -> VariedResult:
     bench = load_varied_benchmark(data_dir, context, parallel)
-    configs = {"nasm": ("Neural ASM, featured (pathways preset)", fast),
+    configs = {"nasm": ("Neural ASM, featured (precise preset)", fast),
                "nasm_paper": ("Neural ASM, paper configuration", FAITHFUL.with_(epochs=paper_epochs))}
     methods: list[Method] = []
     norm = None
