@@ -61,6 +61,8 @@ def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = PR
         # A measurement beyond the paper, kept out of the methods and the paired tests (docs/diagnostic_bptt.md).
         from experiments.varied.diagnostic import headline_diagnostics
 
-        # It trains the paper's form of the network (no direct pathways) by BPTT.
-        head["diagnostics"] = headline_diagnostics(bench, norm, fast.with_(direct_lags=0), alpha=alpha)
+        # It trains the paper's form of the network (no direct pathways, the demonstrations'
+        # precisions, fixed) by BPTT.
+        head["diagnostics"] = headline_diagnostics(
+            bench, norm, fast.with_(direct_lags=0, observation_precision="demo_spread"), alpha=alpha)
     return VariedResult(bench, summaries, results, head, {name: config.to_dict() for name, (_, config) in configs.items()})
