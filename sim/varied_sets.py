@@ -9,7 +9,10 @@ so it never repeats a paper-task episode):
 - `ood`: benign out-of-range episodes: parameters up to 30 % beyond the demonstrated ranges,
   at least one beyond; normal operation that a monitor should not flag;
 - `faults`: the fault families of `sim.varied_faults`, over varied contexts;
-- `twins`: each fault's seed without the fault.
+- `twins`: each fault's seed without the fault;
+- `val_faults`, `val_twins`: validation faults and their twins, the same families and skills on
+  a quarter of the episodes (`VALIDATION_PLAN`), for choices that need faults (the either-of-two
+  rival, experiments/varied/pairs.py) without touching the faults that are measured.
 
 Files are the paper task's format (`sim.dataset`): `<set>.mcap` plus its `.npz` cache, with
 the episode's context and the recorded channels (25 + 7 context channels) in every episode.
@@ -30,8 +33,8 @@ from sim.varied import (VARIED_SKILLS, Context, draw_plan_noise, keyframes, make
 from sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestoreFriction, VariedFault, apply_sensor_fault,
                                execution_effects)
 
-VARIED_KINDS = ("demos", "normal", "ood", "faults", "twins")
-SEED_BASE = {"demos": 0, "normal": 10_000, "ood": 20_000, "faults": 100_000}
+VARIED_KINDS = ("demos", "normal", "ood", "faults", "twins", "val_faults", "val_twins")
+SEED_BASE = {"demos": 0, "normal": 10_000, "ood": 20_000, "faults": 100_000, "val_faults": 200_000}
 TASK_TAG = 7  # separates the varied task's random streams from the paper task's
 HOLDING = ("pick_place_right", "pick_place_around", "lift_hold")
 # (kind, episodes, skills it applies to)
@@ -41,6 +44,8 @@ FAULT_PLAN: tuple[tuple[str, int, tuple[str, ...]], ...] = (
     ("stray_post", 48, ("pick_place_right", "pick_place_around", "push")), ("wrong_side", 40, ("pick_place_around",)),
     ("wrong_cube", 48, VARIED_SKILLS),
 )
+# The validation faults: each family on its skills, a quarter of its test count and at least 8.
+VALIDATION_PLAN = tuple((kind, max(8, count // 4), skills) for kind, count, skills in FAULT_PLAN)
 
 
 @dataclass(frozen=True)
@@ -149,11 +154,14 @@ def draw_fault(kind: str, job: VariedJob, rng: np.random.Generator) -> VariedFau
     raise ValueError(f"unknown fault kind {kind!r}")
 
 
-def fault_jobs() -> list[VariedJob]:
+def fault_jobs(validation: bool = False) -> list[VariedJob]:
+    """The test faults (`FAULT_PLAN`) or, with `validation`, the validation faults
+    (`VALIDATION_PLAN`, seeds of their own)."""
+    plan, base = (VALIDATION_PLAN, SEED_BASE["val_faults"]) if validation else (FAULT_PLAN, SEED_BASE["faults"])
     jobs = []
-    for kind, count, skills in FAULT_PLAN:
+    for kind, count, skills in plan:
         for i in range(count):
-            job = VariedJob(skills[i % len(skills)], SEED_BASE["faults"] + len(jobs))
+            job = VariedJob(skills[i % len(skills)], base + len(jobs))
             jobs.append(replace(job, fault=draw_fault(kind, job, np.random.default_rng((job.seed, TASK_TAG, 9)))))
     return jobs
 
@@ -168,10 +176,10 @@ def jobs_for(kind: str, n_demos: int | None = None, n_normal: int = 850, n_ood: 
         return [VariedJob(VARIED_SKILLS[i % k], SEED_BASE["normal"] + i) for i in range(n_normal)]
     if kind == "ood":
         return [VariedJob(VARIED_SKILLS[i % k], SEED_BASE["ood"] + i, out_of_range=True) for i in range(n_ood)]
-    if kind == "faults":
-        return fault_jobs()
-    if kind == "twins":
-        return [replace(job, fault=None) for job in fault_jobs()]
+    if kind in ("faults", "val_faults"):
+        return fault_jobs(validation=kind == "val_faults")
+    if kind in ("twins", "val_twins"):
+        return [replace(job, fault=None) for job in fault_jobs(validation=kind == "val_twins")]
     raise ValueError(f"kind must be one of {VARIED_KINDS}, got {kind!r}")
 
 

@@ -111,11 +111,22 @@ def test_faults_depart_from_their_twins():
 
 def test_sets_use_disjoint_seeds_and_fault_specs_are_checked():
     seeds = {kind: {job.seed for job in jobs_for(kind, n_demos=5, n_normal=20, n_ood=20)}
-             for kind in ("demos", "normal", "ood", "faults")}
+             for kind in ("demos", "normal", "ood", "faults", "val_faults")}
     kinds = list(seeds)
     for i, a in enumerate(kinds):
         for b in kinds[i + 1:]:
             assert not seeds[a] & seeds[b]
+    # validation faults: every family on the same skills, a quarter as many (at least 8), and their twins
+    from collections import Counter
+
+    from sim.varied_sets import FAULT_PLAN
+
+    val = jobs_for("val_faults")
+    counts = Counter((j.fault.kind, j.skill) for j in val)
+    for kind, count, skills in FAULT_PLAN:
+        assert {s for k, s in counts if k == kind} == set(skills)
+        assert sum(n for (k, _), n in counts.items() if k == kind) == max(8, count // 4)
+    assert [(j.skill, j.seed, None) for j in val] == [(j.skill, j.seed, j.fault) for j in jobs_for("val_twins")]
     with pytest.raises(ValueError, match="fault kind"):
         VariedFault("explode", 3)
     with pytest.raises(ValueError, match="fault step"):

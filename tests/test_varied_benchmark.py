@@ -13,9 +13,9 @@ from experiments.methods import Method, neural_asm_methods
 from experiments.varied.ceiling import ceiling, ceiling_markdown, oracle_rates
 from experiments.varied.data import make_benchmark
 from experiments.varied.methods import train_neural_asm
-from experiments.varied.score import headline, score_all
+from experiments.varied.score import PAIR, headline, score_all
 from models.config import FAST, PRECISE
-from models.detectors import ConditionalTemplate, PerSkillZScore
+from models.detectors import ConditionalTemplate, CueTemplate, PerSkillZScore
 from runtime.parallel import Parallel, parallel_map
 from sim.episode import Episode
 from sim.varied import VARIED_SKILLS
@@ -26,12 +26,14 @@ pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
 @pytest.fixture(scope="module")
 def bench():
-    faults = [job for kind in ("stray_post", "wrong_cube", "force_bias")
-              for job in [j for j in fault_jobs() if j.fault.kind == kind][:3]]
+    faults, val_faults = ([job for kind in ("stray_post", "wrong_cube", "force_bias")
+                           for job in [j for j in fault_jobs(validation) if j.fault.kind == kind][:3]]
+                          for validation in (False, True))
     jobs = {"demos": [VariedJob(s, i) for s in VARIED_SKILLS for i in range(4)],
             "normal": [VariedJob(VARIED_SKILLS[i % 4], 10_000 + i) for i in range(36)],
             "ood": [VariedJob(VARIED_SKILLS[i % 4], 20_000 + i, out_of_range=True) for i in range(8)],
-            "faults": faults, "twins": [replace(j, fault=None) for j in faults]}
+            "faults": faults, "twins": [replace(j, fault=None) for j in faults],
+            "val_faults": val_faults, "val_twins": [replace(j, fault=None) for j in val_faults]}
     flat = [(kind, job) for kind, js in jobs.items() for job in js]
     results = parallel_map(run_job, [(job,) for _, job in flat], 2, progress=False)
     sets = {kind: [] for kind in jobs}
@@ -46,20 +48,33 @@ def test_hidden_benchmark_has_no_goal_channel(bench):
     assert [bench.channel_names[i] for i in bench.context_channels] == \
         ["cube_seen_x", "cube_seen_y", "cube_seen_yaw", "post_x", "post_y"]
     assert (bench.onset >= 1).all() and bench.visible.any()
+    v = bench.validation  # by the test faults' rule, on seeds of their own
+    assert v.faults.data.shape[1:] == bench.faults.data.shape[1:] and v.visible.any() and (v.onset >= 1).all()
+    assert not set(v.faults.seeds) & set(bench.faults.seeds) and set(v.kinds) == set(bench.kinds)
 
 
 def test_headline_follows_the_contract(bench, tmp_path):
     model = train_neural_asm(bench, FAST.with_(epochs=3, hidden_size=32), progress=False)
     norm = model.normaliser
     methods = neural_asm_methods(model, "nasm", "Neural ASM")
-    for detector in (PerSkillZScore(), ConditionalTemplate()):
+    for detector in (PerSkillZScore(), ConditionalTemplate(), CueTemplate()):
         detector.fit(norm.normalise(bench.demos.data), bench.demos.labels, bench.context_channels.tolist())
         methods.append(Method(detector.name, detector.label, False, detector.expected))
     summaries, outcomes = score_all(bench, methods, norm)
     h = headline(summaries, outcomes, bench, "nasm_online", oracle={"visible": 0.5, "consequential": 0.8})
     json.dumps(h)  # plain JSON
     assert h["featured"] == "nasm_online" and h["episode_fa_target"] == 0.01
-    assert set(h["methods"]) == set(h["per_family"]) == set(h["consequential"]["methods"]) == {m.name for m in methods}
+    assert set(h["methods"]) == set(h["per_family"]) == set(h["consequential"]["methods"]) == \
+        {m.name for m in methods} | {PAIR}
+    # the either-of-two rival: two baselines chosen among the three pairs, a rival like any other
+    pair = h["or_pair"]
+    assert pair == summaries[PAIR]["or_pair"] and len(pair["validation_detection"]) == 3
+    assert set(pair["chosen"]) <= {"per_skill_zscore", "conditional_template", "cue_template"}
+    assert pair["validation_detection"][" | ".join(pair["chosen"])] == max(pair["validation_detection"].values())
+    assert not h["methods"][PAIR]["is_neural_asm"] and summaries[PAIR]["held_out_mse"] is None
+    # the validation faults reach nothing else: without them every method scores the same
+    plain, _ = score_all(replace(bench, validation=None), methods, norm)
+    assert PAIR not in plain and plain == {name: s for name, s in summaries.items() if name != PAIR}
     for name, values in h["methods"].items():
         assert set(values) == {"is_neural_asm", "detection", "normal_episode_false_alarm", "benign_ood_false_alarm",
                                "auroc", "median_delay_steps", "oracle_share"}
@@ -98,6 +113,7 @@ def test_headline_follows_the_contract(bench, tmp_path):
     assert sum(facts["consequences"].values()) == len(bench.faults)
     table = (tmp_path / "fault_sweep.md").read_text()
     assert "Scored by consequence" in table and table.count("\n| ") >= 3 * len(methods)
+    assert "Either of two rivals: " in table and "| either of two rivals: " in table
 
 
 def test_the_service_hosts_a_varied_model(bench, tmp_path):

@@ -7,6 +7,11 @@ only ever scored. Faults pair with their no-fault twins by seed; a fault's `onse
 step at which it departs from its twin, and it is `visible` when some channel at or after the
 onset departs by more than 3 normal standard deviations (per skill, step and channel, on the
 precision split; `experiments.twins`).
+
+The validation faults (`validation`: other seeds, the same families and skills, a quarter as
+many) get their onset and visibility by the same rule. They serve choices that need faults, the
+either-of-two rival's pair (experiments/varied/pairs.py), and nothing else: no method is fitted,
+calibrated or thresholded on them, and no rate is measured on them.
 """
 
 from __future__ import annotations
@@ -25,6 +30,34 @@ from sim.varied import channel_names, context_columns
 from sim.varied_sets import VARIED_KINDS, generate, jobs_for
 
 SPLIT = (150, 300)  # precision, calibration; the rest of the normal set is the test split
+
+
+@dataclass(frozen=True)
+class FaultSet:
+    """Fault episodes paired with their no-fault twins, and what the pairing says of each."""
+
+    faults: Sequences
+    twins: Sequences
+    kinds: np.ndarray  # (F,) fault family
+    fault_step: np.ndarray  # (F,) nominal start step of the fault
+    onset: np.ndarray  # (F,) first step departing from the twin
+    visible: np.ndarray  # (F,) bool
+    consequence: np.ndarray  # (F,) experiments.twins.CONSEQUENCES
+
+
+def fault_set(faults: list[Episode], twins: list[Episode], columns: np.ndarray, precision: Sequences) -> FaultSet:
+    """Faults that have a twin (the simulation may refuse either), their onset, visibility (in
+    standard deviations of the precision split's normals) and consequence."""
+    by_seed = {e.seed: e for e in twins}
+    faults = [e for e in faults if e.seed in by_seed]
+    twins = [by_seed[e.seed] for e in faults]
+    fault_arr, twin_arr = as_sequences(faults, columns), as_sequences(twins, columns)
+    onset = onset_steps(fault_arr.data, twin_arr.data)
+    deviation = whitened_deviation(fault_arr.data, twin_arr.data, fault_arr.labels, precision.data, precision.labels)
+    visible = visible_from(deviation, onset)
+    consequence = consequences(np.array([e.success for e in faults]), np.array([e.success for e in twins]), visible)
+    return FaultSet(fault_arr, twin_arr, np.array([e.fault.kind for e in faults]),
+                    np.array([e.fault.step for e in faults]), onset, visible, consequence)
 
 
 @dataclass(frozen=True)
@@ -47,6 +80,7 @@ class VariedBenchmark:
     test_success: np.ndarray  # (N_test,) bool: the normal test episode placed its cube
     ood_success: np.ndarray  # (N_ood,) bool: the benign out-of-range run placed its cube
     dropped: dict  # set -> episodes the simulation refused (velocity limits, IK)
+    validation: FaultSet | None = None  # validation faults: only for choices among rivals
 
 
 def ensure_varied_sets(data_dir: Path, parallel: Parallel = Parallel()) -> tuple[dict, dict]:
@@ -63,29 +97,23 @@ def ensure_varied_sets(data_dir: Path, parallel: Parallel = Parallel()) -> tuple
 
 def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict | None = None,
                    split: tuple[int, int] = SPLIT) -> VariedBenchmark:
+    """The benchmark of the sets; without `val_faults` among them it has no validation faults."""
     names = tuple(sets["demos"][0].channel_names)
     columns = context_columns(names, context)
     kept = channel_names(context)
-    twins = {e.seed: e for e in sets["twins"]}
-    faults = [e for e in sets["faults"] if e.seed in twins]
-    fault_arr = as_sequences(faults, columns)
-    twin_arr = as_sequences([twins[e.seed] for e in faults], columns)
     normal = as_sequences(sets["normal"], columns)
     precision, calibration, test = split_three(normal, *split)
-    onset = onset_steps(fault_arr.data, twin_arr.data)
-    deviation = whitened_deviation(fault_arr.data, twin_arr.data, fault_arr.labels, precision.data, precision.labels)
-    visible = visible_from(deviation, onset)
-    consequence = consequences(np.array([e.success for e in faults]), np.array([twins[e.seed].success for e in faults]),
-                               visible)
+    f = fault_set(sets["faults"], sets["twins"], columns, precision)
+    validation = fault_set(sets["val_faults"], sets["val_twins"], columns, precision) if "val_faults" in sets else None
     ctx_names = [n for n in kept if n.startswith(("cube_seen", "goal", "post"))]
     return VariedBenchmark(
         context=context, channel_names=kept, context_channels=np.array([kept.index(n) for n in ctx_names]),
         demos=as_sequences(sets["demos"], columns), precision=precision, calibration=calibration, test=test,
         ood=as_sequences(sets["ood"], columns),
-        faults=fault_arr, twins=twin_arr, kinds=np.array([e.fault.kind for e in faults]),
-        fault_step=np.array([e.fault.step for e in faults]), onset=onset, visible=visible, consequence=consequence,
+        faults=f.faults, twins=f.twins, kinds=f.kinds, fault_step=f.fault_step, onset=f.onset, visible=f.visible,
+        consequence=f.consequence,
         test_success=np.array([e.success for e in sets["normal"]])[len(precision) + len(calibration):],
-        ood_success=np.array([e.success for e in sets["ood"]]), dropped=dict(dropped or {}))
+        ood_success=np.array([e.success for e in sets["ood"]]), dropped=dict(dropped or {}), validation=validation)
 
 
 def load_varied_benchmark(data_dir: Path, context: str, parallel: Parallel = Parallel()) -> VariedBenchmark:

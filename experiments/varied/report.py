@@ -1,4 +1,7 @@
-"""Write the varied-task benchmark's results: JSON (with the headline), a markdown table, figures."""
+"""Write the varied-task benchmark's results: JSON (with the headline), a markdown table, figures.
+
+A number a method has none of (the either-of-two rival expects nothing, so has no held-out
+error) is printed as "-"."""
 
 from __future__ import annotations
 
@@ -34,6 +37,10 @@ def _pct(v: float | None) -> str:
     return "-" if v is None else f"{100 * v:.1f}"
 
 
+def _num(v: float | None, digits: int = 3) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
 def write_markdown(result: VariedResult, path: Path) -> None:
     h = result.headline
     lines = [f"# Varied task, {result.bench.context} context", "",
@@ -47,16 +54,15 @@ def write_markdown(result: VariedResult, path: Path) -> None:
         s = result.summaries[name]
         e, t = s["episode"], s["time_varying"]
         label = f"**{s['label']}**" if name == h["featured"] else s["label"]
-        delay = "-" if e["median_delay_steps"] is None else f"{e['median_delay_steps']:.0f}"
-        lines.append(f"| {label} | {s['held_out_mse']:.3f} | {_pct(e['detection'])} | {_pct(e['detection_all_faults'])} | "
+        lines.append(f"| {label} | {_num(s['held_out_mse'])} | {_pct(e['detection'])} | {_pct(e['detection_all_faults'])} | "
                      f"{_pct(e['normal_episode_false_alarm'])} | {_pct(e['benign_ood_false_alarm'])} | {e['auroc']:.3f} | "
-                     f"{delay} | {_pct(t['detection'])} | {_pct(t['normal_episode_false_alarm'])} |")
+                     f"{_num(e['median_delay_steps'], 0)} | {_pct(t['detection'])} | {_pct(t['normal_episode_false_alarm'])} |")
     p = h["paired"]
     lines += ["", "Held-out error: mean squared normalised error of what the method expects of the precision "
               "split's normal episodes after their first step.", "",
               f"Paired against the best other method ({p['baseline']}): Neural ASM alone {p['nasm_only']}, "
               f"baseline alone {p['baseline_only']}, exact McNemar p = {p['p_value']:.3g}.", "",
-              *_diagnostics_lines(h),
+              *_pair_lines(h), *_diagnostics_lines(h),
               "Detection of visible faults per family (episode threshold):", "",
               "| method | " + " | ".join(result.summaries[order[0]]["episode"]["per_family"]) + " |",
               "|---|" + "---|" * len(result.summaries[order[0]]["episode"]["per_family"])]
@@ -80,17 +86,33 @@ def write_markdown(result: VariedResult, path: Path) -> None:
               "| method | detected | median lead (s) | AUROC | out-of-range runs that placed, flagged |", "|---|---|---|---|---|"]
     for name in order:
         c = result.summaries[name]["episode"]["consequential"]
-        lead = "-" if c["lead_time_s_median"] is None else f"{c['lead_time_s_median']:.1f}"
-        auroc = "-" if c["auroc"] is None else f"{c['auroc']:.3f}"
-        lines.append(f"| {result.summaries[name]['label']} | {_pct(c['detection'])} | {lead} | {auroc} | "
-                     f"{_pct(c['benign_ood_false_alarm'])} |")
-    groups = [g for g in result.summaries[order[0]]["held_out_mse_per_group"] if g != "all"]
+        lines.append(f"| {result.summaries[name]['label']} | {_pct(c['detection'])} | {_num(c['lead_time_s_median'], 1)} | "
+                     f"{_num(c['auroc'])} | {_pct(c['benign_ood_false_alarm'])} |")
+    expecting = [name for name in order if result.summaries[name]["held_out_mse_per_group"] is not None]
+    groups = [g for g in result.summaries[expecting[0]]["held_out_mse_per_group"] if g != "all"]
     lines += ["", "Held-out error per kind of channel (where each method's expectation misses):", "",
               "| method | " + " | ".join(groups) + " |", "|---|" + "---|" * len(groups)]
     for name in order:
-        err = result.summaries[name]["held_out_mse_per_group"]
-        lines.append(f"| {result.summaries[name]['label']} | " + " | ".join(f"{err[g]:.3f}" for g in groups) + " |")
+        err = result.summaries[name]["held_out_mse_per_group"] or {}
+        lines.append(f"| {result.summaries[name]['label']} | " + " | ".join(_num(err.get(g)) for g in groups) + " |")
     path.write_text("\n".join(lines) + "\n")
+
+
+def _pair_lines(h: dict) -> list[str]:
+    """How the either-of-two rival was chosen (experiments/varied/pairs.py), when it was scored."""
+    choice = h.get("or_pair")
+    if choice is None:
+        return []
+    a, b = choice["chosen"]
+    alone = choice["validation_detection_alone"]
+    tied = len(choice["tied_on_detection"]) - 1
+    return [f"Either of two rivals: {a} or {b}, the pair of {len(choice['validation_detection'])} that detects most "
+            f"of the {choice['validation_visible']} visible validation faults "
+            f"({_pct(choice['validation_detection'][f'{a} | {b}'])} %, alone {_pct(alone[a])} % and "
+            f"{_pct(alone[b])} %; faults of their own seeds, never measured or thresholded on"
+            f"{f'; {tied} other pair(s) as many, the tie broken by AUROC, then order' if tied else ''}), flagging when either member's "
+            "energy, in units of its own served threshold on the precision split, crosses the pair's served "
+            "threshold on the calibration split.", ""]
 
 
 def _diagnostics_lines(h: dict) -> list[str]:

@@ -2,13 +2,14 @@
 
 Trains the default and the paper-configured Neural ASM on the varied demonstrations, fits every
 baseline of `models.detectors` on the same demonstrations, scores all on the same episodes
-(experiments/varied/score.py) and writes the results. The featured Neural ASM, the one a
-varied-task service ships, is the default network in online recall, decided before any test
-episode was scored: on a varied task the hidden state must follow the episode (its speed, its
-route), which offline recall from a one-step cue cannot. Its preset, `PRECISE`, is the default
-network trained on noisy observations with the last two observations driving its hidden state's
-prior and its channels' precisions learned from its errors, chosen by held-out error
-(models/config.py, experiments/varied/ablation.py).
+(experiments/varied/score.py), with one more rival, the best pair of baselines flagging when
+either does, chosen on validation faults (experiments/varied/pairs.py), and writes the results.
+The featured Neural ASM, the one a varied-task service ships, is the default network in online
+recall, decided before any test episode was scored: on a varied task the hidden state must
+follow the episode (its speed, its route), which offline recall from a one-step cue cannot. Its
+preset, `PRECISE`, is the default network trained on noisy observations with the last two
+observations driving its hidden state's prior and its channels' precisions learned from its
+errors, chosen by held-out error (models/config.py, experiments/varied/ablation.py).
 
 Every rate is also given as a share of the oracle's: the exact expectation given each episode's
 context and start posture (experiments/varied/ceiling.py), whose replicate episodes are

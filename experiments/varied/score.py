@@ -8,6 +8,11 @@ peak energy (for a fault, from its onset on). Thresholds come from the calibrati
 exceed; at the benchmark's 300 calibration episodes and 1 % it is the split-conformal rank);
 the time-varying one (per-step scales from the precision split) is split-conformal.
 A fault is detected when its energy crosses the threshold at or after its onset.
+
+With validation faults in the benchmark and two baselines or more, one more rival is scored
+alike: the best pair of baselines flagging when either does, chosen on the validation faults
+(experiments/varied/pairs.py). Only the baselines' energies of the validation faults are
+computed, and only that choice reads them.
 """
 
 from __future__ import annotations
@@ -29,6 +34,8 @@ from sim.varied import channel_groups
 
 ALPHA = SCORING.default_fpr  # the episode false-alarm rate every method is held to
 SETS = ("precision", "calibration", "test", "ood", "faults")
+VALIDATION = "val_faults"  # the validation faults' energies: read by the pair's choice only
+PAIR = "best_pair"  # the either-of-two rival's name
 
 
 @dataclass(frozen=True)
@@ -44,13 +51,14 @@ class Outcome:
     ood_score: np.ndarray  # (N_ood,)
 
 
-def energies(method: Method, bench: VariedBenchmark, norm: Normaliser) -> tuple[dict[str, np.ndarray], dict]:
-    """Whitened energies (N, T) of every set under the method's own precisions, and the
-    method's held-out error on the precision split (how well it expects held-out normal
-    episodes, before any weighting)."""
+def energies(method: Method, bench: VariedBenchmark, norm: Normaliser, validation: bool = False
+             ) -> tuple[dict[str, np.ndarray], dict]:
+    """Whitened energies (N, T) of every set (with `validation`, of the validation faults too,
+    under `VALIDATION`) under the method's own precisions, and the method's held-out error on
+    the precision split (how well it expects held-out normal episodes, before any weighting)."""
     errors = {}
-    for key in SETS:
-        arrays = getattr(bench, key)
+    for key in (SETS + (VALIDATION,)) if validation else SETS:
+        arrays = bench.validation.faults if key == VALIDATION else getattr(bench, key)
         x = norm.normalise(arrays.data)
         errors[key] = x - method.expected(x, arrays.labels)
     cal = estimate("varied", 1, errors["precision"], "precision split", "full")
@@ -137,15 +145,24 @@ def consequential(o: Outcome, bench: VariedBenchmark) -> dict:
 
 def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, alpha: float = ALPHA
               ) -> tuple[dict, dict]:
-    """Summaries {method: {rule: summary}} and outcomes {(method, rule): Outcome}."""
-    summaries, results = {}, {}
+    """Summaries {method: {rule: summary}} and outcomes {(method, rule): Outcome}; with
+    validation faults and two baselines or more, the either-of-two rival `PAIR` too."""
+    summaries, results, rivals = {}, {}, {}
+    pair = bench.validation is not None and sum(not m.is_neural_asm for m in methods) >= 2
     for method in tqdm(methods, desc="scoring"):
-        e, held_out = energies(method, bench, norm)
+        e, held_out = energies(method, bench, norm, validation=pair and not method.is_neural_asm)
+        if VALIDATION in e:
+            rivals[method.name] = e
         rules = outcomes(e, bench.onset, alpha)
         summaries[method.name] = {"label": method.label, "is_neural_asm": method.is_neural_asm,
                                   "held_out_mse": held_out["all"], "held_out_mse_per_group": held_out,
                                   **{rule: summary(o, bench) for rule, o in rules.items()}}
         results.update({(method.name, rule): o for rule, o in rules.items()})
+    if pair:
+        from experiments.varied.pairs import best_pair  # it builds on this module's outcomes() and summary()
+
+        summaries[PAIR], rules = best_pair(rivals, {m.name: m for m in methods}, bench, alpha)
+        results.update({(PAIR, rule): o for rule, o in rules.items()})
     return summaries, results
 
 
@@ -165,7 +182,8 @@ def headline(summaries: dict, results: dict, bench: VariedBenchmark, featured: s
              oracle: dict | None = None) -> dict:
     """The contract's headline: the featured Neural ASM, every method, each rate beside the
     oracle's (``oracle``: its ``visible`` and ``consequential`` detection, None when not scored),
-    and exact McNemar tests against the best other method, on visible and on consequential faults."""
+    and exact McNemar tests against the best other method, on visible and on consequential faults.
+    The either-of-two rival, when scored, is one of the other methods; its choice is under "or_pair"."""
     rule = "episode"
     oracle = oracle or {}
     methods = {name: {"is_neural_asm": s["is_neural_asm"], **{k: s[rule][k] for k in (
@@ -176,6 +194,7 @@ def headline(summaries: dict, results: dict, bench: VariedBenchmark, featured: s
     best = max(rivals, key=lambda n: summaries[n][rule]["detection"])
     consequences = {name: s[rule]["consequential"] for name, s in summaries.items()}
     best_consequential = max(rivals, key=lambda n: consequences[n]["detection"] or 0.0)
+    choice = {"or_pair": summaries[PAIR]["or_pair"]} if PAIR in summaries else {}
     return {"featured": featured, "episode_fa_target": alpha, "methods": methods,
             "paired": _paired(results, featured, best, bench.visible),
             "per_family": {name: {family: f["detection_visible"] for family, f in s[rule]["per_family"].items()}
@@ -189,4 +208,5 @@ def headline(summaries: dict, results: dict, bench: VariedBenchmark, featured: s
                                    "normal_episode_false_alarm": summaries[name][rule]["normal_episode_false_alarm"],
                                    "benign_ood_false_alarm": c["benign_ood_false_alarm"], "auroc": c["auroc"]}
                             for name, c in consequences.items()},
-                "paired": _paired(results, featured, best_consequential, bench.consequence == "consequential")}}
+                "paired": _paired(results, featured, best_consequential, bench.consequence == "consequential")},
+            **choice}
