@@ -106,7 +106,7 @@ def test_the_pair_is_chosen_on_validation_faults_only(rivals):
     # scored as a rival on the test faults, where it catches only b's half
     entry, rules = best_pair(rivals, {n: Method(n, n.upper(), False, lambda x, _: x) for n in rivals},
                              _bench(validation))
-    assert entry["or_pair"] == record and entry["label"].startswith("either of two rivals: A or B")
+    assert entry["or_pair"] == record and entry["or_pair"]["chosen"] == list(chosen)
     assert not entry["is_neural_asm"] and entry["held_out_mse"] is None
     assert entry["episode"]["detection"] == 0.5 and rules["episode"].detected[:10].all()
 

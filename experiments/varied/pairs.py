@@ -84,7 +84,7 @@ def best_pair(rivals: dict[str, Energies], methods: dict[str, Method], bench: Va
         raise ValueError("the benchmark has no validation faults to choose a pair on")
     (a, b), record = choose(rivals, bench.validation, alpha)
     rules = outcomes(combined(rivals[a], rivals[b], alpha), bench.onset, alpha)
-    entry = {"label": f"either of two rivals: {methods[a].label} or {methods[b].label}, chosen on validation faults",
+    entry = {"label": "either of two rivals, chosen on validation faults",  # which two: in "or_pair"
              "is_neural_asm": False, "held_out_mse": None, "held_out_mse_per_group": None, "or_pair": record,
              **{rule: summary(o, bench) for rule, o in rules.items()}}
     return entry, rules
