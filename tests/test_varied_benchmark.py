@@ -113,7 +113,7 @@ def test_headline_follows_the_contract(bench, tmp_path):
     assert sum(facts["consequences"].values()) == len(bench.faults)
     table = (tmp_path / "fault_sweep.md").read_text()
     assert "Scored by consequence" in table and table.count("\n| ") >= 3 * len(methods)
-    assert "Either of two rivals: " in table and "| either of two rivals: " in table
+    assert "Either of two rivals: " in table and "| either of two rivals, chosen on validation faults |" in table
 
 
 def test_the_service_hosts_a_varied_model(bench, tmp_path):
