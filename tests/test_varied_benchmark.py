@@ -148,6 +148,15 @@ def test_ablation_rows_carry_validation_error_and_test_scores(bench):
         assert r["validation_mse_per_group"]["all"] == r["validation_mse"]
         assert set(r["training_mse_per_group"]) == set(r["validation_mse_per_group"]) >= {"all", "joints"}
         assert all(v > 0 for v in r["training_mse_per_group"].values())
+    # the visible validation faults flagged, by the benchmark's own rule on the validation set
+    from experiments.varied.pairs import validation_scores
+    from experiments.varied.score import energies
+
+    model = train_neural_asm(bench, tiny, progress=False)
+    online = next(m for m in neural_asm_methods(model, "a", "capped") if m.name.endswith("online"))
+    expected = validation_scores(energies(online, bench, model.normaliser, validation=True)[0], bench.validation)[0]
+    assert rows[1]["validation_fault_detection"] == pytest.approx(expected)
+    assert all(0.0 <= r["validation_fault_detection"] <= 1.0 for r in rows)
     table = ablation_markdown(rows, "hidden")
     assert table.count("\n| ") == 1 + len(rows) // 2  # header and one line per variant and mode
     online = [r["detection"] for r in rows if r["variant"] == "a" and r["mode"] == "online"]
