@@ -305,3 +305,26 @@ def test_learned_precision_is_the_inverse_relaxed_error_relative_to_the_median(r
     expected = relative_precision(np.sqrt(sq / (x.shape[0] * x.shape[1])))
     np.testing.assert_allclose(net.pi, expected, rtol=1e-4)
     assert net.pi[3] < net.pi[2] < 1.0  # the noisiest channels are trusted least
+
+
+def test_learned_precision_is_where_the_energy_with_its_log_term_stops_changing(rng):
+    """With F = sum_i Pi_i eps_i^2 - log Pi_i (the energy's precision-dependent part, per row), the
+    local rule dPi_i ~ 1 - Pi_i eps_i^2 is -Pi_i dF/dPi_i (finite differences), and the
+    learned precisions are its fixed point 1 / mean(eps_i^2), up to the common scale of the median."""
+    eps = rng.standard_normal((50, 4)) * np.array([0.3, 1.0, 2.0, 0.7])
+    pi = rng.uniform(0.2, 1.0, 4)
+
+    def energy(p: np.ndarray) -> float:
+        return float(((p * eps ** 2).sum(axis=1) - np.log(p).sum()).mean())
+
+    h = 1e-6
+    grad = np.array([(energy(pi + h * e) - energy(pi - h * e)) / (2 * h) for e in np.eye(4)])
+    rule = 1.0 - pi * (eps ** 2).mean(axis=0)
+    np.testing.assert_allclose(rule, -pi * grad, rtol=1e-5, atol=1e-8)
+    fixed = 1.0 / (eps ** 2).mean(axis=0)
+    stationary = np.array([(energy(fixed + h * e) - energy(fixed - h * e)) / (2 * h) for e in np.eye(4)])
+    np.testing.assert_allclose(stationary, 0.0, atol=1e-6)
+    learned = relative_precision(np.sqrt((eps ** 2).mean(axis=0)), floor=1e-3)
+    free = (learned > 1e-3) & (learned < 1.0)  # neither at the floor nor at 1: the noisier channels
+    assert free.sum() >= 2
+    np.testing.assert_allclose(learned[free] / fixed[free], (learned[free] / fixed[free])[0], rtol=1e-9)
