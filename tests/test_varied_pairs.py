@@ -9,7 +9,7 @@ import pytest
 from experiments.methods import Method
 from experiments.varied.data import FaultSet, VariedBenchmark
 from experiments.varied.pairs import best_pair, choose, combined, scale
-from experiments.varied.score import VALIDATION, _after_onset, outcomes
+from experiments.varied.score import VALIDATION, after_onset, outcomes
 from models.calibration import Thresholds
 from models.sequences import Sequences
 
@@ -69,7 +69,7 @@ def test_the_combined_energies_flag_exactly_above_the_served_threshold(rivals):
     o = outcomes(c, np.full(SIZES["faults"], ONSET))["episode"]
     thr = Thresholds.of(c["calibration"], 0.01).episode
     np.testing.assert_array_equal(o.normal_flagged, c["test"].max(axis=1) > thr)
-    np.testing.assert_array_equal(o.detected, (_after_onset(c["faults"], np.full(SIZES["faults"], ONSET)) > thr).any(1))
+    np.testing.assert_array_equal(o.detected, (after_onset(c["faults"], np.full(SIZES["faults"], ONSET)) > thr).any(1))
     assert o.normal_flagged[:3].all() and not o.normal_flagged.all()  # the comparison decided something
     # OR semantics at any level t: the pair is above t exactly where A is above t s_A or B above t s_B
     sa, sb = scale(rivals["a"]), scale(rivals["b"])

@@ -23,7 +23,7 @@ from sklearn.metrics import roc_auc_score
 
 from experiments.methods import Method
 from experiments.varied.data import FaultSet, VariedBenchmark
-from experiments.varied.score import ALPHA, PAIR, VALIDATION, Outcome, _after_onset, outcomes, summary
+from experiments.varied.score import ALPHA, PAIR, VALIDATION, Outcome, after_onset, outcomes, summary
 from models.calibration import Thresholds
 
 Energies = dict[str, np.ndarray]  # set -> (N, T) whitened energies
@@ -51,7 +51,7 @@ def validation_scores(c: Energies, validation: FaultSet, alpha: float = ALPHA) -
     if not visible.any():
         raise ValueError("no visible validation fault: nothing to choose a pair on")
     o = outcomes({**c, "faults": c[VALIDATION]}, validation.onset, alpha)["episode"]
-    peaks = _after_onset(c[VALIDATION], validation.onset).max(axis=1)[visible]
+    peaks = after_onset(c[VALIDATION], validation.onset).max(axis=1)[visible]
     normal = c["calibration"].max(axis=1)
     auroc = roc_auc_score(np.r_[np.ones(len(peaks)), np.zeros(len(normal))], np.r_[peaks, normal])
     return float(o.detected[visible].mean()), float(auroc)

@@ -73,7 +73,9 @@ def held_out_error(errors: np.ndarray, channel_names: tuple[str, ...]) -> dict:
             **{group: float(squared[..., cols].mean()) for group, cols in channel_groups(channel_names).items()}}
 
 
-def _after_onset(e: np.ndarray, onset: np.ndarray) -> np.ndarray:
+def after_onset(e: np.ndarray, onset: np.ndarray) -> np.ndarray:
+    """Energies (N, T) with the steps before each episode's onset masked: a fault is only
+    credited for what the monitor flags once it has begun."""
     steps = np.arange(e.shape[1])
     return np.where(steps[None] >= onset[:, None], e, -np.inf)
 
@@ -82,16 +84,16 @@ def outcomes(e: dict[str, np.ndarray], onset: np.ndarray, alpha: float = ALPHA) 
     """The served episode threshold and time-varying conformal thresholds."""
     out = {}
     thr = Thresholds.of(e["calibration"], alpha).episode
-    faults = _after_onset(e["faults"], onset)
+    faults = after_onset(e["faults"], onset)
     over = faults > thr
     out["episode"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
                              faults.max(axis=1) / thr, e["test"].max(axis=1) > thr, e["ood"].max(axis=1) > thr,
                              e["test"].max(axis=1) / thr, e["ood"].max(axis=1) / thr)
     tv = TimeVaryingThreshold().fit(e["precision"], e["calibration"], alpha)
     rel = {k: e[k] / tv.thresholds[: e[k].shape[1]] for k in ("test", "ood", "faults")}
-    over = _after_onset(rel["faults"], onset) > 1.0
+    over = after_onset(rel["faults"], onset) > 1.0
     out["time_varying"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
-                                  _after_onset(rel["faults"], onset).max(axis=1), rel["test"].max(axis=1) > 1.0,
+                                  after_onset(rel["faults"], onset).max(axis=1), rel["test"].max(axis=1) > 1.0,
                                   rel["ood"].max(axis=1) > 1.0, rel["test"].max(axis=1), rel["ood"].max(axis=1))
     return out
 
