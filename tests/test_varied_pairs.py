@@ -46,11 +46,12 @@ def _sequences(n: int) -> Sequences:
 
 
 def _bench(validation: FaultSet) -> VariedBenchmark:
-    f = _fault_set(SIZES["faults"])
-    return VariedBenchmark("observed", ("x",), np.array([], int), _sequences(4), _sequences(SIZES["precision"]),
-                           _sequences(SIZES["calibration"]), _sequences(SIZES["test"]), _sequences(SIZES["ood"]),
-                           f.faults, f.twins, f.kinds, f.fault_step, f.onset, f.visible, f.consequence,
-                           np.ones(SIZES["test"], bool), np.ones(SIZES["ood"], bool), {}, validation)
+    return VariedBenchmark(**vars(_fault_set(SIZES["faults"])), context="observed", channel_names=("x",),
+                           context_channels=np.array([], int), demos=_sequences(4),
+                           precision=_sequences(SIZES["precision"]), calibration=_sequences(SIZES["calibration"]),
+                           test=_sequences(SIZES["test"]), ood=_sequences(SIZES["ood"]),
+                           test_success=np.ones(SIZES["test"], bool), ood_success=np.ones(SIZES["ood"], bool),
+                           dropped={}, validation=validation)
 
 
 @pytest.fixture

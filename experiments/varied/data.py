@@ -61,7 +61,9 @@ def fault_set(faults: list[Episode], twins: list[Episode], columns: np.ndarray, 
 
 
 @dataclass(frozen=True)
-class VariedBenchmark:
+class VariedBenchmark(FaultSet):
+    """The test faults (the `FaultSet` it extends), the normal splits and the demonstrations."""
+
     context: str
     channel_names: tuple[str, ...]
     context_channels: np.ndarray  # indices of the perceived cube, goal and post channels
@@ -70,13 +72,6 @@ class VariedBenchmark:
     calibration: Sequences
     test: Sequences
     ood: Sequences
-    faults: Sequences
-    twins: Sequences
-    kinds: np.ndarray  # (F,) fault family
-    fault_step: np.ndarray  # (F,) nominal start step of the fault
-    onset: np.ndarray  # (F,) first step departing from the twin
-    visible: np.ndarray  # (F,) bool
-    consequence: np.ndarray  # (F,) experiments.twins.CONSEQUENCES
     test_success: np.ndarray  # (N_test,) bool: the normal test episode placed its cube
     ood_success: np.ndarray  # (N_ood,) bool: the benign out-of-range run placed its cube
     dropped: dict  # set -> episodes the simulation refused (velocity limits, IK)
@@ -103,15 +98,14 @@ def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict |
     kept = channel_names(context)
     normal = as_sequences(sets["normal"], columns)
     precision, calibration, test = split_three(normal, *split)
-    f = fault_set(sets["faults"], sets["twins"], columns, precision)
+    test_faults = fault_set(sets["faults"], sets["twins"], columns, precision)
     validation = fault_set(sets["val_faults"], sets["val_twins"], columns, precision) if "val_faults" in sets else None
     ctx_names = [n for n in kept if n.startswith(("cube_seen", "goal", "post"))]
     return VariedBenchmark(
-        context=context, channel_names=kept, context_channels=np.array([kept.index(n) for n in ctx_names]),
+        **vars(test_faults), context=context, channel_names=kept,
+        context_channels=np.array([kept.index(n) for n in ctx_names]),
         demos=as_sequences(sets["demos"], columns), precision=precision, calibration=calibration, test=test,
         ood=as_sequences(sets["ood"], columns),
-        faults=f.faults, twins=f.twins, kinds=f.kinds, fault_step=f.fault_step, onset=f.onset, visible=f.visible,
-        consequence=f.consequence,
         test_success=np.array([e.success for e in sets["normal"]])[len(precision) + len(calibration):],
         ood_success=np.array([e.success for e in sets["ood"]]), dropped=dict(dropped or {}), validation=validation)
 
