@@ -167,8 +167,9 @@ FAST = TPCConfig()
 # (experiments/varied/ablation.py); 0.35 was kept. Not yet measured on the paper's task, whose
 # default stays FAST.
 ROBUST = FAST.with_(training_noise=0.35)
-# ROBUST with the last two observations added to the hidden state's prior through W_D. Chosen by held-out online error on the varied task's precision
-# split, three trainings each (experiments/varied/ablation.py, observed context): 0.333
+# ROBUST with the last two observations added to the hidden state's prior through W_D. Chosen by
+# held-out online error on the varied task's precision split, three trainings each
+# (experiments/varied/ablation.py, observed context): 0.333
 # (0.325-0.338) against ROBUST's 0.341 (0.336-0.347); the same pathways into the expected
 # observation instead 0.383 (0.380-0.385). docs/varied_levers.md has the study.
 PATHWAYS = ROBUST.with_(direct_lags=2, direct_target="hidden")

@@ -70,7 +70,7 @@ def train_epoch(
     update: WeightUpdate,
     rate: float,
     rng: np.random.Generator,
-) -> float:
+) -> tuple[float, np.ndarray]:
     """One pass over all sequences (N, T, D), normalised; returns the mean energy per step and
     each channel's mean squared error at the relaxed state (D,)."""
     n, steps, width = sequences.shape
