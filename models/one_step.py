@@ -98,6 +98,12 @@ class TemplateResidualOneStep(DetectorBase):
     name = "template_residual_one_step"
     label = "conditional template + one-step residual predictor"
 
+    def __init__(self, residual_weight: float = 1.0) -> None:
+        """``residual_weight`` scales the residual's prediction: 1 is the baseline, 0 the template
+        alone (experiments/varied/plan_probe.py measures what lies between)."""
+        super().__init__()
+        self.residual_weight = residual_weight
+
     def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
         self.template = ConditionalTemplate().fit(x, skills, self.context_channels, seed)
         residuals = self.template.cross_fitted_residuals(x, skills, seed)
@@ -108,4 +114,4 @@ class TemplateResidualOneStep(DetectorBase):
         residuals = x - template
         correction = np.zeros_like(x)
         correction[:, 1:] = self.one_step.predict(residuals, skills)
-        return template + correction
+        return template + self.residual_weight * correction

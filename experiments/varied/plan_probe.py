@@ -1,0 +1,157 @@
+"""What does the best rival have that the network lacks? A plan its expectation returns to.
+
+A probe beyond the benchmark (docs/varied_levers.md). The conditional template with a one-step
+residual predictor catches more visible faults than the featured network, locks above all, although
+it expects held-out normal episodes worse. The hypothesis: an expectation made of a plan fixed
+from the cue plus a model of the episode's departure from it keeps expecting the plan's motion
+after a lock, where a one-step predictor of the observations, which reads the arm's own last
+motion, expects the locked arm to stay. Each row is scored by the benchmark's own code:
+
+- the linear one-step predictor pooled over skills (not told the skill, as the network is not),
+  and the same with a plan term B_t c: per step, a linear map of the whole first observation (a
+  cue-conditioned plan in the prediction, the tPC's input term made phase-dependent);
+- the template with its residual predictor weighted by kappa = 0, 0.5 and 1 (1 is the rival,
+  0 the template alone);
+- the network's own offline plan, recalled from the cue, as the template, plus a linear one-step
+  predictor of the residual, pooled or per skill; one row per training.
+
+    python -m experiments.varied.plan_probe DATA_DIR [--context hidden] [--seeds 3]
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import typer
+from tqdm.auto import tqdm
+
+from experiments.methods import Method
+from experiments.varied.data import load_varied_benchmark
+from experiments.varied.methods import train_neural_asm
+from experiments.varied.score import score_all
+from models.asm import NeuralASM
+from models.config import PRECISE
+from models.detector_base import DetectorBase, episode_folds
+from models.normaliser import Normaliser
+from models.one_step import ONE_STEP_RIDGES, TemplateResidualOneStep, delay_embed, fit_one_step
+from models.recall import offline_recall
+
+LAGS = 2  # the pooled linear model's choice on the demonstrations (models.one_step.fit_one_step)
+
+
+def plan_features(x: np.ndarray, steps: int, lags: int, plan: bool) -> np.ndarray:
+    """(N, T-1, F) inputs predicting steps 1..T-1 of x (N, T, D): the last `lags` steps and,
+    with `plan`, the first observation (and a one) placed in the block of the predicted step, so
+    that each step has its own linear map of the cue. `steps` is the demonstrations' length."""
+    n, t, d = x.shape
+    parts = [delay_embed(x, lags)[:, :-1]]
+    if plan:
+        cue = np.concatenate([x[:, 0], np.ones((n, 1))], axis=1)
+        step = np.eye(steps)[1:t]  # the one-hot of the predicted step
+        parts.append((step[None, :, :, None] * cue[:, None, None, :]).reshape(n, t - 1, steps * (d + 1)))
+    return np.concatenate(parts, axis=2)
+
+
+class PlanOneStep(DetectorBase):
+    """x[t] ridge-regressed on the last `lags` steps (and, with `plan`, on B_t times the cue), one
+    model for every skill; the ridge chosen by 5-fold cross-validation over whole demonstrations."""
+
+    name = "plan_one_step"
+    label = "linear one-step predictor pooled over skills, with a per-step map of the cue"
+
+    def __init__(self, plan: bool = True, lags: int = LAGS) -> None:
+        super().__init__()
+        self.plan, self.lags = plan, lags
+
+    def _solve(self, x: np.ndarray, ridge: float) -> np.ndarray:
+        f = plan_features(x, self.steps, self.lags, self.plan).reshape(-1, self._width)
+        a = np.hstack([f, np.ones((len(f), 1))])
+        y = x[:, 1:].reshape(-1, x.shape[2])
+        reg = ridge * np.eye(a.shape[1])
+        reg[-1, -1] = 0.0
+        return np.linalg.solve(a.T @ a + reg, a.T @ y)
+
+    def _predict(self, weights: np.ndarray, x: np.ndarray) -> np.ndarray:
+        f = plan_features(x, self.steps, self.lags, self.plan)
+        return np.concatenate([f, np.ones(f.shape[:2] + (1,))], axis=2) @ weights
+
+    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
+        self._width = plan_features(x[:1], self.steps, self.lags, self.plan).shape[2]
+        folds = episode_folds(skills, seed)
+
+        def cv_error(ridge: float) -> float:
+            return sum(float(((self._predict(self._solve(x[train], ridge), x[test]) - x[test, 1:]) ** 2).sum())
+                       for train, test in folds)
+
+        self.ridge = min(ONE_STEP_RIDGES, key=cv_error)
+        self.weights = self._solve(x, self.ridge)
+
+    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        out = x.astype(np.float64)
+        if x.shape[1] > 1:
+            out[:, 1:] = self._predict(self.weights, x)
+        return out
+
+
+def network_plan_residual(model: NeuralASM, demos: np.ndarray, skills: np.ndarray, per_skill: bool
+                          ) -> Method:
+    """The network's offline plan from the cue plus a linear one-step predictor of the departure
+    from it, fitted on the demonstrations (normalised); pooled unless `per_skill` (told the skill)."""
+    def plan(x: np.ndarray) -> np.ndarray:
+        return offline_recall(model.net, x[:, :1].astype(np.float32), x.shape[1]).astype(np.float64)
+
+    def labels(s: np.ndarray) -> np.ndarray:
+        return np.asarray(s) if per_skill else np.full(len(s), "all")
+
+    one_step = fit_one_step(demos - plan(demos), labels(skills), 0)
+
+    def expected(x: np.ndarray, s: np.ndarray) -> np.ndarray:
+        p = plan(x)
+        correction = np.zeros_like(p)
+        correction[:, 1:] = one_step.predict(x - p, labels(s))
+        return p + correction
+
+    told = "per skill (told the skill)" if per_skill else "pooled"
+    return Method(f"network_plan_residual_{'skill' if per_skill else 'pooled'}",
+                  f"network's offline plan + linear residual predictor, {told}", False, expected)
+
+
+def row(name: str, label: str, summary: dict) -> dict:
+    episode = summary["episode"]
+    return {"method": name, "label": label, "held_out_mse": summary["held_out_mse"],
+            "held_out_mse_joints": summary["held_out_mse_per_group"]["joints"],
+            "visible": episode["detection"], "lock": episode["per_family"]["lock"]["detection_visible"],
+            "consequential": episode["consequential"]["detection"],
+            "normal_flagged": episode["normal_episode_false_alarm"]}
+
+
+def main(data: Path, context: str = "observed", seeds: int = typer.Option(3, min=1, help="network trainings")) -> None:
+    bench = load_varied_benchmark(data, context)
+    norm = Normaliser.fit(bench.demos.data)
+    demos, skills, ctx = norm.normalise(bench.demos.data), bench.demos.labels, bench.context_channels.tolist()
+    methods = [Method("linear_pooled", "linear one-step, pooled over skills", False,
+                      PlanOneStep(plan=False).fit(demos, skills, ctx).expected),
+               Method("linear_pooled_plan", "linear one-step, pooled, + per-step map of the cue", False,
+                      PlanOneStep(plan=True).fit(demos, skills, ctx).expected)]
+    for kappa in (0.0, 0.5, 1.0):
+        detector = TemplateResidualOneStep(residual_weight=kappa).fit(demos, skills, ctx)
+        methods.append(Method(f"template_residual_{kappa:g}", f"template + {kappa:g} x residual predictor",
+                              False, detector.expected))
+    summaries, _ = score_all(bench, methods, norm)
+    rows = [row(m.name, m.label, summaries[m.name]) for m in methods]
+    for seed in tqdm(range(seeds), desc="trainings"):
+        model = train_neural_asm(bench, PRECISE.with_(seed=seed), progress=False)
+        plans = [network_plan_residual(model, model.normaliser.normalise(bench.demos.data), skills, per_skill)
+                 for per_skill in (False, True)]
+        summaries, _ = score_all(bench, plans, model.normaliser)
+        rows += [row(f"{m.name} (training {seed})", m.label, summaries[m.name]) for m in plans]
+    print("| method | held-out MSE | joints | visible detected | locks | consequential | normal flagged |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['method']} | {r['held_out_mse']:.3f} | {r['held_out_mse_joints']:.3f} | {100 * r['visible']:.1f} "
+              f"| {100 * r['lock']:.1f} | {100 * r['consequential']:.1f} | {100 * r['normal_flagged']:.1f} |")
+
+
+if __name__ == "__main__":
+    typer.run(main)
