@@ -56,6 +56,8 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
                           "errors", PRECISE),
     "precise_context": ("precise preset, the context channels' first values drive the prior through W_C",
                         PRECISE.with_(context_input=True)),
+    "precise_noise_0.5": ("precise preset trained on noise 0.5 (0.35)", PRECISE.with_(training_noise=0.5)),
+    "precise_noise_0.7": ("precise preset trained on noise 0.7 (0.35)", PRECISE.with_(training_noise=0.7)),
     "direct_hidden_noise_0.5": ("training noise 0.5, the last 2 observations added to the hidden prior through W_D",
                                 FAST.with_(training_noise=0.5, direct_lags=2, direct_target="hidden")),
 }
