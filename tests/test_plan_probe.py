@@ -58,3 +58,21 @@ def test_a_residual_weight_of_zero_is_the_template_alone(rng):
     template = alone.template.expected(x, skills)
     assert np.allclose(alone.expected(x, skills), template)
     assert not np.allclose(full.expected(x, skills), template)
+
+
+def test_skill_recognition_reads_the_skill_from_the_first_observation_only(rng):
+    from types import SimpleNamespace
+
+    from experiments.varied.plan_probe import skill_recognition
+    from models.normaliser import Normaliser
+
+    def episodes(n, apart):
+        labels = np.repeat(["a", "b"], n // 2)
+        x = rng.normal(size=(n, 6, 3))
+        x[:, 0, 0] += apart * (labels == "b")
+        x[:, 1:, 1] += 5.0 * (labels == "b")[:, None]  # later steps tell, the first does not
+        return SimpleNamespace(data=x, labels=labels)
+
+    for apart, lowest, highest in ((6.0, 0.95, 1.0), (0.0, 0.25, 0.75)):
+        bench = SimpleNamespace(demos=episodes(60, apart), test=episodes(200, apart))
+        assert lowest <= skill_recognition(bench, Normaliser.fit(bench.demos.data)) <= highest

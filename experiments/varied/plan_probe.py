@@ -11,7 +11,7 @@ motion, expects the locked arm to stay. Each row is scored by the benchmark's ow
   and the same with a plan term B_t c: per step, a linear map of the whole first observation (a
   cue-conditioned plan in the prediction, the tPC's input term made phase-dependent);
 - the template with its residual predictor weighted by kappa = 0, 0.5 and 1 (1 is the rival,
-  0 the template alone);
+  0 the template alone), and the rival fitted as one model for every skill;
 - the network's own offline plan, recalled from the cue, as the template, plus a linear one-step
   predictor of the residual, pooled or per skill; one row per training.
 
@@ -24,10 +24,13 @@ from pathlib import Path
 
 import numpy as np
 import typer
+from sklearn.linear_model import LogisticRegression
+from sklearn.pipeline import make_pipeline
+from sklearn.preprocessing import StandardScaler
 from tqdm.auto import tqdm
 
 from experiments.methods import Method
-from experiments.varied.data import load_varied_benchmark
+from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.methods import train_neural_asm
 from experiments.varied.score import score_all
 from models.asm import NeuralASM
@@ -117,6 +120,14 @@ def network_plan_residual(model: NeuralASM, demos: np.ndarray, skills: np.ndarra
                   f"network's offline plan + linear residual predictor, {told}", False, expected)
 
 
+def skill_recognition(bench: VariedBenchmark, norm: Normaliser) -> float:
+    """Share of the test episodes whose skill a logistic regression on the demonstrations' first
+    observations names right: whether being told the skill tells a baseline more than the cue."""
+    recogniser = make_pipeline(StandardScaler(), LogisticRegression(max_iter=2000))
+    recogniser.fit(norm.normalise(bench.demos.data)[:, 0], bench.demos.labels)
+    return float((recogniser.predict(norm.normalise(bench.test.data)[:, 0]) == bench.test.labels).mean())
+
+
 def row(name: str, label: str, summary: dict) -> dict:
     episode = summary["episode"]
     return {"method": name, "label": label, "held_out_mse": summary["held_out_mse"],
@@ -138,6 +149,10 @@ def main(data: Path, context: str = "observed", seeds: int = typer.Option(3, min
         detector = TemplateResidualOneStep(residual_weight=kappa).fit(demos, skills, ctx)
         methods.append(Method(f"template_residual_{kappa:g}", f"template + {kappa:g} x residual predictor",
                               False, detector.expected))
+    pooled = TemplateResidualOneStep().fit(demos, np.full(len(demos), "all"), ctx)
+    methods.append(Method("template_residual_pooled", "template + residual predictor, one model for every skill",
+                          False, lambda x, _skills: pooled.expected(x, np.full(len(x), "all"))))
+    print(f"skill recognised from the first observation: {100 * skill_recognition(bench, norm):.1f} % of test episodes")
     summaries, _ = score_all(bench, methods, norm)
     rows = [row(m.name, m.label, summaries[m.name]) for m in methods]
     for seed in tqdm(range(seeds), desc="trainings"):
