@@ -22,6 +22,7 @@ from experiments.varied.pairs import validation_scores
 from experiments.varied.score import ALPHA, energies, score_all
 from models.asm import NeuralASM
 from models.config import FAST, PATHWAYS, PRECISE, ROBUST, TPCConfig
+from models.normaliser import Normaliser
 from runtime.parallel import Parallel
 from sim.varied import channel_groups
 
@@ -97,7 +98,7 @@ def _trained_rows(bench: VariedBenchmark, name: str, label: str, config: TPCConf
         rows.append({"variant": name, "label": label, "mode": mode, "seed": config.seed, "config": config.to_dict(),
                      "validation_mse": validation["all"], "validation_mse_per_group": validation,
                      "validation_fault_detection": validation_fault_detection(methods[f"{name}_{mode}"], bench,
-                                                                              model, alpha),
+                                                                              model.normaliser, alpha),
                      "training_mse_per_group": training_errors(model, bench, mode),
                      "consequential_detection": s["consequential"]["detection"],
                      **{k: s[k] for k in ("detection", "detection_all_faults", "normal_episode_false_alarm",
@@ -105,13 +106,13 @@ def _trained_rows(bench: VariedBenchmark, name: str, label: str, config: TPCConf
     return rows
 
 
-def validation_fault_detection(method: Method, bench: VariedBenchmark, model: NeuralASM, alpha: float
+def validation_fault_detection(method: Method, bench: VariedBenchmark, norm: Normaliser, alpha: float
                                ) -> float | None:
     """The share of visible validation faults the method flags at the served episode threshold
     (None without validation faults): a selection number that counts faults, not one-step error."""
     if bench.validation is None:
         return None
-    e, _ = energies(method, bench, model.normaliser, validation=True)
+    e, _ = energies(method, bench, norm, validation=True)
     return validation_scores(e, bench.validation, alpha)[0]
 
 

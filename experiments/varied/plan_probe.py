@@ -34,7 +34,8 @@ from tqdm.auto import tqdm
 from experiments.methods import Method
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.methods import train_neural_asm
-from experiments.varied.score import score_all
+from experiments.varied.ablation import validation_fault_detection
+from experiments.varied.score import ALPHA, score_all
 from models.asm import NeuralASM
 from models.config import PRECISE
 from models.detector_base import DetectorBase, episode_folds
@@ -188,9 +189,9 @@ def network_readout_residual(model: NeuralASM, demos: np.ndarray, skills: np.nda
                   "per-skill linear residual predictor", False, expected)
 
 
-def row(name: str, label: str, summary: dict) -> dict:
+def row(name: str, label: str, summary: dict, validation: float | None = None) -> dict:
     episode = summary["episode"]
-    return {"method": name, "label": label, "held_out_mse": summary["held_out_mse"],
+    return {"method": name, "label": label, "held_out_mse": summary["held_out_mse"], "validation_faults": validation,
             "held_out_mse_joints": summary["held_out_mse_per_group"]["joints"],
             "visible": episode["detection"], "lock": episode["per_family"]["lock"]["detection_visible"],
             "consequential": episode["consequential"]["detection"],
@@ -214,18 +215,22 @@ def main(data: Path, context: str = "observed", seeds: int = typer.Option(3, min
                           False, lambda x, _skills: pooled.expected(x, np.full(len(x), "all"))))
     print(f"skill recognised from the first observation: {100 * skill_recognition(bench, norm):.1f} % of test episodes")
     summaries, _ = score_all(bench, methods, norm)
-    rows = [row(m.name, m.label, summaries[m.name]) for m in methods]
+    rows = [row(m.name, m.label, summaries[m.name], validation_fault_detection(m, bench, norm, ALPHA))
+            for m in methods]
     for seed in tqdm(range(seeds), desc="trainings"):
         model = train_neural_asm(bench, PRECISE.with_(seed=seed), progress=False)
         own = model.normaliser.normalise(bench.demos.data)
         plans = [network_plan_residual(model, own, skills, per_skill) for per_skill in (False, True)]
         plans.append(network_readout_residual(model, own, skills))
         summaries, _ = score_all(bench, plans, model.normaliser)
-        rows += [row(f"{m.name} (training {seed})", m.label, summaries[m.name]) for m in plans]
-    print("| method | held-out MSE | joints | visible detected | locks | consequential | normal flagged |")
-    print("|---|---|---|---|---|---|---|")
+        rows += [row(f"{m.name} (training {seed})", m.label, summaries[m.name],
+                     validation_fault_detection(m, bench, model.normaliser, ALPHA)) for m in plans]
+    print("| method | held-out MSE | joints | validation faults detected | visible detected | locks | consequential "
+          "| normal flagged |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['method']} | {r['held_out_mse']:.3f} | {r['held_out_mse_joints']:.3f} | {100 * r['visible']:.1f} "
+        print(f"| {r['method']} | {r['held_out_mse']:.3f} | {r['held_out_mse_joints']:.3f} "
+              f"| {100 * r['validation_faults']:.1f} | {100 * r['visible']:.1f} "
               f"| {100 * r['lock']:.1f} | {100 * r['consequential']:.1f} | {100 * r['normal_flagged']:.1f} |")
 
 
