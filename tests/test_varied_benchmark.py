@@ -13,7 +13,8 @@ from experiments.methods import Method, neural_asm_methods
 from experiments.varied.ceiling import ceiling, ceiling_markdown, oracle_rates
 from experiments.varied.data import make_benchmark
 from experiments.varied.methods import train_neural_asm
-from experiments.varied.score import PAIR, headline, score_all
+from experiments.varied.pairs import PAIR
+from experiments.varied.score import headline, score_all
 from models.config import FAST, PRECISE
 from models.detectors import ConditionalTemplate, CueTemplate, PerSkillZScore
 from runtime.parallel import Parallel, parallel_map

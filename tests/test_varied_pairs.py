@@ -9,7 +9,7 @@ import pytest
 from experiments.methods import Method
 from experiments.varied.data import FaultSet, VariedBenchmark
 from experiments.varied.pairs import best_pair, choose, combined, scale
-from experiments.varied.score import VALIDATION, after_onset, outcomes
+from experiments.varied.outcomes import VALIDATION, after_onset, outcomes
 from models.calibration import Thresholds
 from models.sequences import Sequences
 

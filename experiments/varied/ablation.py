@@ -19,7 +19,8 @@ from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.methods import Method, neural_asm_methods
 from experiments.varied.methods import train_neural_asm
 from experiments.varied.pairs import validation_scores
-from experiments.varied.score import ALPHA, energies, score_all
+from experiments.varied.outcomes import ALPHA
+from experiments.varied.score import energies, score_all
 from models.asm import NeuralASM
 from models.config import FAST, PATHWAYS, PRECISE, ROBUST, TPCConfig
 from models.normaliser import Normaliser

@@ -9,7 +9,7 @@ how many visible faults stand out of that remaining noise at the benchmark's own
 Every scored episode (held-out normals, benign out-of-range ones, each fault's twin) is
 simulated again with its context and fault and fresh noise (``VariedJob.replicate``), and once
 more keeping its start posture (``same_start``: what its first observation, the network's cue,
-shows). The oracles, scored exactly like the benchmark's methods (``score.outcomes``: whitened
+shows). The oracles, scored exactly like the benchmark's methods (``outcomes.outcomes``: whitened
 energies from the precision split, the served episode threshold at 1 % on the calibration split):
 
 - *replay*: expects an episode to be its replicate (residual ``x - x_rep``). It is realisable
@@ -34,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.varied.score import ALPHA, SETS, held_out_error, outcomes, summary
+from experiments.varied.outcomes import ALPHA, outcomes, summary
+from experiments.varied.score import SETS, held_out_error
 from models.calibration import error_precision, error_spread
 from models.config import SCORING
 from models.normaliser import Normaliser

@@ -23,7 +23,8 @@ from experiments.varied.bptt import BPTTConfig, train_bptt
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.methods import Method
 from experiments.varied.methods import train_neural_asm
-from experiments.varied.score import ALPHA, held_out_error, score_all
+from experiments.varied.outcomes import ALPHA
+from experiments.varied.score import held_out_error, score_all
 from models.asm import NeuralASM, channel_precision, context_index
 from models.baselines import LinearOneStep as RidgeOneStep
 from models.config import ROBUST, TPCConfig

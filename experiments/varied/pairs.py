@@ -23,9 +23,10 @@ from sklearn.metrics import roc_auc_score
 
 from experiments.methods import Method
 from experiments.varied.data import FaultSet, VariedBenchmark
-from experiments.varied.score import ALPHA, PAIR, VALIDATION, Outcome, after_onset, outcomes, summary
+from experiments.varied.outcomes import ALPHA, VALIDATION, Outcome, after_onset, outcomes, summary
 from models.calibration import Thresholds
 
+PAIR = "best_pair"  # the either-of-two rival's name
 Energies = dict[str, np.ndarray]  # set -> (N, T) whitened energies
 TIE_BREAK = ("validation detection, then AUROC of visible validation faults against calibration-split normals, "
              "then baseline order")

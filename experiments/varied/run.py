@@ -25,7 +25,8 @@ from experiments.varied.ceiling import oracle_rates
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.methods import Method, neural_asm_methods
 from experiments.varied.methods import baseline_methods, train_neural_asm
-from experiments.varied.score import ALPHA, headline, score_all
+from experiments.varied.outcomes import ALPHA
+from experiments.varied.score import headline, score_all
 from models import checkpoint
 from models.config import FAITHFUL, PRECISE, TPCConfig
 from runtime.parallel import Parallel

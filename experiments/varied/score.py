@@ -2,12 +2,8 @@
 
 Per method: normalised errors on every set; per-step spreads and precision matrices from the
 precision split (the service's own `estimate`), whitened energies; an episode's score is its
-peak energy (for a fault, from its onset on). Thresholds come from the calibration split at
-`alpha`: the episode threshold is the one a checkpoint stores and the service applies
-(`models.calibration.Thresholds`: the peak energy that a share `alpha` of normal episodes
-exceed; at the benchmark's 300 calibration episodes and 1 % it is the split-conformal rank);
-the time-varying one (per-step scales from the precision split) is split-conformal.
-A fault is detected when its energy crosses the threshold at or after its onset.
+peak energy (for a fault, from its onset on), turned into flags and rates by
+`experiments.varied.outcomes`.
 
 With validation faults in the benchmark and two baselines or more, one more rival is scored
 alike: the best pair of baselines flagging when either does, chosen on the validation faults
@@ -17,38 +13,19 @@ computed, and only that choice reads them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-from sklearn.metrics import roc_auc_score
 from tqdm.auto import tqdm
 
 from experiments.varied.data import VariedBenchmark
 from experiments.methods import Method
-from models.calibration import Thresholds, estimate
-from models.config import SCORING
-from models.conformal import TimeVaryingThreshold, binomial_interval, mcnemar_exact
+from experiments.varied.outcomes import ALPHA, VALIDATION, outcomes, summary
+from experiments.varied.pairs import PAIR, best_pair
+from models.calibration import estimate
+from models.conformal import mcnemar_exact
 from models.normaliser import Normaliser
-from sim.config import SIM
 from sim.varied import channel_groups
 
-ALPHA = SCORING.default_fpr  # the episode false-alarm rate every method is held to
 SETS = ("precision", "calibration", "test", "ood", "faults")
-VALIDATION = "val_faults"  # the validation faults' energies: read by the pair's choice only
-PAIR = "best_pair"  # the either-of-two rival's name
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """Per-episode results of one method under one threshold rule."""
-
-    detected: np.ndarray  # (F,) bool
-    first: np.ndarray  # (F,) first crossing step at or after onset, -1 if none
-    fault_score: np.ndarray  # (F,) peak energy from the onset on (relative to the threshold)
-    normal_flagged: np.ndarray  # (N_test,) bool
-    ood_flagged: np.ndarray  # (N_ood,) bool
-    normal_score: np.ndarray  # (N_test,)
-    ood_score: np.ndarray  # (N_ood,)
 
 
 def energies(method: Method, bench: VariedBenchmark, norm: Normaliser, validation: bool = False
@@ -73,78 +50,6 @@ def held_out_error(errors: np.ndarray, channel_names: tuple[str, ...]) -> dict:
             **{group: float(squared[..., cols].mean()) for group, cols in channel_groups(channel_names).items()}}
 
 
-def after_onset(e: np.ndarray, onset: np.ndarray) -> np.ndarray:
-    """Energies (N, T) with the steps before each episode's onset masked: a fault is only
-    credited for what the monitor flags once it has begun."""
-    steps = np.arange(e.shape[1])
-    return np.where(steps[None] >= onset[:, None], e, -np.inf)
-
-
-def outcomes(e: dict[str, np.ndarray], onset: np.ndarray, alpha: float = ALPHA) -> dict[str, Outcome]:
-    """The served episode threshold and time-varying conformal thresholds."""
-    out = {}
-    thr = Thresholds.of(e["calibration"], alpha).episode
-    faults = after_onset(e["faults"], onset)
-    over = faults > thr
-    out["episode"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
-                             faults.max(axis=1) / thr, e["test"].max(axis=1) > thr, e["ood"].max(axis=1) > thr,
-                             e["test"].max(axis=1) / thr, e["ood"].max(axis=1) / thr)
-    tv = TimeVaryingThreshold().fit(e["precision"], e["calibration"], alpha)
-    rel = {k: e[k] / tv.thresholds[: e[k].shape[1]] for k in ("test", "ood", "faults")}
-    over = after_onset(rel["faults"], onset) > 1.0
-    out["time_varying"] = Outcome(over.any(axis=1), np.where(over.any(axis=1), over.argmax(axis=1), -1),
-                                  after_onset(rel["faults"], onset).max(axis=1), rel["test"].max(axis=1) > 1.0,
-                                  rel["ood"].max(axis=1) > 1.0, rel["test"].max(axis=1), rel["ood"].max(axis=1))
-    return out
-
-
-def summary(o: Outcome, bench: VariedBenchmark) -> dict:
-    visible = bench.visible
-    n_test, k_test = len(o.normal_flagged), int(o.normal_flagged.sum())
-    scores = np.concatenate([o.fault_score[visible], o.normal_score])
-    labels = np.concatenate([np.ones(visible.sum()), np.zeros(n_test)])
-    delay = (o.first - bench.onset)[o.detected & visible]
-    families = {}
-    for kind in np.unique(bench.kinds):
-        m = bench.kinds == kind
-        families[str(kind)] = {"n": int(m.sum()), "visible": int((m & visible).sum()),
-                               "detection": float(o.detected[m].mean()),
-                               "detection_visible": float(o.detected[m & visible].mean()) if (m & visible).any() else None}
-    return {
-        "detection": float(o.detected[visible].mean()),
-        "detection_all_faults": float(o.detected.mean()),
-        "normal_episode_false_alarm": k_test / n_test,
-        "normal_episode_false_alarm_interval95": list(binomial_interval(k_test, n_test)),
-        "benign_ood_false_alarm": float(o.ood_flagged.mean()),
-        "auroc": float(roc_auc_score(labels, scores)),
-        "median_delay_steps": float(np.median(delay)) if len(delay) else None,
-        "per_family": families,
-        "consequential": consequential(o, bench),
-    }
-
-
-def consequential(o: Outcome, bench: VariedBenchmark) -> dict:
-    """Faults whose task failed where their twin's succeeded, scored as robot failure detectors
-    are: caught at the episode threshold, how long before the episode's end (when success is
-    judged) the first flag came, and the AUROC of their score against every successful run
-    (the normal test episodes and the benign out-of-range runs that placed their cube)."""
-    failed, normal_placed, placed = bench.consequence == "consequential", bench.test_success, bench.ood_success
-    if not failed.any():
-        return {"n": 0, "detection": None, "lead_time_s_median": None, "auroc": None,
-                "benign_ood_false_alarm": None, "per_family": {}}
-    caught = failed & o.detected
-    lead_s = (bench.faults.data.shape[1] - o.first[caught]) / SIM.timing.observation_hz
-    scores = np.concatenate([o.fault_score[failed], o.normal_score[normal_placed], o.ood_score[placed]])
-    labels = np.concatenate([np.ones(failed.sum()), np.zeros(normal_placed.sum() + placed.sum())])
-    return {"n": int(failed.sum()), "detection": float(caught.sum() / failed.sum()),
-            "lead_time_s_median": float(np.median(lead_s)) if caught.any() else None,
-            "auroc": float(roc_auc_score(labels, scores)),
-            "benign_ood_false_alarm": float(o.ood_flagged[placed].mean()) if placed.any() else None,
-            "per_family": {str(kind): {"n": int((failed & (bench.kinds == kind)).sum()),
-                                       "detection": float(o.detected[failed & (bench.kinds == kind)].mean())}
-                           for kind in np.unique(bench.kinds[failed])}}
-
-
 def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, alpha: float = ALPHA
               ) -> tuple[dict, dict]:
     """Summaries {method: {rule: summary}} and outcomes {(method, rule): Outcome}; with
@@ -161,8 +66,6 @@ def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, a
                                   **{rule: summary(o, bench) for rule, o in rules.items()}}
         results.update({(method.name, rule): o for rule, o in rules.items()})
     if pair:
-        from experiments.varied.pairs import best_pair  # it builds on this module's outcomes() and summary()
-
         summaries[PAIR], rules = best_pair(rivals, {m.name: m for m in methods}, bench, alpha)
         results.update({(PAIR, rule): o for rule, o in rules.items()})
     return summaries, results
