@@ -16,14 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.methods import Method, neural_asm_methods
+from experiments.methods import neural_asm_methods
 from experiments.varied.methods import train_neural_asm
-from experiments.varied.pairs import validation_scores
 from experiments.varied.outcomes import ALPHA
-from experiments.varied.score import energies, score_all
+from experiments.varied.score import score_all, validation_fault_detection
 from models.asm import NeuralASM
 from models.config import FAST, PATHWAYS, PRECISE, ROBUST, TPCConfig
-from models.normaliser import Normaliser
 from runtime.parallel import Parallel
 from sim.varied import channel_groups
 
@@ -105,16 +103,6 @@ def _trained_rows(bench: VariedBenchmark, name: str, label: str, config: TPCConf
                      **{k: s[k] for k in ("detection", "detection_all_faults", "normal_episode_false_alarm",
                                           "benign_ood_false_alarm", "auroc", "median_delay_steps")}})
     return rows
-
-
-def validation_fault_detection(method: Method, bench: VariedBenchmark, norm: Normaliser, alpha: float
-                               ) -> float | None:
-    """The share of visible validation faults the method flags at the served episode threshold
-    (None without validation faults): a selection number that counts faults, not one-step error."""
-    if bench.validation is None:
-        return None
-    e, _ = energies(method, bench, norm, validation=True)
-    return validation_scores(e, bench.validation, alpha)[0]
 
 
 def training_errors(model: NeuralASM, bench: VariedBenchmark, mode: str) -> dict[str, float]:

@@ -34,9 +34,8 @@ from tqdm.auto import tqdm
 from experiments.methods import Method
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.methods import train_neural_asm
-from experiments.varied.ablation import validation_fault_detection
 from experiments.varied.outcomes import ALPHA
-from experiments.varied.score import score_all
+from experiments.varied.score import score_all, validation_fault_detection
 from models.asm import NeuralASM
 from models.config import PRECISE
 from models.detector_base import DetectorBase, episode_folds

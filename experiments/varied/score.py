@@ -19,7 +19,7 @@ from tqdm.auto import tqdm
 from experiments.varied.data import VariedBenchmark
 from experiments.methods import Method
 from experiments.varied.outcomes import ALPHA, VALIDATION, outcomes, summary
-from experiments.varied.pairs import PAIR, best_pair
+from experiments.varied.pairs import PAIR, best_pair, validation_scores
 from models.calibration import estimate
 from models.conformal import mcnemar_exact
 from models.normaliser import Normaliser
@@ -41,6 +41,16 @@ def energies(method: Method, bench: VariedBenchmark, norm: Normaliser, validatio
     cal = estimate("varied", 1, errors["precision"], "precision split", "full")
     return {key: cal.energy(e) for key, e in errors.items()}, held_out_error(
         errors["precision"], bench.channel_names)
+
+
+def validation_fault_detection(method: Method, bench: VariedBenchmark, norm: Normaliser, alpha: float
+                               ) -> float | None:
+    """The share of visible validation faults the method flags at the served episode threshold
+    (None without validation faults): a selection number that counts faults, not one-step error."""
+    if bench.validation is None:
+        return None
+    e, _ = energies(method, bench, norm, validation=True)
+    return validation_scores(e, bench.validation, alpha)[0]
 
 
 def held_out_error(errors: np.ndarray, channel_names: tuple[str, ...]) -> dict:
