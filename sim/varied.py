@@ -42,10 +42,16 @@ CARRY, HOVER, HOLD_Z = 0.15, 0.15, 0.30
 DETOUR_M = 0.24  # how far from the post the carry passes (the hand and wrist must clear it)
 
 
-def channel_names(context: str) -> tuple[str, ...]:
-    """The observation channels of a context variant."""
+def check_context(context: str) -> str:
+    """The context variant's name, refused unless it is one of `CONTEXTS`."""
     if context not in CONTEXTS:
         raise ValueError(f"context must be one of {CONTEXTS}, got {context!r}")
+    return context
+
+
+def channel_names(context: str) -> tuple[str, ...]:
+    """The observation channels of a context variant."""
+    check_context(context)
     extra = CONTEXT_NAMES if context == "observed" else tuple(n for n in CONTEXT_NAMES if n not in HIDDEN_CONTEXT)
     return (*CHANNEL_NAMES, *extra)
 

@@ -240,3 +240,11 @@ def test_headline_diagnostics_follow_the_contract(bench):
     assert d["best_linear_held_out_mse"] == d["best_linear"]["held_out_mse_per_group"]["all"] > 0
     # a choice among more models (one per skill too) is never worse on the split it is chosen on
     assert d["best_linear_held_out_mse"] <= d["best_linear_not_told_the_skill"]["held_out_mse_per_group"]["all"]
+
+
+def test_an_unknown_context_is_refused_before_anything_is_simulated(tmp_path):
+    from experiments.varied.data import load_varied_benchmark
+
+    with pytest.raises(ValueError, match="context must be one of"):
+        load_varied_benchmark(tmp_path / "data", "foo")
+    assert not (tmp_path / "data").exists()

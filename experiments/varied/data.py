@@ -26,7 +26,7 @@ from models.sequences import Sequences
 from pipelines.episodes import as_sequences, ensure_sets, split_three
 from runtime.parallel import Parallel
 from sim.episode import Episode
-from sim.varied import channel_names, context_columns
+from sim.varied import channel_names, check_context, context_columns
 from sim.varied_sets import VARIED_KINDS, generate, jobs_for
 
 SPLIT = (150, 300)  # precision, calibration; the rest of the normal set is the test split
@@ -111,5 +111,8 @@ def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict |
 
 
 def load_varied_benchmark(data_dir: Path, context: str, parallel: Parallel = Parallel()) -> VariedBenchmark:
+    """The benchmark in one context variant, its episode sets simulated into `data_dir` where
+    missing; an unknown context is refused before any simulation starts."""
+    check_context(context)
     sets, dropped = ensure_varied_sets(Path(data_dir), parallel)
     return make_benchmark(sets, context, dropped)
