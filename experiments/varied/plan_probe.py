@@ -34,8 +34,9 @@ from tqdm.auto import tqdm
 from experiments.methods import Method
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.methods import train_neural_asm
-from experiments.varied.outcomes import ALPHA
-from experiments.varied.score import score_all, validation_fault_detection
+from experiments.varied.outcomes import ALPHA, outcomes, summary
+from experiments.varied.pairs import validation_scores
+from experiments.varied.score import energies
 from models.asm import NeuralASM
 from models.config import PRECISE
 from models.detector_base import DetectorBase, episode_folds
@@ -189,10 +190,15 @@ def network_readout_residual(model: NeuralASM, demos: np.ndarray, skills: np.nda
                   "per-skill linear residual predictor", False, expected)
 
 
-def row(name: str, label: str, summary: dict, validation: float | None = None) -> dict:
-    episode = summary["episode"]
-    return {"method": name, "label": label, "held_out_mse": summary["held_out_mse"], "validation_faults": validation,
-            "held_out_mse_joints": summary["held_out_mse_per_group"]["joints"],
+def row(method: Method, bench: VariedBenchmark, norm: Normaliser, name: str | None = None) -> dict:
+    """One method scored by the benchmark's own rule, its energies computed once for every set,
+    the validation faults included (no pair of rivals is formed: the probe compares, it does not
+    choose)."""
+    e, held_out = energies(method, bench, norm, validation=True)
+    episode = summary(outcomes(e, bench.onset, ALPHA)["episode"], bench)
+    return {"method": name or method.name, "label": method.label, "held_out_mse": held_out["all"],
+            "validation_faults": validation_scores(e, bench.validation, ALPHA)[0],
+            "held_out_mse_joints": held_out["joints"],
             "visible": episode["detection"], "lock": episode["per_family"]["lock"]["detection_visible"],
             "consequential": episode["consequential"]["detection"],
             "normal_flagged": episode["normal_episode_false_alarm"]}
@@ -214,17 +220,13 @@ def main(data: Path, context: str = "observed", seeds: int = typer.Option(3, min
     methods.append(Method("template_residual_pooled", "template + residual predictor, one model for every skill",
                           False, lambda x, _skills: pooled.expected(x, np.full(len(x), "all"))))
     print(f"skill recognised from the first observation: {100 * skill_recognition(bench, norm):.1f} % of test episodes")
-    summaries, _ = score_all(bench, methods, norm)
-    rows = [row(m.name, m.label, summaries[m.name], validation_fault_detection(m, bench, norm, ALPHA))
-            for m in methods]
+    rows = [row(m, bench, norm) for m in tqdm(methods, desc="scoring")]
     for seed in tqdm(range(seeds), desc="trainings"):
         model = train_neural_asm(bench, PRECISE.with_(seed=seed), progress=False)
         own = model.normaliser.normalise(bench.demos.data)
         plans = [network_plan_residual(model, own, skills, per_skill) for per_skill in (False, True)]
         plans.append(network_readout_residual(model, own, skills))
-        summaries, _ = score_all(bench, plans, model.normaliser)
-        rows += [row(f"{m.name} (training {seed})", m.label, summaries[m.name],
-                     validation_fault_detection(m, bench, model.normaliser, ALPHA)) for m in plans]
+        rows += [row(m, bench, model.normaliser, f"{m.name} (training {seed})") for m in plans]
     print("| method | held-out MSE | joints | validation faults detected | visible detected | locks | consequential "
           "| normal flagged |")
     print("|---|---|---|---|---|---|---|---|")
