@@ -22,6 +22,7 @@ from client.transport import ServiceError, ServiceLost, TRANSPORTS, served_model
 from logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
 from logs.errors import LogError
 from logs.sources import check_model, episode_position
+from models.recall import RECALL_MODES
 from models.sequences import Sequences
 from recordings import DEFAULT_DIR
 from sim.episode import Episode
@@ -66,7 +67,7 @@ def replay(
     model: str | None = typer.Option(None, help="name of the served model to score with (default: the service's default)"),
     episode: list[int] = typer.Option([], help="episode number in the source (repeatable) (default: every episode)"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
-    mode: str = typer.Option("offline", help="recall mode: offline or online"),
+    mode: str = typer.Option("offline", help="recall mode: offline, online or plan (a model with a plan memory)"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
     transport: str = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
     reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
@@ -75,8 +76,9 @@ def replay(
 ) -> None:
     """Stream recorded episodes to a running service exactly as the live robot client does,
     after the same checks as ``nasm score`` against the served model."""
-    if mode not in ("offline", "online") or transport not in TRANSPORTS:
-        raise fail(f"--mode must be offline or online and --transport ws or http; got {mode!r}, {transport!r}")
+    if mode not in RECALL_MODES or transport not in TRANSPORTS:
+        raise fail(f"--mode must be one of {', '.join(RECALL_MODES)} and --transport ws or http; "
+                   f"got {mode!r}, {transport!r}")
     seqs = read_logs(source, mapping, skip_bad=skip_bad)
     summaries = []
     try:

@@ -12,7 +12,6 @@ from typing import Callable
 import numpy as np
 
 from models.asm import NeuralASM
-from models.recall import RECALL_MODES
 
 Expect = Callable[[np.ndarray, np.ndarray], np.ndarray]  # normalised (N, T, D) and true skills -> (N, T, D)
 
@@ -33,8 +32,9 @@ class Method:
 
 
 def neural_asm_methods(model: NeuralASM, name: str, label: str) -> list[Method]:
-    """The network in each recall mode; it is told neither the skill nor the context."""
+    """The network in each of its recall modes; it is told neither the skill nor the context (plan recall
+    recognises the skill from the cue)."""
     def expect(mode: str) -> Expect:
         return lambda x, _skills: x - model.errors(model.normaliser.denormalise(x), mode, 1)
 
-    return [Method(f"{name}_{mode}", f"{label}, {mode} recall", True, expect(mode)) for mode in RECALL_MODES]
+    return [Method(f"{name}_{mode}", f"{label}, {mode} recall", True, expect(mode)) for mode in model.recall_modes]

@@ -20,6 +20,7 @@ from models.calibration import Calibration, calibration_key, estimate, set_thres
 from models.config import DEFAULT_RATE_HZ, FAST, SCORING, Covariance, TPCConfig
 from models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_for
 from models.normaliser import Normaliser
+from models.plan import PlanMemory, PlanRecaller
 from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
 from models.sequences import checked_array
 from models.tpc import TemporalPC, relative_precision
@@ -63,6 +64,7 @@ class NeuralASM:
         provenance: dict[str, Any] | None = None,
         history: list[float] | None = None,
         rate_hz: float = DEFAULT_RATE_HZ,
+        plan: PlanMemory | None = None,
     ) -> None:
         if len(channel_names) != net.obs_size:
             raise ValueError(f"{len(channel_names)} channel names for {net.obs_size} channels")
@@ -77,6 +79,9 @@ class NeuralASM:
         # Observations per second of the sequences it learnt (its steps are 1 / rate_hz apart):
         # its predictions, precisions and thresholds hold at this rate only.
         self.rate_hz = float(rate_hz)
+        if plan is not None and plan.recognition.shape[1] != net.obs_size + 1:
+            raise ValueError(f"the plan memory reads {plan.recognition.shape[1] - 1} channels, the network {net.obs_size}")
+        self.plan = plan  # the maps of plan recall (models/plan.py), with config.plan_memory
 
     @classmethod
     def fit(
@@ -115,8 +120,9 @@ class NeuralASM:
             held_out = normaliser.normalise(as_sequences(validation, len(channel_names)))
         history, kept = train(net, normaliser.normalise(data), progress=progress, validation=held_out)
         provenance = {**(provenance or {}), "kept_epoch": kept + 1}
-        model = cls(net, normaliser, channel_names, provenance=provenance, history=history, rate_hz=rate_hz)
-        for mode in recall_.RECALL_MODES:
+        plan = PlanMemory.fit(net, normaliser.normalise(data), labels, config.seed) if config.plan_memory else None
+        model = cls(net, normaliser, channel_names, provenance=provenance, history=history, rate_hz=rate_hz, plan=plan)
+        for mode in model.recall_modes:
             # provisional until calibrate(); one sequence cannot give a precision matrix
             covariance = SCORING.error_covariance if len(data) > 1 else "diagonal"
             calibration = estimate(mode, 1, model.errors(data, mode, 1), "training sequences", covariance,
@@ -137,6 +143,23 @@ class NeuralASM:
     def obs_size(self) -> int:
         return self.net.obs_size
 
+    @property
+    def recall_modes(self) -> tuple[str, ...]:
+        """The network's own recall modes, and "plan" where a plan memory was fitted."""
+        return recall_.RECALL_MODES if self.plan is not None else recall_.NETWORK_MODES
+
+    def recaller(self, batch: int, mode: str = "offline", cue_steps: int = 1) -> recall_.Recaller | PlanRecaller:
+        """The state of a batch of sequences recalled in one mode, stepped one observation at a time."""
+        recall_.check_recall(mode, cue_steps, recall_.RECALL_MODES)
+        if mode != "plan":
+            return recall_.Recaller(self.net, batch, mode, cue_steps, self._rng())  # type: ignore[arg-type]
+        if self.plan is None:
+            raise ValueError("plan recall needs a plan memory: this model was trained without one "
+                             f"(its recall modes: {', '.join(self.recall_modes)})")
+        if cue_steps != 1:
+            raise ValueError(f"plan recall is cued by the first observation alone, got cue_steps={cue_steps}")
+        return PlanRecaller(self.net, self.plan, batch, self._rng())
+
     def _rng(self) -> np.random.Generator | None:
         # Recall with a random initial state stays reproducible for a given model. A zero
         # initial state draws nothing, and seeding a generator costs more than opening the
@@ -154,7 +177,8 @@ class NeuralASM:
     def errors(self, sequences: np.ndarray, mode: str = "offline", cue_steps: int = 1) -> np.ndarray:
         """Normalised prediction errors (N, T, D) of raw sequences under a recall mode."""
         x = self.normaliser.normalise(as_sequences(sequences, self.obs_size))
-        return x - recall_.run(self.net, x, mode, cue_steps, self._rng())  # type: ignore[arg-type]
+        recaller = self.recaller(len(x), mode, cue_steps)
+        return x - np.stack([recaller.step(x[:, t]) for t in range(x.shape[1])], axis=1)
 
     def calibration(self, mode: str, cue_steps: int) -> Calibration | None:
         return self.calibrations.get(calibration_key(mode, cue_steps))
@@ -237,6 +261,7 @@ class SkillStream:
         if fpr is not None and not weighted:
             raise ValueError("a fault threshold needs weighted errors: one calibration sets both")
         self.model = model
+        self.recaller = model.recaller(1, mode, cue_steps)
         self.calibration = model.weighting(mode, cue_steps, weighted)
         # each skill's misfit to the steps so far: which skill's mean errors to take out (`Calibration.centre_step`)
         self.misfit = np.zeros(len(self.calibration.skills) if self.calibration is not None else 0)
@@ -244,7 +269,6 @@ class SkillStream:
         self.threshold = threshold
         if fpr is not None:
             threshold_for(self.calibration, fpr, 0, threshold)  # type: ignore[arg-type]  # KeyError now, not mid-episode
-        self.recaller = recall_.Recaller(model.net, 1, mode, cue_steps, model._rng())  # type: ignore[arg-type]
 
     @property
     def t(self) -> int:
@@ -301,7 +325,7 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     model = streams[0].model
     recallers = [s.recaller for s in streams]
     steps = [r.t for r in recallers]
-    batch = recall_.Recaller.stack(recallers)
+    batch = type(recallers[0]).stack(recallers)  # type: ignore[arg-type]
     x = model.normaliser.normalise(observations)
     expected = batch.step(x)
     errors = x - expected

@@ -1,6 +1,8 @@
 """Checkpoints: one safetensors file holding the weights and a JSON metadata header.
 
-Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``W_D`` (with direct pathways only), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
+Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``W_D`` (with direct pathways only),
+``plan.recognition``, ``plan.readouts`` and ``plan.departures`` (with a plan memory only, its skills
+named in the header), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
 calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.step_thresholds``, when errors are whitened
 ``calibration.<key>.error_precision`` (absent: channels weighed independently) and, at rates whose
@@ -34,19 +36,22 @@ from models.asm import NeuralASM, context_index
 from models.calibration import Calibration
 from models.config import DEFAULT_RATE_HZ, TPCConfig
 from models.normaliser import Normaliser
+from models.plan import PlanMemory
 from models.tpc import TemporalPC
 from runtime.version import __version__
 
 # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
 # digest; 5: the inference solver in the config; 6: the observation rate (older: 2 Hz) and
 # optional W_D (direct pathways); 7: optional mean errors per skill and step in calibrations (a reader
-# that ignored them would weigh a 40 Hz model's errors uncentred against centred thresholds).
-FORMAT_VERSION = 7
-READABLE_VERSIONS = (2, 3, 4, 5, 6, 7)  # older files simply have no precision matrices, context input, digest, rate,
+# that ignored them would weigh a 40 Hz model's errors uncentred against centred thresholds); 8: an
+# optional plan memory (a reader that ignored it would refuse its "plan" calibration's sessions).
+FORMAT_VERSION = 8
+READABLE_VERSIONS = (2, 3, 4, 5, 6, 7, 8)  # older files simply have no precision matrices, context input, digest, rate,
 # W_D or mean errors
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
 MAX_ABS_WEIGHT = 1e3
+PLAN_TENSORS = ("recognition", "readouts", "departures")
 
 
 class CheckpointError(ValueError):
@@ -79,6 +84,9 @@ def to_bytes(model: NeuralASM) -> bytes:
         tensors["W_C"] = model.net.W_C.contiguous()
     if model.net.has_direct:
         tensors["W_D"] = model.net.W_D.contiguous()
+    if model.plan is not None:
+        for name in PLAN_TENSORS:
+            tensors[f"plan.{name}"] = _f64(getattr(model.plan, name))
     calibrations = []
     for key, cal in model.calibrations.items():
         fprs = sorted(cal.step_thresholds)
@@ -113,6 +121,7 @@ def to_bytes(model: NeuralASM) -> bytes:
         "provenance": model.provenance,
         "history": model.history,
         "rate_hz": model.rate_hz,
+        "plan_skills": None if model.plan is None else list(model.plan.skills),
         "tensor_sha256": tensor_digest(tensors),
     }
     return st_save(tensors, metadata={HEADER_KEY: json.dumps(meta)})
@@ -167,6 +176,10 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
         net = TemporalPC(len(names), config, context_index(names, meta.get("context_channels", []), config))
         net.load_weights(tensors["W_H"], tensors["W_F"], tensors["precision"], tensors.get("W_C"), tensors.get("W_D"))
         normaliser = Normaliser(tensors["normaliser.mean"].numpy(), tensors["normaliser.std"].numpy())
+        plan = None
+        if meta.get("plan_skills") is not None:
+            plan = PlanMemory(tuple(str(s) for s in meta["plan_skills"]),
+                              *(tensors[f"plan.{name}"].numpy() for name in PLAN_TENSORS))
         calibrations = {}
         for c in meta["calibrations"]:
             fprs = [float(f) for f in c["fprs"]]
@@ -206,7 +219,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
             raise CheckpointError(f"{where}: {name} holds values beyond +-{MAX_ABS_WEIGHT:g}, not a trained network")
     try:
         return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"),
-                         meta.get("rate_hz", DEFAULT_RATE_HZ))
+                         meta.get("rate_hz", DEFAULT_RATE_HZ), plan)
     except ValueError as exc:
         raise CheckpointError(f"{where}: {exc}") from exc
 

@@ -89,6 +89,10 @@ class TPCConfig:
     # redrawn each epoch (0: none). A regulariser for few demonstrations: the memory must
     # recall a skill from observations that are never exactly the demonstrated ones.
     training_noise: float = 0.0
+    # Fit the maps of plan recall after training (models/plan.py, beyond the paper): the network's
+    # offline recall read out per recognised skill, plus pathways of the departure from it. It
+    # adds the recall mode "plan"; the network and its other modes are unchanged.
+    plan_memory: bool = False
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -177,7 +181,10 @@ PATHWAYS = ROBUST.with_(direct_lags=2, direct_target="hidden")
 # featured network. Chosen by the same held-out error, three trainings each: observed context
 # 0.325 (0.325-0.325) against PATHWAYS' 0.334 (0.326-0.338); hidden 0.352 (0.349-0.357) against
 # 0.353 (0.350-0.356). docs/varied_levers.md has the study.
-PRECISE = PATHWAYS.with_(observation_precision="learned")
+# Its plan memory adds plan recall (models/plan.py) and changes nothing else: on the varied task
+# plan recall flags more of the validation faults than online recall (experiments/varied/ablation.py,
+# three trainings; docs/varied_levers.md), so the benchmark features it.
+PRECISE = PATHWAYS.with_(observation_precision="learned", plan_memory=True)
 PRESETS: dict[str, TPCConfig] = {"fast": FAST, "faithful": FAITHFUL, "robust": ROBUST, "pathways": PATHWAYS,
                                  "precise": PRECISE}
 # FAST for 300-step episodes at the controller's 40 Hz: whole sequences, 100 epochs at 2e-4,

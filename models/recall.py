@@ -22,13 +22,17 @@ import numpy as np
 
 from models.tpc import TemporalPC
 
-RecallMode = Literal["offline", "online"]
-RECALL_MODES: tuple[str, ...] = ("offline", "online")
+NetworkMode = Literal["offline", "online"]
+RecallMode = Literal["offline", "online", "plan"]
+NETWORK_MODES: tuple[str, ...] = ("offline", "online")  # the network's own recall
+# "plan" reads the network's offline recall out per recognised skill (models/plan.py): only
+# networks fitted with a plan memory have it.
+RECALL_MODES: tuple[str, ...] = (*NETWORK_MODES, "plan")
 
 
-def check_recall(mode: str, cue_steps: int) -> None:
-    if mode not in RECALL_MODES:
-        raise ValueError(f"recall mode must be one of {RECALL_MODES}, got {mode!r}")
+def check_recall(mode: str, cue_steps: int, modes: tuple[str, ...] = NETWORK_MODES) -> None:
+    if mode not in modes:
+        raise ValueError(f"recall mode must be one of {modes}, got {mode!r}")
     if cue_steps < 1:
         raise ValueError(f"cue_steps must be >= 1, got {cue_steps}")
 
@@ -40,7 +44,7 @@ class Recaller:
         self,
         net: TemporalPC,
         batch: int,
-        mode: RecallMode = "offline",
+        mode: NetworkMode = "offline",
         cue_steps: int = 1,
         rng: np.random.Generator | None = None,
     ) -> None:
@@ -134,7 +138,7 @@ class Recaller:
 def run(
     net: TemporalPC,
     sequences: np.ndarray,
-    mode: RecallMode = "offline",
+    mode: NetworkMode = "offline",
     cue_steps: int = 1,
     rng: np.random.Generator | None = None,
 ) -> np.ndarray:

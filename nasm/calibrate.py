@@ -20,7 +20,6 @@ import typer
 from logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
 from models import checkpoint
 from models.asm import NeuralASM
-from models.recall import RECALL_MODES
 from models.sequences import Sequences
 from nasm.data import load_sequences
 
@@ -47,7 +46,7 @@ def calibrate_model(model: NeuralASM, precision: np.ndarray, thresholds: np.ndar
         raise ValueError(f"calibration needs at least {MIN_EPISODES} normal episodes for the precisions and "
                          f"{MIN_EPISODES} for the thresholds; got {len(precision)} and {len(thresholds)}")
     report: dict[str, Any] = {"precision_episodes": len(precision), "threshold_episodes": len(thresholds), "modes": {}}
-    for mode in RECALL_MODES:
+    for mode in model.recall_modes:
         cal = model.calibrate(precision, thresholds, mode, 1, source=source, labels=labels)
         report["modes"][mode] = {"episode_thresholds": {str(f): t for f, t in sorted(cal.episode_thresholds.items())},
                                  "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}

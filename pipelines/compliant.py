@@ -28,7 +28,7 @@ from models import checkpoint
 from models.asm import NeuralASM, step_streams
 from models.config import SCORING
 from models.fault import ThresholdKind
-from models.recall import RECALL_MODES
+from models.recall import NETWORK_MODES
 from pipelines.default_model import ensure_default_model, model_name
 from sim.config import SIM
 from sim.control import PlanCorrection, execute_recalled
@@ -99,7 +99,7 @@ def undisturbed(model: NeuralASM, controller: str, seeds: MonitorSeeds,
     return normal(seeds.first), normal(seeds.first + seeds.per_split)
 
 
-def calibrated_for(model: NeuralASM, controller: str, seeds: MonitorSeeds, modes: tuple[str, ...] = RECALL_MODES,
+def calibrated_for(model: NeuralASM, controller: str, seeds: MonitorSeeds, modes: tuple[str, ...] = NETWORK_MODES,
                    fprs: tuple[float, ...] = SCORING.fprs, planner: NeuralASM | None = None) -> NeuralASM:
     """A copy of `model` whose only calibrations come from undisturbed runs under `controller`
     (of `planner`'s plans, default `model`'s)."""

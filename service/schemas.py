@@ -21,7 +21,7 @@ SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 SESSION_ID_HEADER = "X-Session-Id"  # answers name their session here; clients send it back (see docker/haproxy.cfg)
 Value = Annotated[float, Field(strict=True, ge=-BOUND, le=BOUND, allow_inf_nan=False)]
 SessionId = Annotated[str, Field(pattern=SESSION_ID_PATTERN)]
-RecallMode = Literal["offline", "online"]
+RecallMode = Literal["offline", "online", "plan"]
 
 
 def _json_integer(value: Any) -> Any:
@@ -98,7 +98,9 @@ class SessionCreate(Strict):
     model: str | None = Field(None, max_length=128, description="model name; the default model if omitted")
     mode: RecallMode = Field(
         "offline",
-        description="offline (the paper's setting): infer from the cue, then roll forward; online: infer from every observation",
+        description="offline (the paper's setting): infer from the cue, then roll forward; online: infer from every "
+        "observation; plan: the offline recall read out for the skill recognised at the cue, plus the episode's "
+        "departure from it (models with a plan memory)",
     )
     cue_steps: Count = Field(1, ge=1, le=10_000, description="observations the hidden state is inferred from")
     fpr: Fpr | None = Field(

@@ -76,24 +76,3 @@ def test_skill_recognition_reads_the_skill_from_the_first_observation_only(rng):
     for apart, lowest, highest in ((6.0, 0.95, 1.0), (0.0, 0.25, 0.75)):
         bench = SimpleNamespace(demos=episodes(60, apart), test=episodes(200, apart))
         assert lowest <= skill_recognition(bench, Normaliser.fit(bench.demos.data)) <= highest
-
-
-def test_skill_readouts_of_the_recalled_states_fit_each_skills_demonstrations(trained, skills):
-    from experiments.varied.plan_probe import SkillReadouts, hidden_plan, network_readout_residual
-
-    train, _ = skills
-    x = trained.normaliser.normalise(train.data)
-    features = hidden_plan(trained, x, x.shape[1])
-    assert features.shape == x.shape[:2] + (trained.net.config.hidden_size + x.shape[1],)
-    later = x.copy()
-    later[:, 1:] += 3.0
-    assert np.allclose(features, hidden_plan(trained, later, x.shape[1]))  # the plan reads the cue only
-    assert np.allclose(features[:, :4], hidden_plan(trained, x[:, :4], x.shape[1]))
-    plan = SkillReadouts(trained, x, train.labels).plan(x, train.labels)
-    pooled_mean = ((x - x.mean(axis=0)) ** 2).mean()
-    assert ((plan - x) ** 2).mean() < 0.5 * pooled_mean
-    method = network_readout_residual(trained, x, train.labels)
-    expected = method.expected(x, train.labels)
-    changed = x.copy()
-    changed[:, 8:] += 5.0
-    assert np.allclose(expected[:, :9], method.expected(changed, train.labels)[:, :9])  # causal

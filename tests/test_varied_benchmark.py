@@ -75,7 +75,14 @@ def test_headline_follows_the_contract(bench, tmp_path):
     assert not h["methods"][PAIR]["is_neural_asm"] and summaries[PAIR]["held_out_mse"] is None
     # the validation faults reach nothing else: without them every method scores the same
     plain, _ = score_all(replace(bench, validation=None), methods, norm)
-    assert PAIR not in plain and plain == {name: s for name, s in summaries.items() if name != PAIR}
+
+    def without_validation(s: dict) -> dict:
+        return {k: v for k, v in s.items() if k != "validation_fault_detection"}
+
+    assert PAIR not in plain and {name: without_validation(s) for name, s in plain.items()} == {
+        name: without_validation(s) for name, s in summaries.items() if name != PAIR}
+    assert all(s["validation_fault_detection"] is None for s in plain.values())
+    assert all(0.0 <= summaries[m.name]["validation_fault_detection"] <= 1.0 for m in methods)
     for name, values in h["methods"].items():
         assert set(values) == {"is_neural_asm", "detection", "normal_episode_false_alarm", "benign_ood_false_alarm",
                                "auroc", "median_delay_steps", "oracle_share"}
@@ -192,10 +199,12 @@ def test_ceiling_oracles_see_what_the_context_explains(bench, tmp_path):
     assert set(mean["lower_floors"]) == {"0.01", "0.002"} and "floor 0.002" in ceiling_markdown(result)
 
 
-def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path):
+@pytest.mark.parametrize("mode", ["online", "plan"])
+def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path, mode):
     """The benchmark's episode rule is the served one: the same model streamed through a real
-    service flags exactly the normal episodes, and detects exactly the faults, the benchmark does.
-    The model has the featured network's form (direct pathways into the hidden state, learned precisions)."""
+    service flags exactly the normal episodes, and detects exactly the faults, the benchmark does,
+    in online and in plan recall. The model has the featured network's form (direct pathways into
+    the hidden state, learned precisions, a plan memory)."""
     from client.transport import WebSocketTransport
     from models import checkpoint
     from service.embedded import start_embedded
@@ -203,7 +212,7 @@ def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path):
 
     model = train_neural_asm(bench, PRECISE.with_(epochs=3, hidden_size=32), progress=False)
     summaries, outcomes = score_all(bench, neural_asm_methods(model, "nasm", "Neural ASM"), model.normaliser)
-    benchmark = outcomes[("nasm_online", "episode")]
+    benchmark = outcomes[(f"nasm_{mode}", "episode")]
     checkpoint.save(model, tmp_path / "varied.safetensors")
     settings = Settings(models_dir=tmp_path, build_default_model=False, record=False)
 
@@ -213,7 +222,7 @@ def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path):
             for episode in episodes:
                 ws = WebSocketTransport(server.url, None)
                 try:
-                    ws.start({"model": "varied", "mode": "online", "cue_steps": 1, "fpr": 0.01})
+                    ws.start({"model": "varied", "mode": mode, "cue_steps": 1, "fpr": 0.01})
                     flags.append([ws.step(x.tolist())["fault"] for x in episode])
                 finally:
                     ws.close()

@@ -20,7 +20,7 @@ from experiments.fault_sweep.served import Onsets, evaluate, subsampled
 from experiments.twins import VISIBLE_K
 from models import checkpoint
 from models.config import RATE_DEFAULTS, TPCConfig
-from models.recall import RECALL_MODES
+from models.recall import NETWORK_MODES
 from pipelines.default_model import model_name, provenance_of, train_calibrated
 from pipelines.episodes import NormalSets, as_sequences, paper_sets, split_normal
 from runtime.parallel import Parallel
@@ -70,11 +70,11 @@ def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | N
                 runs.append({"seed": seed, "train_and_calibrate_seconds": round(trained, 1),
                              "online_mse_held_out": float((held_out ** 2).mean()),
                              "modes": {mode: evaluate(model, mode, split.normal_test, locks, hits, split.calibration)
-                                       for mode in RECALL_MODES}})
+                                       for mode in NETWORK_MODES}})
                 bar.update()
             by_rate[f"{hz:g}"] = {"epochs": config.epochs, "config": config.to_dict(), **runs[0], "trainings": runs,
                                   "across_trainings": {mode: spread([r["modes"][mode] for r in runs])
-                                                       for mode in RECALL_MODES}}
+                                                       for mode in NETWORK_MODES}}
     headline = by_rate[f"{rate:g}"]["modes"][HEADLINE_MODE]
     return {
         "rate_hz": rate,

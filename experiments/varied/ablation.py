@@ -2,8 +2,9 @@
 
 One network per variant of the default configuration, each scored exactly like the benchmark's
 methods (same episodes, same served episode thresholds). Each row also carries the network's one-step
-error on the held-out precision split: that, never the test episodes, is what a configuration
-to ship is chosen by. Its error on the demonstrations it was trained on says whether a lever
+error on the held-out precision split and the share of the validation faults it flags: those,
+never the test episodes, are what a configuration to ship is chosen by (the faults decide where
+the two disagree). Its error on the demonstrations it was trained on says whether a lever
 fails by fitting them too little (a joint error on the demonstrations as large as on new
 episodes) or by not generalising. Every variant is trained once per seed: the table gives the
 mean and range over the trainings.
@@ -19,7 +20,7 @@ from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.methods import neural_asm_methods
 from experiments.varied.methods import train_neural_asm
 from experiments.varied.outcomes import ALPHA
-from experiments.varied.score import score_all, validation_fault_detection
+from experiments.varied.score import score_all
 from models.asm import NeuralASM
 from models.config import FAST, PATHWAYS, PRECISE, ROBUST, TPCConfig
 from runtime.parallel import Parallel
@@ -88,16 +89,14 @@ def ablate(bench: VariedBenchmark, variants: dict[str, tuple[str, TPCConfig]], a
 def _trained_rows(bench: VariedBenchmark, name: str, label: str, config: TPCConfig, alpha: float,
                   progress: bool) -> list[dict]:
     model = train_neural_asm(bench, config, progress)
-    methods = {m.name: m for m in neural_asm_methods(model, name, label)}
-    summaries, _ = score_all(bench, list(methods.values()), model.normaliser, alpha)
+    summaries, _ = score_all(bench, neural_asm_methods(model, name, label), model.normaliser, alpha)
     rows = []
-    for mode in ("offline", "online"):
+    for mode in model.recall_modes:
         s = summaries[f"{name}_{mode}"]["episode"]
         validation = summaries[f"{name}_{mode}"]["held_out_mse_per_group"]
         rows.append({"variant": name, "label": label, "mode": mode, "seed": config.seed, "config": config.to_dict(),
                      "validation_mse": validation["all"], "validation_mse_per_group": validation,
-                     "validation_fault_detection": validation_fault_detection(methods[f"{name}_{mode}"], bench,
-                                                                              model.normaliser, alpha),
+                     "validation_fault_detection": summaries[f"{name}_{mode}"]["validation_fault_detection"],
                      "training_mse_per_group": training_errors(model, bench, mode),
                      "consequential_detection": s["consequential"]["detection"],
                      **{k: s[k] for k in ("detection", "detection_all_faults", "normal_episode_false_alarm",

@@ -27,7 +27,7 @@ def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool =
     context = [bench.channel_names[i] for i in bench.context_channels]
     model = NeuralASM.fit(bench.demos.data, bench.channel_names, config, progress=progress, provenance=provenance,
                           validation=bench.precision.data, labels=bench.demos.labels, context_channels=context)
-    for mode in ("offline", "online"):
+    for mode in model.recall_modes:
         model.calibrate(bench.precision.data, bench.calibration.data, mode, 1,
                         source="held-out normal episodes of the varied task (simulated Panda)")
     return model

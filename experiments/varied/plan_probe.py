@@ -13,9 +13,9 @@ motion, expects the locked arm to stay. Each row is scored by the benchmark's ow
 - the template with its residual predictor weighted by kappa = 0, 0.5 and 1 (1 is the rival,
   0 the template alone), and the rival fitted as one model for every skill;
 - the network's own offline plan, recalled from the cue, as the template, plus a linear one-step
-  predictor of the residual, pooled or per skill; and the network's offline hidden states read
-  out per skill (recognised from the first observation) with a per-skill residual predictor; one
-  row per training.
+  predictor of the residual, pooled or per skill; and the network's plan recall, the served mode
+  that grew out of this probe (its offline hidden states read out per skill recognised from the
+  first observation, with per-skill departure pathways: models/plan.py); one row per training.
 
     python -m experiments.varied.plan_probe DATA_DIR [--context hidden] [--seeds 3]
 """
@@ -26,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 import typer
-from sklearn.linear_model import LogisticRegression, RidgeCV
-from sklearn.pipeline import Pipeline, make_pipeline
+from sklearn.linear_model import LogisticRegression
+from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 from tqdm.auto import tqdm
 
-from experiments.methods import Method
+from experiments.methods import Method, neural_asm_methods
 from experiments.varied.data import VariedBenchmark, load_varied_benchmark
 from experiments.varied.methods import train_neural_asm
 from experiments.varied.outcomes import ALPHA, outcomes, summary
@@ -42,7 +42,7 @@ from models.config import PRECISE
 from models.detector_base import DetectorBase, episode_folds
 from models.normaliser import Normaliser
 from models.one_step import ONE_STEP_RIDGES, TemplateResidualOneStep, delay_embed, fit_one_step
-from models.recall import Recaller, offline_recall
+from models.recall import offline_recall
 
 LAGS = 2  # the pooled linear model's choice on the demonstrations (models.one_step.fit_one_step)
 
@@ -124,70 +124,12 @@ def network_plan_residual(model: NeuralASM, demos: np.ndarray, skills: np.ndarra
                   f"network's offline plan + linear residual predictor, {told}", False, expected)
 
 
-def skill_recogniser(demos: np.ndarray, skills: np.ndarray) -> Pipeline:
-    """A logistic regression naming the skill from the first observation of normalised demonstrations."""
-    return make_pipeline(StandardScaler(), LogisticRegression(max_iter=2000)).fit(demos[:, 0], skills)
-
-
 def skill_recognition(bench: VariedBenchmark, norm: Normaliser) -> float:
-    """Share of the test episodes whose skill the recogniser names right: whether being told the
-    skill tells a baseline more than the cue does."""
-    recogniser = skill_recogniser(norm.normalise(bench.demos.data), bench.demos.labels)
+    """Share of the test episodes whose skill a logistic regression on the first observation names
+    right: whether being told the skill tells a baseline more than the cue does."""
+    demos = norm.normalise(bench.demos.data)
+    recogniser = make_pipeline(StandardScaler(), LogisticRegression(max_iter=2000)).fit(demos[:, 0], bench.demos.labels)
     return float((recogniser.predict(norm.normalise(bench.test.data)[:, 0]) == bench.test.labels).mean())
-
-
-def hidden_plan(model: NeuralASM, x: np.ndarray, steps: int) -> np.ndarray:
-    """(N, T, H + steps): f(z) of the network's offline recall from the first observation of x at
-    each step, and the step's one-hot among the demonstrations' `steps`."""
-    recaller = Recaller(model.net, len(x), "offline", 1)
-    states = []
-    for t in range(x.shape[1]):
-        recaller.step(x[:, t].astype(np.float32) if t == 0 else None)
-        states.append(np.tanh(recaller.zhat).astype(np.float64))
-    step = np.broadcast_to(np.eye(steps)[: x.shape[1]], (len(x), x.shape[1], steps))
-    return np.concatenate([np.stack(states, axis=1), step], axis=2)
-
-
-class SkillReadouts:
-    """Per skill, a ridge regression of the observations on the network's offline hidden states:
-    the plan the memory recalls, read out for the skill (the fixed point of a delta rule per skill)."""
-
-    def __init__(self, model: NeuralASM, x: np.ndarray, skills: np.ndarray) -> None:
-        self.model, self.steps = model, x.shape[1]
-        f = hidden_plan(model, x, self.steps)
-        self.readouts = {s: RidgeCV(alphas=np.logspace(-2, 4, 13)).fit(
-            f[skills == s].reshape(-1, f.shape[2]), x[skills == s].reshape(-1, x.shape[2])) for s in np.unique(skills)}
-
-    def plan(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
-        f = hidden_plan(self.model, x, self.steps)
-        out = np.empty(x.shape)
-        for s, readout in self.readouts.items():
-            rows = skills == s
-            if rows.any():
-                out[rows] = readout.predict(f[rows].reshape(-1, f.shape[2])).reshape(x[rows].shape)
-        return out
-
-
-def network_readout_residual(model: NeuralASM, demos: np.ndarray, skills: np.ndarray, seed: int = 0) -> Method:
-    """The network's offline hidden states read out per skill, plus a per-skill linear one-step
-    predictor of the departure (fitted on departures cross-fitted by episode folds, as the rival's
-    residual is); each episode's skill recognised from its first observation, not told."""
-    recogniser = skill_recogniser(demos, skills)
-    readouts = SkillReadouts(model, demos, skills)
-    departures = np.empty_like(demos, dtype=np.float64)
-    for train, test in episode_folds(skills, seed):
-        departures[test] = demos[test] - SkillReadouts(model, demos[train], skills[train]).plan(demos[test], skills[test])
-    one_step = fit_one_step(departures, skills, seed)
-
-    def expected(x: np.ndarray, _skills: np.ndarray) -> np.ndarray:
-        recognised = recogniser.predict(x[:, 0])
-        plan = readouts.plan(x, recognised)
-        correction = np.zeros_like(plan)
-        correction[:, 1:] = one_step.predict(x - plan, recognised)
-        return plan + correction
-
-    return Method("network_readout_residual", "network's offline states read out per recognised skill + "
-                  "per-skill linear residual predictor", False, expected)
 
 
 def row(method: Method, bench: VariedBenchmark, norm: Normaliser, name: str | None = None) -> dict:
@@ -225,7 +167,7 @@ def main(data: Path, context: str = "observed", seeds: int = typer.Option(3, min
         model = train_neural_asm(bench, PRECISE.with_(seed=seed), progress=False)
         own = model.normaliser.normalise(bench.demos.data)
         plans = [network_plan_residual(model, own, skills, per_skill) for per_skill in (False, True)]
-        plans.append(network_readout_residual(model, own, skills))
+        plans += [m for m in neural_asm_methods(model, "nasm", "featured network") if m.name == "nasm_plan"]
         rows += [row(m, bench, model.normaliser, f"{m.name} (training {seed})") for m in plans]
     print("| method | held-out MSE | joints | validation faults detected | visible detected | locks | consequential "
           "| normal flagged |")

@@ -5,10 +5,10 @@ precision split (the service's own `estimate`), whitened energies; an episode's 
 peak energy (for a fault, from its onset on), turned into flags and rates by
 `experiments.varied.outcomes`.
 
-With validation faults in the benchmark and two baselines or more, one more rival is scored
-alike: the best pair of baselines flagging when either does, chosen on the validation faults
-(experiments/varied/pairs.py). Only the baselines' energies of the validation faults are
-computed, and only that choice reads them.
+With validation faults in the benchmark, every method's share of them flagged is reported (what
+the featured recall mode and the ablation's variants are chosen by), and with two baselines or
+more one more rival is scored alike: the best pair of baselines flagging when either does, chosen
+on the validation faults (experiments/varied/pairs.py).
 """
 
 from __future__ import annotations
@@ -43,16 +43,6 @@ def energies(method: Method, bench: VariedBenchmark, norm: Normaliser, validatio
         errors["precision"], bench.channel_names)
 
 
-def validation_fault_detection(method: Method, bench: VariedBenchmark, norm: Normaliser, alpha: float
-                               ) -> float | None:
-    """The share of visible validation faults the method flags at the served episode threshold
-    (None without validation faults): a selection number that counts faults, not one-step error."""
-    if bench.validation is None:
-        return None
-    e, _ = energies(method, bench, norm, validation=True)
-    return validation_scores(e, bench.validation, alpha)[0]
-
-
 def held_out_error(errors: np.ndarray, channel_names: tuple[str, ...]) -> dict:
     """Mean squared normalised error after the first step, overall and per kind of channel."""
     squared = errors[:, 1:].astype(np.float64) ** 2
@@ -65,14 +55,18 @@ def score_all(bench: VariedBenchmark, methods: list[Method], norm: Normaliser, a
     """Summaries {method: {rule: summary}} and outcomes {(method, rule): Outcome}; with
     validation faults and two baselines or more, the either-of-two rival `PAIR` too."""
     summaries, results, rivals = {}, {}, {}
-    pair = bench.validation is not None and sum(not m.is_neural_asm for m in methods) >= 2
+    validation = bench.validation is not None
+    pair = validation and sum(not m.is_neural_asm for m in methods) >= 2
     for method in tqdm(methods, desc="scoring"):
-        e, held_out = energies(method, bench, norm, validation=pair and not method.is_neural_asm)
-        if VALIDATION in e:
+        e, held_out = energies(method, bench, norm, validation=validation)
+        if pair and not method.is_neural_asm:
             rivals[method.name] = e
         rules = outcomes(e, bench.onset, alpha)
         summaries[method.name] = {"label": method.label, "is_neural_asm": method.is_neural_asm,
                                   "held_out_mse": held_out["all"], "held_out_mse_per_group": held_out,
+                                  # a selection number that counts faults, not one-step error
+                                  "validation_fault_detection": validation_scores(e, bench.validation, alpha)[0]
+                                  if validation else None,
                                   **{rule: summary(o, bench) for rule, o in rules.items()}}
         results.update({(method.name, rule): o for rule, o in rules.items()})
     if pair:

@@ -1,0 +1,88 @@
+"""Plan recall: the network's offline recall read out per recognised skill, plus the departure pathways."""
+
+import numpy as np
+import pytest
+
+from models import checkpoint
+from models.asm import NeuralASM, step_streams
+from models.config import FAST
+from models.plan import PlanMemory
+from models.synthetic import make_skills
+
+CONFIG = FAST.with_(epochs=60, hidden_size=32, plan_memory=True)
+
+
+@pytest.fixture(scope="module")
+def data():
+    return make_skills(n_skills=3, repetitions=12, steps=15, channels=8, seed=1)
+
+
+@pytest.fixture(scope="module")
+def model(data):
+    m = NeuralASM.fit(data.data, data.channel_names, CONFIG, progress=False, labels=data.labels)
+    m.calibrate(data.data, data.data, "plan", 1, labels=data.labels)
+    return m
+
+
+def test_plan_is_a_recall_mode_only_with_a_plan_memory(data, model):
+    assert model.recall_modes == ("offline", "online", "plan")
+    plain = NeuralASM.fit(data.data, data.channel_names, CONFIG.with_(plan_memory=False), progress=False)
+    assert plain.recall_modes == ("offline", "online")
+    with pytest.raises(ValueError, match="plan memory"):
+        plain.errors(data.data, "plan")
+    with pytest.raises(ValueError, match="cued by the first observation"):
+        model.errors(data.data, "plan", cue_steps=2)
+
+
+def test_recognises_each_skill_from_its_first_observation(data, model):
+    x = model.normaliser.normalise(data.data)
+    recognised = np.array(model.plan.skills)[model.plan.recognise(x[:, 0])]
+    assert (recognised == data.labels.astype(str)).all()
+
+
+def test_expects_the_demonstrations_better_than_the_networks_offline_recall(data, model):
+    plan = (model.errors(data.data, "plan")[:, 1:] ** 2).mean()
+    offline = (model.errors(data.data, "offline")[:, 1:] ** 2).mean()
+    assert plan < 0.2 * offline
+
+
+def test_each_expectation_reads_only_the_observations_before_it(data, model):
+    changed = data.data.copy()
+    changed[:, 8:] += 5.0
+    np.testing.assert_allclose(model.score(changed, "plan").expected[:, :9], model.score(data.data, "plan").expected[:, :9])
+    assert not np.allclose(model.score(changed, "plan").expected[:, 9:], model.score(data.data, "plan").expected[:, 9:])
+
+
+def test_a_departure_from_the_plan_is_carried_forward(data, model):
+    """An episode shifted by a constant from step 1 on: after two steps the pathways expect most of
+    the shift; offline recall, fixed at the cue, expects none of it."""
+    shifted = data.data[:3].copy()
+    shift = 0.5 * data.data.std(axis=(0, 1))
+    shifted[:, 1:] += shift
+    plan = np.abs(model.errors(shifted, "plan")[:, 4:]).mean()
+    offline = np.abs(model.errors(shifted, "offline")[:, 4:]).mean()
+    assert plan < 0.6 * offline
+
+
+def test_a_stream_equals_the_batch_and_streams_at_different_steps_step_together(data, model):
+    batch = model.score(data.data[:2], "plan")
+    a, b = model.stream("plan", fpr=0.01), model.stream("plan", fpr=0.01)
+    a.step(data.data[0, 0])
+    a.step(data.data[0, 1])
+    b.step(data.data[1, 0])  # a at step 2, b at step 1: one batch
+    got = step_streams([a, b], np.stack([data.data[0, 2], data.data[1, 1]]))
+    np.testing.assert_allclose(got[0].score.expected, batch.expected[0, 2], atol=1e-5)
+    np.testing.assert_allclose(got[1].score.expected, batch.expected[1, 1], atol=1e-5)
+    assert got[0].decision is not None
+
+
+def test_checkpoint_keeps_the_plan_memory(data, model):
+    loaded = checkpoint.from_bytes(checkpoint.to_bytes(model))
+    assert loaded.plan.skills == model.plan.skills
+    np.testing.assert_array_equal(loaded.errors(data.data, "plan"), model.errors(data.data, "plan"))
+    assert loaded.calibration("plan", 1) is not None
+
+
+def test_a_plan_memory_of_the_wrong_shape_is_refused(model):
+    with pytest.raises(ValueError, match="departures"):
+        PlanMemory(model.plan.skills, model.plan.recognition, model.plan.readouts, model.plan.departures[:, :, :-1])
