@@ -77,7 +77,8 @@ def train(
     provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs)}
     if seqs.seeds is not None:
         provenance["seeds"] = seqs.seeds.tolist()
-    model = NeuralASM.fit(seqs.data, seqs.channel_names, config, provenance=provenance, rate_hz=seqs.rate_hz)
+    model = NeuralASM.fit(seqs.data, seqs.channel_names, config, provenance=provenance, rate_hz=seqs.rate_hz,
+                          labels=seqs.labels)
     checkpoint.save(model, out)
     typer.echo(f"trained on {len(seqs)} sequences at {seqs.rate_hz:g} Hz; final energy {model.history[-1]:.4g}; wrote {out}")
 

@@ -1,6 +1,6 @@
 """Sessions: one per episode, each holding its own recall state and recording.
 
-A session fixes the model, the recall mode (offline or online), the cue length, the
+A session fixes the model, the recall mode (offline, online or plan), the cue length, the
 false-positive rate and whether the threshold varies per step. Sessions idle longer
 than the configured time are closed; the number open at once is capped, in all and per
 client, so that one client can neither exhaust the server's memory nor lock others out.

@@ -59,7 +59,7 @@ def test_zero_pathways_are_the_papers_network(trained, skills, target):
     direct = TemporalPC(trained.obs_size, trained.config.with_(direct_lags=LAGS, direct_target=target))
     direct.load_weights(trained.net.W_H, trained.net.W_F, trained.net.precision, W_D=torch.zeros_like(direct.W_D))
     x = trained.normaliser.normalise(test.data)
-    for mode in recall.RECALL_MODES:
+    for mode in recall.NETWORK_MODES:
         np.testing.assert_allclose(recall.run(direct, x, mode), recall.run(trained.net, x, mode), atol=1e-6)
 
 
@@ -131,7 +131,7 @@ def test_stream_matches_sequence_scoring(direct_model, skills):
     """A served session (one step at a time, its past carried by the stream) expects what
     batch recall expects."""
     _, test = skills
-    for mode in recall.RECALL_MODES:
+    for mode in direct_model.recall_modes:
         whole = direct_model.score(test.data[:1], mode, weighted=False)
         stream = direct_model.stream(mode, weighted=False)
         steps = [stream.step(x) for x in test.data[0]]
