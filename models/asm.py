@@ -120,7 +120,10 @@ class NeuralASM:
             held_out = normaliser.normalise(as_sequences(validation, len(channel_names)))
         history, kept = train(net, normaliser.normalise(data), progress=progress, validation=held_out)
         provenance = {**(provenance or {}), "kept_epoch": kept + 1}
-        plan = PlanMemory.fit(net, normaliser.normalise(data), labels, config.seed) if config.plan_memory else None
+        plan = None
+        if config.plan_memory:
+            context = [list(channel_names).index(c) for c in context_channels]  # checked by context_index above
+            plan = PlanMemory.fit(net, normaliser.normalise(data), labels, context, config.seed)
         model = cls(net, normaliser, channel_names, provenance=provenance, history=history, rate_hz=rate_hz, plan=plan)
         for mode in model.recall_modes:
             # provisional until calibrate(); one sequence cannot give a precision matrix

@@ -1,8 +1,8 @@
 """Checkpoints: one safetensors file holding the weights and a JSON metadata header.
 
 Tensors: ``W_H``, ``W_F``, ``W_C`` (with context channels only), ``W_D`` (with direct pathways only),
-``plan.recognition``, ``plan.readouts`` and ``plan.departures`` (with a plan memory only, its skills
-named in the header), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
+``plan.recognition``, ``plan.inputs``, ``plan.readouts`` and ``plan.departures`` (with a plan memory
+only, its skills and context channels named in the header), ``precision`` (of the observation channels), ``normaliser.mean``, ``normaliser.std`` and, per
 calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.step_thresholds``, when errors are whitened
 ``calibration.<key>.error_precision`` (absent: channels weighed independently) and, at rates whose
@@ -51,7 +51,7 @@ READABLE_VERSIONS = (2, 3, 4, 5, 6, 7, 8)  # older files simply have no precisio
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
 MAX_ABS_WEIGHT = 1e3
-PLAN_TENSORS = ("recognition", "readouts", "departures")
+PLAN_TENSORS = ("recognition", "inputs", "readouts", "departures")
 
 
 class CheckpointError(ValueError):
@@ -122,6 +122,7 @@ def to_bytes(model: NeuralASM) -> bytes:
         "history": model.history,
         "rate_hz": model.rate_hz,
         "plan_skills": None if model.plan is None else list(model.plan.skills),
+        "plan_context": None if model.plan is None else list(model.plan.context),
         "tensor_sha256": tensor_digest(tensors),
     }
     return st_save(tensors, metadata={HEADER_KEY: json.dumps(meta)})
@@ -178,7 +179,7 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
         normaliser = Normaliser(tensors["normaliser.mean"].numpy(), tensors["normaliser.std"].numpy())
         plan = None
         if meta.get("plan_skills") is not None:
-            plan = PlanMemory(tuple(str(s) for s in meta["plan_skills"]),
+            plan = PlanMemory(tuple(str(s) for s in meta["plan_skills"]), tuple(int(i) for i in meta["plan_context"]),
                               *(tensors[f"plan.{name}"].numpy() for name in PLAN_TENSORS))
         calibrations = {}
         for c in meta["calibrations"]:

@@ -1,23 +1,26 @@
-"""Plan recall (beyond the paper): the memory's offline recall of a skill, read out for the skill
-it recognises, and the episode's departure from that plan carried forward.
+"""Plan recall (beyond the paper): a plan set by the cue, what the memory's offline recall adds to
+it, for the skill it recognises, and the episode's departure from that plan carried forward.
 
 Why: where every episode differs, online recall reads the arm's last motion, so after a locked
 joint it expects the arm to stay where it is; an expectation that returns to a plan fixed at the
-cue keeps expecting the plan's motion and sees the lock (docs/varied_levers.md). The network's
-offline hidden states hold such a plan, which W_F alone reads out poorly. Three linear maps,
-each the fixed point of a delta rule on the demonstrations (solved in closed form, as
-``direct_init="least_squares"`` is), read it:
+cue keeps expecting the plan's motion and sees the lock (docs/varied_levers.md). The expectation
+of step t of an episode recognised as skill s, with context c (the cue's context channels) and
+departures d_t = x_t - plan_t, is
+
+    plan_t  = B_s [e_t, e_t (x) c, 1] + R_s [f(z_t), 1]
+    x_hat_t = plan_t + A_s [d_{t-1}, ..., d_{t-L}, 1]
 
 - recognition: a softmax regression of the skill on the first observation (the cue);
-- a readout per skill: the observation regressed on f(z_t) of offline recall from the cue and
-  on the step's one-hot (the step's own offset, as the template rivals have);
-- departure pathways per skill: the departure from the plan regressed on the last departures,
-  fitted on departures from readouts that did not see the episode (a readout's departures on
-  its own demonstrations are smaller than a new episode's).
+- B_s, the input pathway (the tPC's B u, one map per step): the plan as a linear function of
+  the context, the step's one-hot e_t giving each step its own;
+- R_s: what the network's offline hidden states z_t, recalled from the cue, add to it, fitted on
+  the part of the demonstrations B_s leaves (cross-fitted: from maps that did not see them);
+- A_s, departure pathways (per skill or pooled, 1-3 lags, chosen by cross-validation), fitted on
+  departures from plans that did not see the episode (a plan's departures on its own
+  demonstrations are smaller than a new episode's).
 
-At step t the expectation is R_s [f(z_t), e_t, 1] + A_s [d_{t-1}, ..., d_{t-L}, 1], with s the
-skill recognised at the cue and d the departures seen so far (the first standing in for those before the start, as
-the one-step rivals embed it).
+Each map is the fixed point of a delta rule on the demonstrations, solved in closed form (ridge,
+as ``direct_init="least_squares"`` is). Without context channels B_s is each step's mean.
 """
 
 from __future__ import annotations
@@ -43,55 +46,79 @@ def _with_one(a: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PlanMemory:
-    """The maps of plan recall; K skills, D channels, H hidden units, T demonstrated steps, L lags."""
+    """The maps of plan recall; K skills, D channels, C context channels, H hidden units, T
+    demonstrated steps, L lags."""
 
     skills: tuple[str, ...]
+    context: tuple[int, ...]  # the context channels' indices among the D
     recognition: np.ndarray  # (K, D + 1): skill logits of the cue [x_0, 1]
-    readouts: np.ndarray  # (K, H + T + 1, D): x_t = [f(z_t), e_t, 1] @ readouts[s]
-    departures: np.ndarray  # (K, L * D + 1, D): d_t = [d_{t-1}, ..., d_{t-L}, 1] @ departures[s]
+    inputs: np.ndarray  # (K, T * (C + 1) + 1, D): B_s
+    readouts: np.ndarray  # (K, H + 1, D): R_s
+    departures: np.ndarray  # (K, L * D + 1, D): A_s
 
     def __post_init__(self) -> None:
         k, d = len(self.skills), self.recognition.shape[1] - 1
         if self.recognition.shape != (k, d + 1):
             raise ValueError(f"plan recognition has shape {self.recognition.shape} for {k} skill(s)")
-        if self.readouts.ndim != 3 or self.readouts.shape[0] != k or self.readouts.shape[2] != d:
-            raise ValueError(f"plan readouts have shape {self.readouts.shape} for {k} skill(s) and {d} channels")
-        rows = self.departures.shape[1] - 1 if self.departures.ndim == 3 else -1
-        if self.departures.shape[::2] != (k, d) or rows < d or rows % d:
-            raise ValueError(f"plan departures have shape {self.departures.shape} for {k} skill(s) and {d} channels")
+        if any(not 0 <= i < d for i in self.context):
+            raise ValueError(f"plan context channels {self.context} are not among {d} channels")
+        for name, rows in (("inputs", lambda n: n % (len(self.context) + 1) == 0),
+                           ("readouts", lambda n: n > 0), ("departures", lambda n: n >= d and n % d == 0)):
+            a = getattr(self, name)
+            if a.ndim != 3 or a.shape[::2] != (k, d) or not rows(a.shape[1] - 1):
+                raise ValueError(f"plan {name} have shape {a.shape} for {k} skill(s), {d} channels "
+                                 f"and {len(self.context)} context channel(s)")
 
     @property
     def lags(self) -> int:
         return (self.departures.shape[1] - 1) // (self.recognition.shape[1] - 1)
 
+    @property
+    def steps(self) -> int:
+        return (self.inputs.shape[1] - 1) // (len(self.context) + 1)
+
     @classmethod
-    def fit(cls, net: TemporalPC, x: np.ndarray, skills: Sequence[str] | None, seed: int = 0) -> "PlanMemory":
-        """Fit on normalised demonstrations x (N, T, D) of the given skills (None: one skill)."""
+    def fit(cls, net: TemporalPC, x: np.ndarray, skills: Sequence[str] | None, context: Sequence[int] = (),
+            seed: int = 0) -> "PlanMemory":
+        """Fit on normalised demonstrations x (N, T, D) of the given skills (None: one skill)
+        whose channels `context` describe the episode's context."""
         labels = np.asarray(["all"] * len(x) if skills is None else skills, dtype=str)
         names = tuple(str(s) for s in np.unique(labels))
-        readouts = _fit_readouts(net, x, labels, names)
+        skill = np.array([names.index(s) for s in labels])
+        inputs = input_features(x[:, None, 0, list(context)], step_codes(x.shape[1], x.shape[1])[None])
+        states = _offline_states(net, x)
+
+        def maps(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            b = _ridge(inputs[rows], x[rows], labels[rows], names)
+            left = np.empty_like(x[rows])
+            for train, test in episode_folds(labels[rows], seed):
+                fold = _ridge(inputs[rows][train], x[rows][train], labels[rows][train], names)
+                left[test] = x[rows][test] - _apply(fold, inputs[rows][test], skill[rows][test])
+            return b, _ridge(states[rows], left, labels[rows], names)
+
+        b, r = maps(np.arange(len(x)))
         departures = np.empty_like(x)
         for train, test in episode_folds(labels, seed):
-            held_out = _fit_readouts(net, x[train], labels[train], names)
-            departures[test] = x[test] - _plan(net, held_out, x[test], [names.index(s) for s in labels[test]])
+            b_fold, r_fold = maps(train)
+            departures[test] = x[test] - _apply(b_fold, inputs[test], skill[test]) - _apply(r_fold, states[test], skill[test])
         one_step = fit_one_step(departures, labels, seed)
-        width = x.shape[2]
-        pathways = np.stack([one_step.models[s].weights[:, :width] for s in names])
-        return cls(names, _fit_recognition(x[:, 0], labels, names), readouts, pathways)
+        pathways = np.stack([one_step.models[s].weights[:, : x.shape[2]] for s in names])
+        return cls(names, tuple(int(i) for i in context), _fit_recognition(x[:, 0], labels, names), b, r, pathways)
 
     def recognise(self, cue: np.ndarray) -> np.ndarray:
         """(B,) index of the skill each normalised first observation (B, D) is recognised as."""
         return np.argmax(_with_one(cue) @ self.recognition.T, axis=1)
 
-    def read(self, z: np.ndarray, t: np.ndarray, skill: np.ndarray) -> np.ndarray:
-        """The plan (B, D) at each row's step t (B,) from hidden states z (B, H); past the
-        demonstrations' length the last step's offset holds."""
-        step = step_codes(int(t.max()) + 1, self.readouts.shape[1] - 1 - z.shape[1])[t]
-        return np.einsum("bf,bfd->bd", _with_one(np.concatenate([np.tanh(z), step], axis=1)), self.readouts[skill])
+    def read(self, z: np.ndarray, t: np.ndarray, skill: np.ndarray, cue: np.ndarray) -> np.ndarray:
+        """The plan (B, D) at each row's step t (B,) from hidden states z (B, H) and the
+        normalised cue (B, D); past the demonstrations' length the last step's map holds."""
+        steps = step_codes(int(t.max()) + 1, self.steps)[t]
+        return (_apply(self.inputs, input_features(cue[:, list(self.context)], steps), skill)
+                + _apply(self.readouts, np.tanh(z), skill))
 
     def depart(self, past: np.ndarray, skill: np.ndarray) -> np.ndarray:
         """The departure expected next (B, D) from the last L departures, newest first (B, L * D)."""
-        return np.einsum("bf,bfd->bd", _with_one(past), self.departures[skill])
+        return _apply(self.departures, past, skill)
 
 
 def _fit_recognition(cue: np.ndarray, labels: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
@@ -108,7 +135,7 @@ def _fit_recognition(cue: np.ndarray, labels: np.ndarray, names: tuple[str, ...]
     return np.hstack([weights, bias[:, None]])[order]
 
 
-def _offline_features(net: TemporalPC, x: np.ndarray) -> np.ndarray:
+def _offline_states(net: TemporalPC, x: np.ndarray) -> np.ndarray:
     """(N, T, H): f(z_t) of the network's offline recall from each sequence's first observation."""
     recaller = Recaller(net, len(x), "offline", 1)
     states = []
@@ -124,32 +151,36 @@ def step_codes(length: int, steps: int) -> np.ndarray:
     return np.eye(steps)[np.minimum(np.arange(length), steps - 1)]
 
 
-def _features(f: np.ndarray, steps: int) -> np.ndarray:
-    n, t, _ = f.shape
-    return np.concatenate([f, np.broadcast_to(step_codes(t, steps), (n, t, steps))], axis=2)
+def input_features(context: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """[e_t, e_t (x) c] of step codes (..., T) and contexts (..., C) that broadcast together:
+    (..., T * (C + 1))."""
+    outer = codes[..., :, None] * context[..., None, :]
+    codes = np.broadcast_to(codes, outer.shape[:-1])
+    return np.concatenate([codes, outer.reshape(outer.shape[:-2] + (-1,))], axis=-1)
 
 
-def _fit_readouts(net: TemporalPC, x: np.ndarray, labels: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
-    features = _features(_offline_features(net, x), x.shape[1])
+def _ridge(features: np.ndarray, x: np.ndarray, labels: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
+    """(K, F + 1, D): per skill, x (N, T, D) ridge-regressed on features (N, T, F), the ridge by
+    generalised cross-validation."""
     out = []
     for s in names:
         rows = labels == s
-        ridge = RidgeCV(alphas=READOUT_RIDGES).fit(features[rows].reshape(-1, features.shape[2]),
-                                                   x[rows].reshape(-1, x.shape[2]))
+        ridge = RidgeCV(alphas=READOUT_RIDGES).fit(features[rows].reshape(-1, features.shape[-1]),
+                                                   x[rows].reshape(-1, x.shape[-1]))
         out.append(np.vstack([ridge.coef_.T, ridge.intercept_[None]]))
     return np.stack(out)
 
 
-def _plan(net: TemporalPC, readouts: np.ndarray, x: np.ndarray, skill: Sequence[int]) -> np.ndarray:
-    """(N, T, D) plans of sequences x read out for their skills."""
-    features = _with_one(_features(_offline_features(net, x), readouts.shape[1] - 1 - net.config.hidden_size))
-    return np.einsum("ntf,nfd->ntd", features, readouts[np.asarray(skill)])
+def _apply(maps: np.ndarray, features: np.ndarray, skill: np.ndarray) -> np.ndarray:
+    """Each row's features (B, F) or (B, T, F) through its skill's map (K, F + 1, D)."""
+    eq = "bf,bfd->bd" if features.ndim == 2 else "btf,bfd->btd"
+    return np.einsum(eq, _with_one(features), maps[skill])
 
 
 class PlanRecaller:
-    """A batch's plan recall, one step at a time, with `Recaller`'s interface: the network's
-    offline recall from the cue, read out for the recognised skill, plus the departure pathways.
-    Rows may be at different steps (a batch of served sessions): each keeps its own."""
+    """A batch's plan recall, one step at a time, with `Recaller`'s interface: the plan of the skill
+    recognised at the cue, plus the departure pathways. Rows may be at different steps (a batch
+    of served sessions): each keeps its own."""
 
     mode = "plan"
     cue_steps = 1
@@ -159,6 +190,7 @@ class PlanRecaller:
         self.offline = Recaller(net, batch, "offline", 1, rng)
         self.steps = np.zeros(batch, dtype=int)  # each row's step
         self.skill = np.zeros(batch, dtype=int)  # recognised at the cue
+        self.cue = np.zeros((batch, memory.recognition.shape[1] - 1))  # the first observation
         self.past: np.ndarray | None = None  # the last L departures, newest first (B, L * D)
         self.next_expected: np.ndarray | None = None
 
@@ -178,6 +210,7 @@ class PlanRecaller:
         batch.offline = Recaller.stack([r.offline for r in recallers])
         batch.steps = np.concatenate([r.steps for r in recallers])
         batch.skill = np.concatenate([r.skill for r in recallers])
+        batch.cue = np.concatenate([r.cue for r in recallers])
         if first.past is not None:
             batch.past = np.concatenate([r.past for r in recallers])
         if all(r.next_expected is not None for r in recallers):
@@ -188,7 +221,7 @@ class PlanRecaller:
         """Take the state of row i of ``batch``, stacked from this recaller and stepped once."""
         self.offline.advance_as(batch.offline, i)
         row = slice(i, i + 1)
-        self.steps, self.skill = batch.steps[row].copy(), batch.skill[row].copy()
+        self.steps, self.skill, self.cue = batch.steps[row].copy(), batch.skill[row].copy(), batch.cue[row].copy()
         self.past = None if batch.past is None else batch.past[row].copy()
         self.next_expected = None if batch.next_expected is None else batch.next_expected[row].copy()
 
@@ -198,13 +231,13 @@ class PlanRecaller:
             raise ValueError(f"step {self.t} needs an observation in plan recall: departures are measured on it")
         x = np.asarray(x, np.float64)
         if self.t == 0:
-            self.skill = self.memory.recognise(x)
+            self.skill, self.cue = self.memory.recognise(x), x
             self.offline.step(x)
-            expected = plan = self.memory.read(self.offline.zhat, self.steps, self.skill)
+            expected = plan = self.memory.read(self.offline.zhat, self.steps, self.skill, self.cue)
         else:
             expected = self.forecast()
             self.offline.step(None)
-            plan = self.memory.read(self.offline.zhat, self.steps, self.skill)
+            plan = self.memory.read(self.offline.zhat, self.steps, self.skill, self.cue)
         departure = x - plan
         lags = self.memory.lags
         self.past = np.tile(departure, lags) if self.past is None else np.concatenate(
@@ -219,6 +252,6 @@ class PlanRecaller:
             if self.past is None:
                 raise ValueError("plan recall forecasts only once the cue has been seen")
             self.offline.forecast()
-            plan = self.memory.read(self.offline.next_prior, self.steps, self.skill)
+            plan = self.memory.read(self.offline.next_prior, self.steps, self.skill, self.cue)
             self.next_expected = plan + self.memory.depart(self.past, self.skill)
         return self.next_expected

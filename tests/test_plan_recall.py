@@ -41,6 +41,8 @@ def test_recognises_each_skill_from_its_first_observation(data, model):
 
 
 def test_expects_the_demonstrations_better_than_the_networks_offline_recall(data, model):
+    """Without context channels the input pathway is each step's mean."""
+    assert model.plan.context == () and model.plan.inputs.shape[1] == data.data.shape[1] + 1
     plan = (model.errors(data.data, "plan")[:, 1:] ** 2).mean()
     offline = (model.errors(data.data, "offline")[:, 1:] ** 2).mean()
     assert plan < 0.2 * offline
@@ -84,5 +86,27 @@ def test_checkpoint_keeps_the_plan_memory(data, model):
 
 
 def test_a_plan_memory_of_the_wrong_shape_is_refused(model):
+    plan = model.plan
     with pytest.raises(ValueError, match="departures"):
-        PlanMemory(model.plan.skills, model.plan.recognition, model.plan.readouts, model.plan.departures[:, :, :-1])
+        PlanMemory(plan.skills, plan.context, plan.recognition, plan.inputs, plan.readouts, plan.departures[:, :, :-1])
+    with pytest.raises(ValueError, match="context channels"):
+        PlanMemory(plan.skills, (99,), plan.recognition, plan.inputs, plan.readouts, plan.departures)
+
+
+def test_the_plan_follows_the_context_step_by_step(rng):
+    """Episodes whose every step is its own linear function of two context channels read at the
+    first step (where the object is, where it must go): the plan expects held-out episodes of new
+    contexts almost exactly, where the network's offline recall alone does not."""
+    steps, maps = 12, rng.normal(size=(12, 2, 4))
+
+    def episodes(n):
+        c = rng.uniform(-1, 1, (n, 2))
+        x = np.concatenate([np.einsum("nc,tcd->ntd", c, maps), np.repeat(c[:, None], steps, axis=1)], axis=2)
+        return x + 0.01 * rng.normal(size=x.shape)
+
+    names = [f"arm{i}" for i in range(4)] + ["object", "goal"]
+    train, test = episodes(40), episodes(20)
+    m = NeuralASM.fit(train, names, CONFIG, progress=False, context_channels=["object", "goal"])
+    assert m.plan.context == (4, 5) and m.plan.skills == ("all",)
+    plan = (m.errors(test, "plan")[:, 1:, :4] ** 2).mean()
+    assert plan < 0.01 < (m.errors(test, "offline")[:, 1:, :4] ** 2).mean()
