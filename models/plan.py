@@ -79,9 +79,10 @@ class PlanMemory:
 
     @classmethod
     def fit(cls, net: TemporalPC, x: np.ndarray, skills: Sequence[str] | None, context: Sequence[int] = (),
-            seed: int = 0) -> "PlanMemory":
+            seed: int = 0, with_states: bool = True) -> "PlanMemory":
         """Fit on normalised demonstrations x (N, T, D) of the given skills (None: one skill)
-        whose channels `context` describe the episode's context."""
+        whose channels `context` describe the episode's context. Without `with_states` R_s is
+        zero: the plan is the input pathway's alone, the network's part taken out (an ablation)."""
         labels = np.asarray(["all"] * len(x) if skills is None else skills, dtype=str)
         names = tuple(str(s) for s in np.unique(labels))
         skill = np.array([names.index(s) for s in labels])
@@ -90,6 +91,8 @@ class PlanMemory:
 
         def maps(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             b = _ridge(inputs[rows], x[rows], labels[rows], names)
+            if not with_states:
+                return b, np.zeros((len(names), states.shape[2] + 1, x.shape[2]))
             left = np.empty_like(x[rows])
             for train, test in episode_folds(labels[rows], seed):
                 fold = _ridge(inputs[rows][train], x[rows][train], labels[rows][train], names)

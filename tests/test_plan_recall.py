@@ -110,3 +110,13 @@ def test_the_plan_follows_the_context_step_by_step(rng):
     assert m.plan.context == (4, 5) and m.plan.skills == ("all",)
     plan = (m.errors(test, "plan")[:, 1:, :4] ** 2).mean()
     assert plan < 0.01 < (m.errors(test, "offline")[:, 1:, :4] ** 2).mean()
+
+
+def test_without_the_networks_states_the_plan_is_the_input_pathway_alone(data, model):
+    x = model.normaliser.normalise(data.data)
+    bare = PlanMemory.fit(model.net, x, data.labels, (), with_states=False)
+    assert not bare.readouts.any() and bare.readouts.shape == model.plan.readouts.shape
+    np.testing.assert_allclose(bare.inputs, model.plan.inputs)  # the same first stage
+    z = np.random.default_rng(0).normal(size=(3, model.config.hidden_size))
+    skill, t, cue = np.array([0, 1, 2]), np.array([0, 4, 20]), x[:3, 0]
+    np.testing.assert_allclose(bare.read(z, t, skill, cue), bare.read(2 * z, t, skill, cue))  # states unread

@@ -14,14 +14,15 @@ motion, expects the locked arm to stay. Each row is scored by the benchmark's ow
   0 the template alone), and the rival fitted as one model for every skill;
 - the network's own offline plan, recalled from the cue, as the template, plus a linear one-step
   predictor of the residual, pooled or per skill; and the network's plan recall, the served mode
-  that grew out of this probe (its offline hidden states read out per skill recognised from the
-  first observation, with per-skill departure pathways: models/plan.py); one row per training.
+  that grew out of this probe (models/plan.py), and the same with the network's part taken out
+  (the input and departure pathways alone, a linear model); one row per training.
 
     python -m experiments.varied.plan_probe DATA_DIR [--context hidden] [--seeds 3]
 """
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +43,7 @@ from models.config import PRECISE
 from models.detector_base import DetectorBase, episode_folds
 from models.normaliser import Normaliser
 from models.one_step import ONE_STEP_RIDGES, TemplateResidualOneStep, delay_embed, fit_one_step
+from models.plan import PlanMemory
 from models.recall import offline_recall
 
 LAGS = 2  # the pooled linear model's choice on the demonstrations (models.one_step.fit_one_step)
@@ -132,6 +134,17 @@ def skill_recognition(bench: VariedBenchmark, norm: Normaliser) -> float:
     return float((recogniser.predict(norm.normalise(bench.test.data)[:, 0]) == bench.test.labels).mean())
 
 
+def plan_without_states(model: NeuralASM, demos: np.ndarray, skills: np.ndarray) -> Method:
+    """Plan recall with the network's part taken out (R_s = 0): the input pathway per step of the
+    context and the departure pathways alone, a linear model. What the served mode gains over it
+    is what the network's recalled states add."""
+    bare = copy.copy(model)
+    bare.plan = PlanMemory.fit(model.net, demos, skills, model.plan.context, model.config.seed, with_states=False)
+    plan = next(m for m in neural_asm_methods(bare, "nasm", "") if m.name == "nasm_plan")
+    return Method("plan_without_states", "plan recall without the network's states (input and departure "
+                  "pathways alone)", False, plan.expected)
+
+
 def row(method: Method, bench: VariedBenchmark, norm: Normaliser, name: str | None = None) -> dict:
     """One method scored by the benchmark's own rule, its energies computed once for every set,
     the validation faults included (no pair of rivals is formed: the probe compares, it does not
@@ -168,6 +181,7 @@ def main(data: Path, context: str = "observed", seeds: int = typer.Option(3, min
         own = model.normaliser.normalise(bench.demos.data)
         plans = [network_plan_residual(model, own, skills, per_skill) for per_skill in (False, True)]
         plans += [m for m in neural_asm_methods(model, "nasm", "featured network") if m.name == "nasm_plan"]
+        plans.append(plan_without_states(model, own, skills))
         rows += [row(m, bench, model.normaliser, f"{m.name} (training {seed})") for m in plans]
     print("| method | held-out MSE | joints | validation faults detected | visible detected | locks | consequential "
           "| normal flagged |")
