@@ -11,7 +11,8 @@ from __future__ import annotations
 from models.detector_base import Detector
 from models.one_step import LinearOneStep, TemplateResidualOneStep
 from models.sequence_detectors import LSTMVAE, GRUOneStep, RecurrentConfig
-from models.templates import ConditionalTemplate, CueNearestDemos, CueTemplate, NearestDemos, PerSkillZScore
+from models.templates import (ConditionalTemplate, CueNearestDemos, CueTemplate, NearestDemos, PerSkillZScore,
+                              StepRidgeTemplate)
 
 __all__ = [
     "Detector",
@@ -20,6 +21,7 @@ __all__ = [
     "CueTemplate",
     "CueNearestDemos",
     "TemplateResidualOneStep",
+    "StepRidgeTemplate",
     "NearestDemos",
     "LinearOneStep",
     "GRUOneStep",
@@ -36,6 +38,7 @@ def all_detectors() -> list[Detector]:
         ConditionalTemplate(),
         CueTemplate(),
         TemplateResidualOneStep(),
+        TemplateResidualOneStep(template=StepRidgeTemplate),
         NearestDemos(),
         CueNearestDemos(),
         LinearOneStep(),

@@ -21,10 +21,11 @@ import numpy as np
 
 from models.baselines import LinearOneStep as RidgeOneStep
 from models.detector_base import DetectorBase, episode_folds
-from models.templates import ConditionalTemplate
+from models.templates import ConditionalTemplate, StepRidgeTemplate
 
 ONE_STEP_RIDGES = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
 ONE_STEP_LAGS = (1, 2, 3)
+STEP_RIDGE_RESIDUAL = "step_ridge_template_residual"
 
 
 def delay_embed(x: np.ndarray, lags: int) -> np.ndarray:
@@ -98,14 +99,18 @@ class TemplateResidualOneStep(DetectorBase):
     name = "template_residual_one_step"
     label = "conditional template + one-step residual predictor"
 
-    def __init__(self, residual_weight: float = 1.0) -> None:
+    def __init__(self, residual_weight: float = 1.0, template: type[ConditionalTemplate | StepRidgeTemplate]
+                 = ConditionalTemplate) -> None:
         """``residual_weight`` scales the residual's prediction: 1 is the baseline, 0 the template
-        alone (experiments/varied/plan_probe.py measures what lies between)."""
+        alone (experiments/varied/plan_probe.py measures what lies between). With ``template=
+        StepRidgeTemplate`` it is plan recall without the network (`STEP_RIDGE_RESIDUAL`)."""
         super().__init__()
-        self.residual_weight = residual_weight
+        self.residual_weight, self.template_class = residual_weight, template
+        if template is StepRidgeTemplate:
+            self.name, self.label = STEP_RIDGE_RESIDUAL, "one-ridge conditional template + one-step residual predictor"
 
     def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
-        self.template = ConditionalTemplate().fit(x, skills, self.context_channels, seed)
+        self.template = self.template_class().fit(x, skills, self.context_channels, seed)
         residuals = self.template.cross_fitted_residuals(x, skills, seed)
         self.one_step = fit_one_step(residuals, skills, seed)
 

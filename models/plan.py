@@ -29,20 +29,14 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from sklearn.linear_model import LogisticRegression, RidgeCV
+from sklearn.linear_model import LogisticRegression
 from sklearn.preprocessing import StandardScaler
 
 from models.detector_base import episode_folds
 from models.one_step import fit_one_step
 from models.recall import Recaller
+from models.step_maps import apply_maps, input_features, ridge_maps, step_codes, with_one
 from models.tpc import TemporalPC
-
-READOUT_RIDGES = np.logspace(-2, 4, 13)
-
-
-def _with_one(a: np.ndarray) -> np.ndarray:
-    return np.concatenate([a, np.ones(a.shape[:-1] + (1,))], axis=-1)
-
 
 @dataclass(frozen=True)
 class PlanMemory:
@@ -90,38 +84,38 @@ class PlanMemory:
         states = _offline_states(net, x)
 
         def maps(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            b = _ridge(inputs[rows], x[rows], labels[rows], names)
+            b = ridge_maps(inputs[rows], x[rows], labels[rows], names)
             if not with_states:
                 return b, np.zeros((len(names), states.shape[2] + 1, x.shape[2]))
             left = np.empty_like(x[rows])
             for train, test in episode_folds(labels[rows], seed):
-                fold = _ridge(inputs[rows][train], x[rows][train], labels[rows][train], names)
-                left[test] = x[rows][test] - _apply(fold, inputs[rows][test], skill[rows][test])
-            return b, _ridge(states[rows], left, labels[rows], names)
+                fold = ridge_maps(inputs[rows][train], x[rows][train], labels[rows][train], names)
+                left[test] = x[rows][test] - apply_maps(fold, inputs[rows][test], skill[rows][test])
+            return b, ridge_maps(states[rows], left, labels[rows], names)
 
         b, r = maps(np.arange(len(x)))
         departures = np.empty_like(x)
         for train, test in episode_folds(labels, seed):
             b_fold, r_fold = maps(train)
-            departures[test] = x[test] - _apply(b_fold, inputs[test], skill[test]) - _apply(r_fold, states[test], skill[test])
+            departures[test] = x[test] - apply_maps(b_fold, inputs[test], skill[test]) - apply_maps(r_fold, states[test], skill[test])
         one_step = fit_one_step(departures, labels, seed)
         pathways = np.stack([one_step.models[s].weights[:, : x.shape[2]] for s in names])
         return cls(names, tuple(int(i) for i in context), _fit_recognition(x[:, 0], labels, names), b, r, pathways)
 
     def recognise(self, cue: np.ndarray) -> np.ndarray:
         """(B,) index of the skill each normalised first observation (B, D) is recognised as."""
-        return np.argmax(_with_one(cue) @ self.recognition.T, axis=1)
+        return np.argmax(with_one(cue) @ self.recognition.T, axis=1)
 
     def read(self, z: np.ndarray, t: np.ndarray, skill: np.ndarray, cue: np.ndarray) -> np.ndarray:
         """The plan (B, D) at each row's step t (B,) from hidden states z (B, H) and the
         normalised cue (B, D); past the demonstrations' length the last step's map holds."""
         steps = step_codes(int(t.max()) + 1, self.steps)[t]
-        return (_apply(self.inputs, input_features(cue[:, list(self.context)], steps), skill)
-                + _apply(self.readouts, np.tanh(z), skill))
+        return (apply_maps(self.inputs, input_features(cue[:, list(self.context)], steps), skill)
+                + apply_maps(self.readouts, np.tanh(z), skill))
 
     def depart(self, past: np.ndarray, skill: np.ndarray) -> np.ndarray:
         """The departure expected next (B, D) from the last L departures, newest first (B, L * D)."""
-        return _apply(self.departures, past, skill)
+        return apply_maps(self.departures, past, skill)
 
 
 def _fit_recognition(cue: np.ndarray, labels: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
@@ -146,38 +140,6 @@ def _offline_states(net: TemporalPC, x: np.ndarray) -> np.ndarray:
         recaller.step(x[:, t] if t == 0 else None)
         states.append(np.tanh(recaller.zhat).astype(np.float64))
     return np.stack(states, axis=1)
-
-
-def step_codes(length: int, steps: int) -> np.ndarray:
-    """(length, steps): the one-hot of each step among the demonstrations' `steps`, the last
-    step's past their end."""
-    return np.eye(steps)[np.minimum(np.arange(length), steps - 1)]
-
-
-def input_features(context: np.ndarray, codes: np.ndarray) -> np.ndarray:
-    """[e_t, e_t (x) c] of step codes (..., T) and contexts (..., C) that broadcast together:
-    (..., T * (C + 1))."""
-    outer = codes[..., :, None] * context[..., None, :]
-    codes = np.broadcast_to(codes, outer.shape[:-1])
-    return np.concatenate([codes, outer.reshape(outer.shape[:-2] + (-1,))], axis=-1)
-
-
-def _ridge(features: np.ndarray, x: np.ndarray, labels: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
-    """(K, F + 1, D): per skill, x (N, T, D) ridge-regressed on features (N, T, F), the ridge by
-    generalised cross-validation."""
-    out = []
-    for s in names:
-        rows = labels == s
-        ridge = RidgeCV(alphas=READOUT_RIDGES).fit(features[rows].reshape(-1, features.shape[-1]),
-                                                   x[rows].reshape(-1, x.shape[-1]))
-        out.append(np.vstack([ridge.coef_.T, ridge.intercept_[None]]))
-    return np.stack(out)
-
-
-def _apply(maps: np.ndarray, features: np.ndarray, skill: np.ndarray) -> np.ndarray:
-    """Each row's features (B, F) or (B, T, F) through its skill's map (K, F + 1, D)."""
-    eq = "bf,bfd->bd" if features.ndim == 2 else "btf,bfd->btd"
-    return np.einsum(eq, _with_one(features), maps[skill])
 
 
 class PlanRecaller:

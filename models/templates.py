@@ -8,6 +8,8 @@
   nearest (k by leave-one-out error).
 - ``CueTemplate``, ``CueNearestDemos``: the same two on the whole first observation (the cue
   the Neural ASM gets), so the start posture counts as context too.
+- ``StepRidgeTemplate``: per skill, every step a linear function of the context, all steps in one
+  ridge regression with one strength: plan recall's input pathway without the network.
 
 Without context channels ``ConditionalTemplate`` and ``NearestDemos`` reduce to the per-skill mean.
 """
@@ -20,6 +22,7 @@ from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 
 from models.detector_base import DetectorBase, episode_folds
+from models.step_maps import apply_maps, input_features, ridge_maps, step_codes
 
 RIDGE_ALPHAS = np.logspace(-3, 4, 15)
 NEIGHBOUR_COUNTS = (1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30, 40)
@@ -164,3 +167,32 @@ class CueNearestDemos(NearestDemos):
 
     def context(self, x: np.ndarray) -> np.ndarray:
         return x[:, 0, :]
+
+
+class StepRidgeTemplate(DetectorBase):
+    """Per skill, each step's observation a linear function of the context, every step in one ridge
+    regression whose single strength generalised cross-validation chooses (``ConditionalTemplate``
+    chooses one per step and channel, and a quadratic form where leave-one-out error prefers it).
+    It is plan recall's input pathway (models/plan.py) without the network, so the Neural ASM's
+    plan recall is measured against its own linear special case."""
+
+    name = "step_ridge_template"
+    label = "conditional template (one ridge per skill over every step)"
+
+    def _features(self, x: np.ndarray) -> np.ndarray:
+        return input_features(self.context(x)[:, None], step_codes(x.shape[1], self.steps)[None])
+
+    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
+        self.maps = ridge_maps(self._features(x), x, skills, tuple(self.skill_names))
+
+    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        return apply_maps(self.maps, self._features(x), np.array([self.skill_names.index(s) for s in skills]))
+
+    def cross_fitted_residuals(self, x: np.ndarray, skills: np.ndarray, seed: int) -> np.ndarray:
+        """x minus the template of a fit that did not see the episode (K folds by episode)."""
+        residuals = np.empty_like(x)
+        for train, test in episode_folds(skills, seed):
+            fold = StepRidgeTemplate().fit(x[train], skills[train], self.context_channels.tolist(), seed)
+            residuals[test] = x[test] - fold.expected(x[test], skills[test])
+        return residuals
+

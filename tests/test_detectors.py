@@ -74,7 +74,7 @@ def mse(x, expected):
 
 def test_all_detectors_are_distinct_and_follow_the_protocol():
     found = all_detectors()
-    assert len({d.name for d in found}) == len(found) == 9
+    assert len({d.name for d in found}) == len(found) == 10
     assert all(isinstance(d, Detector) and d.label for d in found)
 
 

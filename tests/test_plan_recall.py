@@ -93,6 +93,24 @@ def test_a_plan_memory_of_the_wrong_shape_is_refused(model):
         PlanMemory(plan.skills, (99,), plan.recognition, plan.inputs, plan.readouts, plan.departures)
 
 
+def test_without_states_plan_recall_is_the_one_ridge_template_with_its_residual_predictor(rng):
+    """The benchmark's rival `step_ridge_template_residual` is plan recall's linear special case:
+    the same expectations, told the skill where plan recall recognises it."""
+    from models.one_step import TemplateResidualOneStep
+    from models.templates import StepRidgeTemplate
+
+    steps, maps = 10, rng.normal(size=(10, 2, 3))
+    c = rng.uniform(-1, 1, (30, 2))
+    x = np.concatenate([np.einsum("nc,tcd->ntd", c, maps), np.repeat(c[:, None], steps, axis=1)], axis=2)
+    x += 0.05 * rng.normal(size=x.shape).cumsum(axis=1)
+    m = NeuralASM.fit(x, [f"c{i}" for i in range(5)], CONFIG, progress=False, context_channels=["c3", "c4"])
+    m.plan = PlanMemory.fit(m.net, m.normaliser.normalise(x), None, m.plan.context, CONFIG.seed, with_states=False)
+    xn = m.normaliser.normalise(x)
+    skills = np.full(len(x), "all")
+    rival = TemplateResidualOneStep(template=StepRidgeTemplate).fit(xn, skills, [3, 4], CONFIG.seed)
+    np.testing.assert_allclose(xn - m.errors(x, "plan"), rival.expected(xn, skills), atol=1e-7)
+
+
 def test_the_plan_follows_the_context_step_by_step(rng):
     """Episodes whose every step is its own linear function of two context channels read at the
     first step (where the object is, where it must go): the plan expects held-out episodes of new

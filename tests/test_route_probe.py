@@ -39,3 +39,16 @@ def test_an_expectation_that_knows_the_route_is_right_and_one_that_follows_is_la
 
     wrong = across_moves(_model(lambda s: np.concatenate([s[:, :1], 2 * s[:, :-1] - s[:, 1:]], axis=1)), x, 0)
     assert wrong["right"] == 0.0
+
+
+def test_routes_set_by_a_context_channel_are_named_from_it_and_found_without_labels(rng):
+    from experiments.varied.route_probe import route_naming
+
+    route = np.arange(40) % 2 == 0
+    x = rng.normal(size=(40, 8, 4))
+    x[:, 0, 3] = np.where(route, 1.0, -1.0) + 0.1 * rng.normal(size=40)  # the context channel decides the route
+    x[:, 3:, 0] += np.where(route, 4.0, -4.0)[:, None]  # and the detour goes that way
+    told = route_naming(x, route, [3])
+    assert told["context"] == 1.0 and told["two_means"] == 1.0
+    x[:, 0, 3] = rng.normal(size=40)  # a cue that says nothing of the route
+    assert route_naming(x, route, [3])["context"] < 0.8
