@@ -25,7 +25,6 @@ from models.templates import ConditionalTemplate, StepRidgeTemplate
 
 ONE_STEP_RIDGES = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
 ONE_STEP_LAGS = (1, 2, 3)
-STEP_RIDGE_RESIDUAL = "step_ridge_template_residual"
 
 
 def delay_embed(x: np.ndarray, lags: int) -> np.ndarray:
@@ -103,11 +102,13 @@ class TemplateResidualOneStep(DetectorBase):
                  = ConditionalTemplate) -> None:
         """``residual_weight`` scales the residual's prediction: 1 is the baseline, 0 the template
         alone (experiments/varied/plan_probe.py measures what lies between). With ``template=
-        StepRidgeTemplate`` it is plan recall without the network (`STEP_RIDGE_RESIDUAL`)."""
+        StepRidgeTemplate`` it is plan recall without the network, the rival
+        `step_ridge_template_residual`."""
         super().__init__()
         self.residual_weight, self.template_class = residual_weight, template
         if template is StepRidgeTemplate:
-            self.name, self.label = STEP_RIDGE_RESIDUAL, "one-ridge conditional template + one-step residual predictor"
+            self.name = "step_ridge_template_residual"
+            self.label = "one-ridge conditional template + one-step residual predictor"
 
     def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
         self.template = self.template_class().fit(x, skills, self.context_channels, seed)
