@@ -80,7 +80,7 @@ class PlanMemory:
         labels = np.asarray(["all"] * len(x) if skills is None else skills, dtype=str)
         names = tuple(str(s) for s in np.unique(labels))
         skill = np.array([names.index(s) for s in labels])
-        inputs = input_features(x[:, None, 0, list(context)], step_codes(x.shape[1], x.shape[1])[None])
+        inputs = input_features(x[:, None, 0, list(context)], step_codes(np.arange(x.shape[1]), x.shape[1])[None])
         states = _offline_states(net, x)
 
         def maps(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -109,8 +109,7 @@ class PlanMemory:
     def read(self, z: np.ndarray, t: np.ndarray, skill: np.ndarray, cue: np.ndarray) -> np.ndarray:
         """The plan (B, D) at each row's step t (B,) from hidden states z (B, H) and the
         normalised cue (B, D); past the demonstrations' length the last step's map holds."""
-        steps = step_codes(int(t.max()) + 1, self.steps)[t]
-        return (apply_maps(self.inputs, input_features(cue[:, list(self.context)], steps), skill)
+        return (apply_maps(self.inputs, input_features(cue[:, list(self.context)], step_codes(t, self.steps)), skill)
                 + apply_maps(self.readouts, np.tanh(z), skill))
 
     def depart(self, past: np.ndarray, skill: np.ndarray) -> np.ndarray:

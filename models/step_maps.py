@@ -18,10 +18,12 @@ def with_one(a: np.ndarray) -> np.ndarray:
     return np.concatenate([a, np.ones(a.shape[:-1] + (1,))], axis=-1)
 
 
-def step_codes(length: int, steps: int) -> np.ndarray:
-    """(length, steps): the one-hot of each step among the demonstrations' `steps`, the last
+def step_codes(t: np.ndarray, steps: int) -> np.ndarray:
+    """(..., steps): the one-hot of each step index t among the demonstrations' `steps`, the last
     step's past their end."""
-    return np.eye(steps)[np.minimum(np.arange(length), steps - 1)]
+    codes = np.zeros(np.shape(t) + (steps,))
+    np.put_along_axis(codes, np.minimum(t, steps - 1)[..., None], 1.0, axis=-1)
+    return codes
 
 
 def input_features(context: np.ndarray, codes: np.ndarray) -> np.ndarray:
@@ -45,6 +47,10 @@ def ridge_maps(features: np.ndarray, x: np.ndarray, labels: np.ndarray, names: t
 
 
 def apply_maps(maps: np.ndarray, features: np.ndarray, skill: np.ndarray) -> np.ndarray:
-    """Each row's features (B, F) or (B, T, F) through its skill's map (K, F + 1, D)."""
-    eq = "bf,bfd->bd" if features.ndim == 2 else "btf,bfd->btd"
-    return np.einsum(eq, with_one(features), maps[skill])
+    """Each row's features (B, ..., F) through its skill's map (K, F + 1, D): one product per skill,
+    no copy of the maps per row."""
+    out = np.empty(features.shape[:-1] + (maps.shape[2],))
+    for k in np.unique(skill):
+        rows = skill == k
+        out[rows] = with_one(features[rows]) @ maps[k]
+    return out

@@ -180,7 +180,7 @@ class StepRidgeTemplate(DetectorBase):
     label = "conditional template (one ridge per skill over every step)"
 
     def _features(self, x: np.ndarray) -> np.ndarray:
-        return input_features(self.context(x)[:, None], step_codes(x.shape[1], self.steps)[None])
+        return input_features(self.context(x)[:, None], step_codes(np.arange(x.shape[1]), self.steps)[None])
 
     def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
         self.maps = ridge_maps(self._features(x), x, skills, tuple(self.skill_names))
