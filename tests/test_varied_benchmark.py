@@ -257,3 +257,11 @@ def test_an_unknown_context_is_refused_before_anything_is_simulated(tmp_path):
     with pytest.raises(ValueError, match="context must be one of"):
         load_varied_benchmark(tmp_path / "data", "foo")
     assert not (tmp_path / "data").exists()
+
+
+def test_the_featured_mode_is_the_one_that_flags_most_validation_faults():
+    from experiments.varied.run import featured_mode
+
+    assert featured_mode({"nasm_offline": 0.41, "nasm_online": 0.34, "nasm_plan": 0.52}) == "nasm_plan"
+    assert featured_mode({"nasm_offline": 0.41, "nasm_online": 0.46}) == "nasm_online"
+    assert featured_mode({"nasm_offline": None, "nasm_plan": None}) == "nasm_online"  # no validation faults
