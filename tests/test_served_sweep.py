@@ -10,7 +10,7 @@ import pytest
 from experiments.fault_sweep.rate_figures import write_latency_figure
 from experiments.fault_sweep.rate import markdown, spread
 from experiments.fault_sweep.served import (Flagged, Onsets, each_ms, flagged, flagged_over_resplits, from_visible,
-                                            latency_ms, percentiles_ms, subsampled)
+                                            latency_ms, percentiles_ms, quiet, subsampled)
 from models.fault import flag_steps
 from models.sequences import Sequences
 
@@ -78,7 +78,8 @@ def test_latency_from_the_visible_onset():
     assert from_visible(early, onsets, 40.0)["median_ms"] == -25.0  # -100 and +50 ms
     at_2 = Flagged(np.array([True, False, False, False]), np.array([1, -1, -1, -1]),
                    np.array([0.375, np.nan, np.nan, np.nan]), np.zeros((4, 1, 4)))
-    entry = latency_ms(at_2, onsets, 2.0)
+    entry = latency_ms(at_2, onsets, 2.0, 1)
+    assert entry["quiet_100ms"] == 1
     assert entry["median_ms"] == 375.0 and entry["from_visible"]["median_ms"] == 225.0  # 0.5 s - 11 / 40 s
 
 
@@ -87,7 +88,8 @@ def evaluated(lock_p95_from_visible: float, locks_before_visible: int) -> dict:
     def kind(p95: float, before: int) -> dict:
         return {"median_ms": 0.0, "p95_ms": 500.0, "from_visible": {"median_ms": -25.0, "p95_ms": p95,
                                                                      "flagged_before_visible": before,
-                                                                     "never_visible": 3}}
+                                                                     "never_visible": 3},
+                "quiet_100ms": before // 10}
 
     return {"normal_episodes_flagged": 0.03, "normal_episodes_flagged_resplits": 0.007,
             "detection": {"lock": 0.997, "falling_object": 1.0}, "isolation_at_detection": 0.95,
@@ -103,6 +105,27 @@ def test_latency_from_the_visible_onset_across_trainings_and_in_the_table():
                       "rates": {"40": {"across_trainings": {"online": across}}}})
     assert "| 40 Hz | online | -25 / 160 (150-170) | 625 (600-650) | -25 / 0 | 0 |" in table
     assert "3 locks and 3 falling objects never depart so far" in table
+    assert across["lock_quiet_100ms"] == {"mean": 62.5, "min": 60, "max": 65}
+    assert "| 40 Hz | online | 62 (60-65) | 0 |" in table
+
+
+def test_quiet_faults_stay_within_the_served_spread_for_100_ms(calibrated):
+    """A fault counts as quiet when no channel departs from its twin by more than the calibration's
+    one-step spread at any observation from its onset to 100 ms after it."""
+    model, test = calibrated
+    steps, width = test.data.shape[1:]
+    spread = model.calibration("online", 1).error_std[:steps] * model.normaliser.std  # channel units
+    departure = np.zeros((4, steps, width))
+    departure[0, 4, 1] = 3.0 * spread[4, 1]  # loud at its onset
+    departure[1, 4:] = 0.5 * spread[4:]  # within the spread throughout
+    departure[2, 9, 2] = 3.0 * spread[9, 2]  # loud, but only long after its onset
+    departure[3, 3, 0] = 3.0 * spread[3, 0]  # loud before its onset: not counted
+    onsets = Onsets(Sequences(test.data[:4], test.labels[:4], test.channel_names, rate_hz=model.rate_hz),
+                    np.arange(4), np.full(4, 4 / model.rate_hz), np.full(4, np.nan), departure)
+    window = 1.5 / model.rate_hz  # steps 4 and 5
+    assert quiet(model, "online", onsets, window) == 3
+    departure[1, 5, 0] = 1.1 * spread[5, 0]
+    assert quiet(model, "online", onsets, window) == 2
 
 
 def test_flags_are_the_services_and_count_from_the_onset(calibrated):
