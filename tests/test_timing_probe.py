@@ -1,0 +1,68 @@
+"""The timing probe: plan recall's linear part told the route and the speed, or inferring the speed."""
+
+import numpy as np
+
+from experiments.varied.timing_probe import GRID, TOLD, InferredSpeedPlan, ToldPlan, plan_context
+from models.normaliser import Normaliser
+from models.one_step import TemplateResidualOneStep
+from models.templates import StepRidgeTemplate
+
+STEPS = 12
+
+
+def _warped(rng, n: int = 40) -> np.ndarray:
+    """Episodes of one skill: an arm channel that ramps from 0 to a context-set height at the
+    episode's speed (its phase is speed x step), a context channel, noise, then the two told
+    channels (route side 0: no post; the speed)."""
+    speed = rng.uniform(0.8, 1.2, n)
+    height = rng.uniform(1.0, 2.0, n)
+    phase = np.minimum(speed[:, None] * np.arange(STEPS)[None] / 6.0, 1.0)
+    x = np.zeros((n, STEPS, 3 + len(TOLD)))
+    x[..., 0] = height[:, None] * phase
+    x[..., 1] = height[:, None]
+    x[..., 2] = 0.01 * rng.normal(size=(n, STEPS))
+    x[..., 3], x[..., 4] = 0.0, speed[:, None]
+    return x
+
+
+def test_the_context_form_is_the_benchmarks_rival_on_the_other_channels(rng):
+    x = _warped(rng)
+    x[..., 3] = np.where(rng.uniform(size=len(x)) < 0.5, -1.0, 1.0)[:, None]  # a route told, but not used
+    norm = Normaliser.fit(x)
+    xn, skills = norm.normalise(x), np.full(len(x), "ramp")
+    told = ToldPlan("context", norm).fit(xn, skills, [1])
+    rival = TemplateResidualOneStep(template=StepRidgeTemplate).fit(xn[..., :3], skills, [1])
+    expected = told.expected(xn, skills)
+    np.testing.assert_allclose(expected[..., :3], rival.expected(xn[..., :3], skills), atol=1e-6)
+    np.testing.assert_array_equal(expected[..., 3:], xn[..., 3:])  # the told channels, expected exactly
+
+
+def test_the_forms_add_the_told_values_as_they_say():
+    context, route, speed = np.ones((3, 2)), np.array([1.0, -1.0, 0.0]), np.array([0.8, 1.0, 1.2])
+    assert plan_context(context, route, speed, "context").shape == (3, 2)
+    assert np.array_equal(plan_context(context, route, speed, "route")[:, 2], route)
+    assert plan_context(context, route, speed, "speed").shape == (3, 7)
+    bilinear = plan_context(context, route, speed, "bilinear").reshape(3, 5, 4)  # basis x [context, route, 1]
+    np.testing.assert_allclose(bilinear[..., 2], bilinear[..., 3] * route[:, None])
+
+
+def test_the_speed_is_told_by_the_motion_once_it_shows(rng):
+    """Told each demonstration's speed, the bilinear plan fits the warped ramps; on new episodes
+    the speed inferred from the steps before each step is the prior's (1) at the start, and half
+    as far from the true one once the ramp has shown it; its plan then expects the ramp as the told one does."""
+    x, new = _warped(rng, 60), _warped(rng, 30)
+    norm = Normaliser.fit(x)
+    xn, skills = norm.normalise(x), np.full(len(x), "ramp")
+    inferred = InferredSpeedPlan(norm, name_route=False).fit(xn, skills, [1])
+    told = ToldPlan("bilinear", norm).fit(xn, skills, [1])
+    nn, new_skills = norm.normalise(new), np.full(len(new), "ramp")
+    speeds = inferred.inferred_speeds(nn, new_skills)
+    assert np.all(speeds[:, 0] == GRID[np.argmin(np.abs(GRID - 1.0))])
+    truth = new[:, 0, -1]
+    rms = np.sqrt(((speeds - truth[:, None]) ** 2).mean(axis=0))
+    assert rms[4] < 0.5 * rms[0]
+    late = slice(5, None)
+    error_inferred = ((nn - inferred.expected(nn, new_skills))[:, late, 0] ** 2).mean()
+    error_told = ((nn - told.expected(nn, new_skills))[:, late, 0] ** 2).mean()
+    error_context = ((nn - ToldPlan("context", norm).fit(xn, skills, [1]).expected(nn, new_skills))[:, late, 0] ** 2).mean()
+    assert error_inferred < 2 * error_told < error_context
