@@ -59,6 +59,9 @@ class VariedJob:
     # with `same_start`, the start posture (what the first observation shows) stays the seed's.
     replicate: int = 0
     same_start: bool = False
+    # An execution speed in place of the context's (None: the context's own): replicates at
+    # other speeds tell what an oracle owes to knowing it (experiments/varied/ceiling.py).
+    speed: float | None = None
 
 
 def _rng(job: VariedJob, stream: int) -> np.random.Generator:
@@ -68,7 +71,8 @@ def _rng(job: VariedJob, stream: int) -> np.random.Generator:
 
 
 def context_of(job: VariedJob) -> Context:
-    return sample_context(job.skill, _rng(job, 0), job.out_of_range)
+    ctx = sample_context(job.skill, _rng(job, 0), job.out_of_range)
+    return ctx if job.speed is None else replace(ctx, speed=float(job.speed))
 
 
 class _CubeYaw:

@@ -197,6 +197,22 @@ def test_ceiling_oracles_see_what_the_context_explains(bench, tmp_path):
     wrong_cube = mean["episode"]["per_family"]["wrong_cube"]
     assert wrong_cube["visible"] > 0 and wrong_cube["detection_visible"] >= 0.5  # a cube 6-10 cm off the reported pose
     assert set(mean["lower_floors"]) == {"0.01", "0.002"} and "floor 0.002" in ceiling_markdown(result)
+    # not told the speed, the same exact plan expects the held-out episodes worse
+    told, blind = (result["without_speed"]["oracles"][k] for k in ("conditional_mean_given_start",
+                                                                   "plan_given_start_without_speed"))
+    assert blind["held_out_mse"] > told["held_out_mse"]
+    assert sorted(p.name for p in tmp_path.glob("replicates_speed_*_test.mcap")) == \
+        [f"replicates_speed_{k}_test.mcap" for k in range(4)]
+    assert "plan given start without speed" in ceiling_markdown(result)
+
+
+def test_a_job_at_another_speed_keeps_the_rest_of_its_context():
+    job = VariedJob(VARIED_SKILLS[2], 10_005, replicate=100, same_start=True)
+    own, slower = run_job(job), run_job(replace(job, speed=0.85))
+    assert slower.task["speed"] == 0.85 != own.task["speed"]
+    assert {k: v for k, v in slower.task.items() if k != "speed"} == {k: v for k, v in own.task.items() if k != "speed"}
+    np.testing.assert_array_equal(slower.observations[0, :7], own.observations[0, :7])  # the same start posture
+    assert not np.allclose(slower.observations[5], own.observations[5])  # elsewhere along the path by step 5
 
 
 @pytest.mark.parametrize("mode", ["online", "plan"])

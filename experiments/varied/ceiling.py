@@ -21,6 +21,10 @@ energies from the precision split, the served episode threshold at 1 % on the ca
 - *conditional mean given the start*: the same with ``E[x | context, start posture]``, from the
   same-start replicates: what an expectation cued by the first observation could reach.
 
+Both are told the execution speed, which no channel shows before the arm moves. Beside the
+given-start oracle, `without_speed` scores the same exact plan averaged over replicates at
+four speeds (``SPEED_REPLICATES``): what knowing the speed is worth to it.
+
 Its held-out error (mean squared normalised residual after the first step, the column the
 benchmark reports for every method) is the floor that no expectation of the episode can go below.
 """
@@ -43,6 +47,7 @@ from models.scoring import energy
 from models.sequences import Sequences
 from pipelines.episodes import as_sequences
 from runtime.parallel import Parallel
+from sim.config import SIM
 from sim.dataset import load_episodes, write_cache, write_mcap
 from sim.episode import Episode
 from sim.varied import channel_groups, context_columns
@@ -50,13 +55,20 @@ from sim.varied_sets import VariedJob, run_job
 
 LOWER_FLOORS = (0.01, 0.002)  # normalised units, against ScoringConfig.error_std_floor (0.05)
 REPLICATES = {"fresh": {"replicate": 1}, "same_start": {"replicate": 2, "same_start": True}}
+# The same start posture at four execution speeds, strata of the task's uniform 1 +- range: their
+# mean is the exact plan of an episode whose speed is not known (`without_speed`).
+SPEED_STRATA = tuple(1.0 + SIM.varied.speed * q for q in (-0.75, -0.25, 0.25, 0.75))
+SPEED_REPLICATES = {f"speed_{k}": {"replicate": 100 + k, "same_start": True, "speed": speed}
+                    for k, speed in enumerate(SPEED_STRATA)}
 
 
 def replicate_jobs(bench: VariedBenchmark, kind: str) -> dict[str, list[VariedJob]]:
-    """One replicate (of REPLICATES' ``kind``) of every scored episode: normals, out-of-range
-    ones, and each fault's twin."""
+    """One replicate (of REPLICATES' or SPEED_REPLICATES' ``kind``) of every scored episode:
+    normals, out-of-range ones, and each fault's twin."""
+    options = {**REPLICATES, **SPEED_REPLICATES}[kind]
+
     def jobs(s: Sequences, **kw: bool) -> list[VariedJob]:
-        return [VariedJob(str(skill), int(seed), **REPLICATES[kind], **kw) for skill, seed in zip(s.labels, s.seeds)]
+        return [VariedJob(str(skill), int(seed), **options, **kw) for skill, seed in zip(s.labels, s.seeds)]
 
     return {"precision": jobs(bench.precision), "calibration": jobs(bench.calibration), "test": jobs(bench.test),
             "ood": jobs(bench.ood, out_of_range=True), "faults": jobs(bench.twins)}
@@ -81,20 +93,21 @@ def _replicates(jobs: list[VariedJob], name: str, parallel: Parallel, cache: Pat
     return results
 
 
-def simulate_replicates(bench: VariedBenchmark, parallel: Parallel = Parallel(), cache: Path | None = None
+def simulate_replicates(bench: VariedBenchmark, parallel: Parallel = Parallel(), cache: Path | None = None,
+                        kinds: tuple[str, ...] = tuple(REPLICATES)
                         ) -> tuple[VariedBenchmark, dict[str, dict[str, Sequences]], dict[str, int]]:
-    """Both kinds of replicates as Sequences of the benchmark's channels, with the benchmark
-    restricted to the episodes that have both (a replicate the simulation refuses, at its
+    """The replicates of ``kinds`` as Sequences of the benchmark's channels, with the benchmark
+    restricted to the episodes that have all of them (a replicate the simulation refuses, at its
     velocity limits or in IK, drops its episode; the drops are counted per set)."""
     results = {}
-    for kind in REPLICATES:
+    for kind in kinds:
         for key, jobs in replicate_jobs(bench, kind).items():
             results[kind, key] = _replicates(jobs, f"replicates_{kind}_{key}", parallel, cache)
-    kept = {key: np.logical_and.reduce([[isinstance(r, Episode) for r in results[kind, key]] for kind in REPLICATES])
+    kept = {key: np.logical_and.reduce([[isinstance(r, Episode) for r in results[kind, key]] for kind in kinds])
             for key in SETS}
     bench = _keep(bench, kept)
     reps = {}
-    for kind in REPLICATES:
+    for kind in kinds:
         reps[kind] = {}
         for key in SETS:
             episodes = [r for r, k in zip(results[kind, key], kept[key]) if k]
@@ -126,6 +139,30 @@ def oracle_errors(bench: VariedBenchmark, reps: dict[str, dict[str, Sequences]],
         mean["faults"] = (x["faults"] - twin) + (twin - r["faults"]) / np.sqrt(2.0)
         out[name] = mean
     return out
+
+
+def without_speed_errors(bench: VariedBenchmark, reps: dict[str, dict[str, Sequences]], norm: Normaliser
+                         ) -> dict[str, np.ndarray]:
+    """Normalised residuals (N, T, D) of the exact plan not told the speed: each episode less the
+    mean of its replicates at the `SPEED_STRATA`, a fault less its twin's. The replicates' own
+    noise is left in (a quarter of its variance), so this oracle is scored a little pessimistically."""
+    return {key: norm.normalise(getattr(bench, key).data)
+            - np.mean([norm.normalise(reps[kind][key].data) for kind in SPEED_REPLICATES], axis=0) for key in SETS}
+
+
+def without_speed(bench: VariedBenchmark, parallel: Parallel = Parallel(), alpha: float = ALPHA,
+                  cache: Path | None = None) -> dict:
+    """What the given-start oracle owes to knowing the execution speed, which no channel shows
+    before the arm moves: it beside the same exact plan averaged over the speeds, on the episodes
+    whose replicates simulated at every speed (the speed-blind plan uses no observation after
+    the cue, so it is a reference, not a ceiling)."""
+    kept, reps, dropped = simulate_replicates(bench, parallel, cache, tuple(REPLICATES) + tuple(SPEED_REPLICATES))
+    norm = Normaliser.fit(kept.demos.data)
+    errors = {"conditional_mean_given_start": oracle_errors(kept, reps, norm)["conditional_mean_given_start"],
+              "plan_given_start_without_speed": without_speed_errors(kept, reps, norm)}
+    return {"speeds": list(SPEED_STRATA), "replicates_failed": dropped,
+            "oracles": {name: {"held_out_mse": held_out_error(e["precision"], kept.channel_names)["all"],
+                               **_scored(kept, e, alpha, SCORING.error_std_floor)} for name, e in errors.items()}}
 
 
 def explained_variance(bench: VariedBenchmark, residual: np.ndarray) -> dict[str, float]:
@@ -165,10 +202,10 @@ def ceiling(bench: VariedBenchmark, parallel: Parallel = Parallel(), alpha: floa
     """Every oracle's summaries (the benchmark's keys, at the scoring's own spread floor),
     held-out error and explained variance; its detection with the spreads floored lower
     (``floors``: how much the floor, not the noise, hides); and the episodes dropped."""
-    bench, reps, dropped = simulate_replicates(bench, parallel, cache)
+    result: dict = {"context": bench.context, "alpha": alpha, "spread_floor": SCORING.error_std_floor,
+                    "without_speed": without_speed(bench, parallel, alpha, cache), "oracles": {}}
+    bench, reps, result["replicates_failed"] = simulate_replicates(bench, parallel, cache)
     norm = Normaliser.fit(bench.demos.data)
-    result: dict = {"context": bench.context, "alpha": alpha, "replicates_failed": dropped,
-                    "spread_floor": SCORING.error_std_floor, "oracles": {}}
     for name, errors in oracle_errors(bench, reps, norm).items():
         result["oracles"][name] = {
             "held_out_mse": held_out_error(errors["precision"], bench.channel_names)["all"],
@@ -226,4 +263,22 @@ def ceiling_markdown(result: dict) -> str:
     for name, o in result["oracles"].items():
         lines.append(f"| {name.replace('_', ' ')} | " + " | ".join(f"{100 * o['explained_variance'][g]:.1f} %"
                                                                   for g in groups) + " |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + without_speed_lines(result["without_speed"], pct)) + "\n"
+
+
+def without_speed_lines(result: dict, pct) -> list[str]:
+    """What the given-start oracle owes to the execution speed, as a table."""
+    speeds = ", ".join(f"{s:g}" for s in result["speeds"])
+    lines = ["", f"What the oracle owes to knowing the execution speed: the given-start oracle beside the same exact "
+             f"plan averaged over replicates at speeds {speeds} (same context otherwise, same start posture; it reads "
+             f"no observation after the cue), on the episodes whose replicates simulated at every speed (failed, left "
+             f"out: {result['replicates_failed']}):", "",
+             "| oracle | held-out error (MSE) | detection (visible) | consequential | normal flagged | wrong_side | lock |",
+             "|---|---|---|---|---|---|---|"]
+    for name, o in result["oracles"].items():
+        s, fam = o["episode"], o["episode"]["per_family"]
+        lines.append(f"| {name.replace('_', ' ')} | {o['held_out_mse']:.3f} | {pct(s['detection'])} "
+                     f"| {pct(s['consequential']['detection'])} | {pct(s['normal_episode_false_alarm'])} "
+                     f"| {pct(fam.get('wrong_side', {}).get('detection_visible'))} "
+                     f"| {pct(fam.get('lock', {}).get('detection_visible'))} |")
+    return lines
