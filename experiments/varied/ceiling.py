@@ -32,6 +32,7 @@ benchmark reports for every method) is the floor that no expectation of the epis
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -266,7 +267,7 @@ def ceiling_markdown(result: dict) -> str:
     return "\n".join(lines + without_speed_lines(result["without_speed"], pct)) + "\n"
 
 
-def without_speed_lines(result: dict, pct) -> list[str]:
+def without_speed_lines(result: dict, pct: Callable[[float | None], str]) -> list[str]:
     """What the given-start oracle owes to the execution speed, as a table."""
     speeds = ", ".join(f"{s:g}" for s in result["speeds"])
     lines = ["", f"What the oracle owes to knowing the execution speed: the given-start oracle beside the same exact "
