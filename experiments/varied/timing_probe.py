@@ -178,20 +178,25 @@ class InferredSpeedPlan(ToldPlan):
             route = np.where(route != 0, named, 0.0)  # which skills have a post is the skill's, not told
         return route, speed
 
-    def inferred_speeds(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
-        """(N, T): the speed chosen before each step from the steps before it (at step 0, 1)."""
+    def _picks(self, x: np.ndarray, skills: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every grid speed's plans (N, G, T, D - 2) and, before each step, the index of the speed
+        chosen from the steps before it (N, T; at step 0, that of 1)."""
         core = x[..., : -len(TOLD)]
-        plans = np.stack([self.plan(x, skills, speed=np.full(len(x), g)) for g in GRID], axis=1)  # (N, G, T, D)
+        plans = np.stack([self.plan(x, skills, speed=np.full(len(x), g)) for g in GRID], axis=1)
         misfit = np.cumsum((((core[:, None] - plans) / self.spread) ** 2).sum(-1), axis=2)
         misfit += PRIOR_WEIGHT * ((GRID - 1.0) / SIM.varied.speed)[None, :, None] ** 2
         pick = np.concatenate([np.full((len(x), 1), np.argmin(np.abs(GRID - 1.0))), misfit.argmin(axis=1)[:, :-1]], axis=1)
-        return GRID[pick]
+        return plans, pick
+
+    def inferred_speeds(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        """(N, T): the speed chosen before each step from the steps before it (at step 0, 1)."""
+        return GRID[self._picks(x, skills)[1]]
 
     def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
-        speeds = self.inferred_speeds(x, skills)
+        plans, pick = self._picks(x, skills)
         expected = np.empty_like(x)
         for t in range(x.shape[1]):
-            plan = self.plan(x, skills, speed=speeds[:, t])
+            plan = plans[np.arange(len(x)), pick[:, t]]  # the plan at the speed chosen before step t
             expected[:, t] = self.with_departures(x, plan, skills)[:, t]  # causal: step t reads steps < t
         return expected
 
