@@ -192,7 +192,7 @@ class StepRidgeTemplate(DetectorBase):
         """x minus the template of a fit that did not see the episode (K folds by episode)."""
         residuals = np.empty_like(x)
         for train, test in episode_folds(skills, seed):
-            fold = StepRidgeTemplate().fit(x[train], skills[train], self.context_channels.tolist(), seed)
+            fold = type(self)().fit(x[train], skills[train], self.context_channels.tolist(), seed)
             residuals[test] = x[test] - fold.expected(x[test], skills[test])
         return residuals
 
