@@ -66,3 +66,23 @@ def test_the_speed_is_told_by_the_motion_once_it_shows(rng):
     error_told = ((nn - told.expected(nn, new_skills))[:, late, 0] ** 2).mean()
     error_context = ((nn - ToldPlan("context", norm).fit(xn, skills, [1]).expected(nn, new_skills))[:, late, 0] ** 2).mean()
     assert error_inferred < 2 * error_told < error_context
+
+
+def test_the_aligned_speed_explains_timing_away_but_not_a_detour(rng):
+    """Chosen with each step, the speed fits the ramps' timing better than the one chosen before
+    it; a departure no speed's plan makes (an offset once every ramp has risen) stays whole."""
+    x, new = _warped(rng, 60), _warped(rng, 30)
+    norm = Normaliser.fit(x)
+    xn, skills = norm.normalise(x), np.full(len(x), "ramp")
+    aligned = InferredSpeedPlan(norm, name_route=False, aligned=True).fit(xn, skills, [1])
+    inferred = InferredSpeedPlan(norm, name_route=False).fit(xn, skills, [1])
+    nn, new_skills = norm.normalise(new), np.full(len(new), "ramp")
+    rising = slice(1, 6)
+    error_aligned = ((nn - aligned.expected(nn, new_skills))[:, rising, 0] ** 2).mean()
+    error_inferred = ((nn - inferred.expected(nn, new_skills))[:, rising, 0] ** 2).mean()
+    assert error_aligned < error_inferred
+    offset = 0.5  # normalised units, on the risen ramp's last steps
+    detoured = nn.copy()
+    detoured[:, 9:, 0] += offset
+    residual = (detoured - aligned.expected(detoured, new_skills))[:, 9, 0]
+    assert residual.mean() > 0.8 * offset

@@ -22,7 +22,11 @@ them. Each row is scored by the benchmark's own code. The plan's forms:
 - `inferred`: the bilinear plan with the speed not told. Before each step it is chosen on a grid
   as the speed whose plan best explains the steps so far (squared departures over their spreads
   on the demonstrations, plus a prior), the route told or named from the context channels by
-  logistic regression (`named`).
+  logistic regression (`named`);
+- `aligned`: the same with the speed chosen at each step from the steps up to and including it,
+  the earlier ones' misfits halved at every step (`FORGET`). As inference picks the hidden state
+  that best explains the current observation, this picks the plan's timing: the energy is
+  minimised over the speed, so a carry merely early or late is explained away.
 
     python -m experiments.varied.timing_probe DATA_DIR [--context hidden]
 """
@@ -56,6 +60,7 @@ CENTRES = 1.0 + SIM.varied.speed * np.linspace(-1.0, 1.0, 5)  # the speed's basi
 WIDTH = SIM.varied.speed / 2
 GRID = 1.0 + 1.25 * SIM.varied.speed * np.linspace(-1.0, 1.0, 26)  # speeds an episode may be inferred at
 PRIOR_WEIGHT = 2.0  # of ((speed - 1) / the demonstrated half-range)^2 in the inference's misfit
+FORGET = 0.5  # the aligned plan's weight of a step's misfit at the next step (the speed may wander)
 # Where each benchmark set's episodes come from among the simulated sets.
 SOURCES = {"demos": "demos", "precision": "normal", "calibration": "normal", "test": "normal", "ood": "ood",
            "faults": "faults", "twins": "twins"}
@@ -155,13 +160,15 @@ class ToldPlan(DetectorBase):
 
 class InferredSpeedPlan(ToldPlan):
     """The bilinear `ToldPlan` with the speed inferred: before each step, the grid speed whose plan
-    best explains the steps so far; the route told, or named from the context channels."""
+    best explains the steps so far; the route told, or named from the context channels. With
+    `aligned`, at each step the speed whose plan best explains it and, fading, the steps before."""
 
-    def __init__(self, norm: Normaliser, name_route: bool) -> None:
+    def __init__(self, norm: Normaliser, name_route: bool, aligned: bool = False) -> None:
         super().__init__("bilinear", norm)
-        self.name_route = name_route
+        self.name_route, self.aligned = name_route, aligned
         self.namer = None  # the route's classifier on the context channels, with `name_route`
-        self.label = f"plan, speed inferred, route {'named' if name_route else 'told'}"
+        self.label = (f"plan, speed {'aligned at each step' if aligned else 'inferred'}, "
+                      f"route {'named' if name_route else 'told'}")
 
     def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
         super()._fit(x, skills, seed)
@@ -179,32 +186,40 @@ class InferredSpeedPlan(ToldPlan):
         return route, speed
 
     def _picks(self, x: np.ndarray, skills: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every grid speed's plans (N, G, T, D - 2) and, before each step, the index of the speed
-        chosen from the steps before it (N, T; at step 0, that of 1)."""
+        """Every grid speed's plans (N, G, T, D - 2) and, for each step, the index of the speed
+        chosen for it (N, T): from the steps before it (at step 0, that of 1), or `aligned`."""
         core = x[..., : -len(TOLD)]
         plans = np.stack([self.plan(x, skills, speed=np.full(len(x), g)) for g in GRID], axis=1)
-        misfit = np.cumsum((((core[:, None] - plans) / self.spread) ** 2).sum(-1), axis=2)
+        step_misfit = (((core[:, None] - plans) / self.spread) ** 2).sum(-1)  # (N, G, T)
+        if self.aligned:
+            misfit = np.zeros_like(step_misfit)
+            for t in range(x.shape[1]):
+                misfit[..., t] = step_misfit[..., t] + (FORGET * misfit[..., t - 1] if t else 0.0)
+        else:
+            misfit = np.cumsum(step_misfit, axis=2)
         misfit += PRIOR_WEIGHT * ((GRID - 1.0) / SIM.varied.speed)[None, :, None] ** 2
-        pick = np.concatenate([np.full((len(x), 1), np.argmin(np.abs(GRID - 1.0))), misfit.argmin(axis=1)[:, :-1]], axis=1)
+        pick = misfit.argmin(axis=1)
+        if not self.aligned:  # causal: the speed for step t from the steps before it
+            pick = np.concatenate([np.full((len(x), 1), np.argmin(np.abs(GRID - 1.0))), pick[:, :-1]], axis=1)
         return plans, pick
 
     def inferred_speeds(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
-        """(N, T): the speed chosen before each step from the steps before it (at step 0, 1)."""
+        """(N, T): the speed chosen for each step."""
         return GRID[self._picks(x, skills)[1]]
 
     def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
         plans, pick = self._picks(x, skills)
         expected = np.empty_like(x)
         for t in range(x.shape[1]):
-            plan = plans[np.arange(len(x)), pick[:, t]]  # the plan at the speed chosen before step t
-            expected[:, t] = self.with_departures(x, plan, skills)[:, t]  # causal: step t reads steps < t
+            plan = plans[np.arange(len(x)), pick[:, t]]  # the plan at the speed chosen for step t
+            expected[:, t] = self.with_departures(x, plan, skills)[:, t]  # the departures: steps < t
         return expected
 
 
 def rows(norm: Normaliser) -> list[ToldPlan]:
     """The probe's plans, in the order of its table."""
     return [ToldPlan(form, norm) for form in ("context", "route", "speed", "bilinear")] + [
-        InferredSpeedPlan(norm, name_route) for name_route in (False, True)]
+        InferredSpeedPlan(norm, name_route, aligned) for aligned in (False, True) for name_route in (False, True)]
 
 
 def main(data: Path, context: str = "observed") -> None:
@@ -223,10 +238,10 @@ def main(data: Path, context: str = "observed") -> None:
         x = norm.normalise(told.precision.data)
         held_out = float(((x - detector.expected(x, told.precision.labels))[:, 1:, : -len(TOLD)] ** 2).mean())
         lock = s["per_family"]["lock"]["detection_visible"]
-        tqdm.write(f"{detector.label:42s} {100 * s['detection']:5.1f} {100 * s['consequential']['detection']:5.1f} "
+        tqdm.write(f"{detector.label:46s} {100 * s['detection']:5.1f} {100 * s['consequential']['detection']:5.1f} "
                    f"{100 * s['per_family']['wrong_side']['detection']:5.1f} {100 * lock:5.1f}  "
                    f"{100 * s['normal_episode_false_alarm']:4.1f}  {held_out:.3f}")
-        if isinstance(detector, InferredSpeedPlan) and not detector.name_route:
+        if isinstance(detector, InferredSpeedPlan) and not detector.name_route and not detector.aligned:
             x = norm.normalise(told.test.data)
             speeds = detector.inferred_speeds(x, told.test.labels)
             truth = told.test.data[:, 0, -1]
