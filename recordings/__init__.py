@@ -11,10 +11,10 @@
 Every writer is a context manager that closes its files on normal exit, Ctrl-C and
 errors. After a kill (SIGKILL) what was written stays readable:
 
-- ``.mcap``: messages go into 4 KiB chunks; each flush writes the new chunks followed by
+- ``.mcap``: messages go into 16 KiB chunks; each flush writes the new chunks followed by
   a provisional end (data end, footer, magic), so a file cut by a kill is a valid MCAP
   file without indexes that mcap's ``make_reader`` reads to its last whole chunk.
-- ``.rrd``: steps are sent to Rerun in batches of 16 and flushed (a service's recorder
+- ``.rrd``: steps are sent to Rerun in batches of up to 40 and flushed (a service's recorder
   process also flushes every second); a cut file has no footer and fails
   ``rerun rrd verify`` though its chunks read.
 - ``nasm recordings recover FILE...`` (``recover.recover``) rewrites either kind into a

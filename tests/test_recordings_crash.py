@@ -22,7 +22,7 @@ from recordings.readers import read_mcap
 from recordings.records import StepRecord
 
 NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("ee_x", "ee_y", "ee_z")
-STEPS = 40
+STEPS = 160  # several 16 KiB chunks
 
 # Writes STEPS steps, then waits to be killed: the file is never closed.
 CHILD = f"""
