@@ -86,3 +86,21 @@ def test_the_aligned_speed_explains_timing_away_but_not_a_detour(rng):
     detoured[:, 9:, 0] += offset
     residual = (detoured - aligned.expected(detoured, new_skills))[:, 9, 0]
     assert residual.mean() > 0.8 * offset
+
+
+def test_the_route_is_named_from_the_episodes_around_a_post_only(rng):
+    """The route side read back from normalised channels is exactly 0 for a skill without a post,
+    so the namer learns the side from the episodes that have one and names no other."""
+    x = _warped(rng, 80)
+    around = np.arange(len(x)) < 40
+    side = np.where(rng.uniform(size=len(x)) < 0.5, -1.0, 1.0)
+    x[..., 1] = np.where(around, side, 0.0)[:, None] + 0.05 * rng.normal(size=(len(x), 1))  # the context shows the side
+    x[..., 3] = np.where(around, side, 0.0)[:, None]
+    norm = Normaliser.fit(x)
+    xn, skills = norm.normalise(x), np.where(around, "around", "ramp")
+    plan = InferredSpeedPlan(norm, name_route=True).fit(xn, skills, [1])
+    told, _ = ToldPlan.told(plan, xn)
+    np.testing.assert_array_equal(told, np.where(around, side, 0.0))
+    named, _ = plan.told(xn)
+    assert np.all(named[~around] == 0.0)
+    assert np.mean(np.sign(named[around]) == side[around]) > 0.9

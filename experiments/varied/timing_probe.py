@@ -28,11 +28,15 @@ them. Each row is scored by the benchmark's own code. The plan's forms:
   that best explains the current observation, this picks the plan's timing: the energy is
   minimised over the speed, so a carry merely early or late is explained away.
 
+Every row is also scored on the end effector's channels alone (`only`): where the detour shows
+when the rest of the arm's errors are left out.
+
     python -m experiments.varied.timing_probe DATA_DIR [--context hidden]
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -54,6 +58,7 @@ from models.one_step import fit_one_step
 from models.sequences import Sequences
 from models.step_maps import apply_maps, input_features, ridge_maps, step_codes
 from sim.config import SIM
+from sim.varied import channel_groups
 
 TOLD = ("route_side", "speed")  # the appended channels
 CENTRES = 1.0 + SIM.varied.speed * np.linspace(-1.0, 1.0, 5)  # the speed's basis functions
@@ -120,9 +125,10 @@ class ToldPlan(DetectorBase):
         self.mean, self.std = norm.mean[-len(TOLD):], norm.std[-len(TOLD):]
 
     def told(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(route side, speed) of each episode, in their own units."""
+        """(route side, speed) of each episode, in their own units (the side exactly -1, 0 or 1:
+        normalised and back, a skill without a post would be at 1e-10 of one)."""
         values = x[:, 0, -len(TOLD):] * self.std + self.mean
-        return values[:, 0], values[:, 1]
+        return np.rint(values[:, 0]), values[:, 1]
 
     def features(self, x: np.ndarray, route: np.ndarray, speed: np.ndarray) -> np.ndarray:
         context = plan_context(x[:, 0, self.context_channels], route, speed, self.form)
@@ -222,25 +228,41 @@ def rows(norm: Normaliser) -> list[ToldPlan]:
         InferredSpeedPlan(norm, name_route, aligned) for aligned in (False, True) for name_route in (False, True)]
 
 
+def only(expected: Callable[[np.ndarray, np.ndarray], np.ndarray], channels: list[int]
+         ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """An expectation of `channels` alone: every other channel expected exactly, so the energy
+    is theirs (the benchmark's spreads and precision, estimated on those channels' errors)."""
+    def expected_only(x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        out = x.copy()
+        out[..., channels] = expected(x, skills)[..., channels]
+        return out
+    return expected_only
+
+
 def main(data: Path, context: str = "observed") -> None:
     bench = load_varied_benchmark(data, context)
     sets, _ = ensure_varied_sets(data)
     told = told_benchmark(bench, sets)
     norm = Normaliser.fit(told.demos.data)
     demos = norm.normalise(told.demos.data)
+    end_effector = list(channel_groups(bench.channel_names)["end effector"])
     print(f"{context} context; visible / consequential / wrong_side / lock (visible) detected, normal flagged, "
-          "held-out MSE (the told channels left out), by the benchmark's episode rule")
+          "held-out MSE (the told channels left out), by the benchmark's episode rule; "
+          "then scored on the end effector's channels alone: visible / wrong_side detected, normal flagged")
     for detector in tqdm(rows(norm), desc="plans"):
         detector.fit(demos, told.demos.labels, told.context_channels.tolist())
-        method = Method(detector.name, detector.label, False, detector.expected)
-        e, _ = energies(method, told, norm)
-        s = summary(outcomes(e, told.onset)["episode"], told)
+        scored = {}
+        for channels, expected in (("all", detector.expected), ("end effector", only(detector.expected, end_effector))):
+            e, _ = energies(Method(detector.name, detector.label, False, expected), told, norm)
+            scored[channels] = summary(outcomes(e, told.onset)["episode"], told)
+        s, ee = scored["all"], scored["end effector"]
         x = norm.normalise(told.precision.data)
         held_out = float(((x - detector.expected(x, told.precision.labels))[:, 1:, : -len(TOLD)] ** 2).mean())
         lock = s["per_family"]["lock"]["detection_visible"]
         tqdm.write(f"{detector.label:46s} {100 * s['detection']:5.1f} {100 * s['consequential']['detection']:5.1f} "
                    f"{100 * s['per_family']['wrong_side']['detection']:5.1f} {100 * lock:5.1f}  "
-                   f"{100 * s['normal_episode_false_alarm']:4.1f}  {held_out:.3f}")
+                   f"{100 * s['normal_episode_false_alarm']:4.1f}  {held_out:.3f} | {100 * ee['detection']:5.1f} "
+                   f"{100 * ee['per_family']['wrong_side']['detection']:5.1f}  {100 * ee['normal_episode_false_alarm']:4.1f}")
         if isinstance(detector, InferredSpeedPlan) and not detector.name_route and not detector.aligned:
             x = norm.normalise(told.test.data)
             speeds = detector.inferred_speeds(x, told.test.labels)
