@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from experiments.varied.timing_probe import GRID, TOLD, InferredSpeedPlan, ToldPlan, plan_context
+from experiments.varied.timing_probe import GRID, TOLD, InferredSpeedPlan, ToldPlan, only, plan_context
 from models.normaliser import Normaliser
 from models.one_step import TemplateResidualOneStep
 from models.templates import StepRidgeTemplate
@@ -104,3 +104,10 @@ def test_the_route_is_named_from_the_episodes_around_a_post_only(rng):
     named, _ = plan.told(xn)
     assert np.all(named[~around] == 0.0)
     assert np.mean(np.sign(named[around]) == side[around]) > 0.9
+
+
+def test_an_expectation_of_some_channels_expects_the_others_exactly(rng):
+    x = rng.normal(size=(4, 6, 5))
+    zeros = only(lambda x, _skills: np.zeros_like(x), [1, 3])(x, np.full(4, "ramp"))
+    np.testing.assert_array_equal(zeros[..., [1, 3]], 0.0)
+    np.testing.assert_array_equal(zeros[..., [0, 2, 4]], x[..., [0, 2, 4]])
