@@ -28,7 +28,9 @@ steps/s; ``fleet_steps_per_s`` sums each robot's steps answered per second of it
 (300 ticks take 7.5 s, longer if its last reply comes later), so it is 2,560 exactly when every
 robot kept its pace; ``dropped_steps`` counts the steps answered after the robot's next tick
 was due (a monitor that missed the tick), ``fleet_ws_p50_ms``/``fleet_ws_p99_ms`` their round
-trips. The
+trips, and ``fleet_send_lag_p99_ms`` how late this process itself sent a tick that was due (its
+event loop serves 64 robots: a tick it sends late may be answered late through no fault of the
+service's). The
 same fleet unpaced (``unpaced_fleet_steps_per_s``, each step sent as soon as the last is
 answered) is the most the service takes at that rate.
 
@@ -242,28 +244,32 @@ def warm_fleet(url: str, episodes: np.ndarray, steps: int) -> Fleet:
 
 
 async def paced_session(url: str, episode: np.ndarray, period_s: float, phase_s: float,
-                        connected: asyncio.Barrier) -> tuple[list[float], list[float], int]:
+                        connected: asyncio.Barrier) -> tuple[list[float], list[float], int, list[float]]:
     """One robot streaming ``episode`` at its pace: tick k sent at k periods plus ``phase_s``
     after the fleet's start, or once the previous reply is in if that is later. Returns the
-    round trips (ms), the reply times (s after its first tick) and the steps answered after the
-    next tick was due."""
-    times, replies, dropped = [], [], 0
+    round trips (ms), the reply times (s after its first tick), the steps answered after the
+    next tick was due, and how late this process sent each tick (ms after it was due and the
+    previous reply was in: the benchmark's own event loop, not the service)."""
+    times, replies, dropped, lags = [], [], 0, []
     async with websockets.connect(url) as ws:
         await ws.recv()
         await ws.send(orjson.dumps({"type": "start", **SESSION}).decode())
         await ws.recv()
         await connected.wait()
         first_tick = time.perf_counter() + phase_s
+        answered = first_tick
         for k, x in enumerate(episode.tolist()):
-            await asyncio.sleep(max(0.0, first_tick + k * period_s - time.perf_counter()))
+            due = max(first_tick + k * period_s, answered)
+            await asyncio.sleep(max(0.0, due - time.perf_counter()))
             t = time.perf_counter()
+            lags.append((t - due) * 1e3)
             await ws.send(orjson.dumps({"type": "step", "observation": x}).decode())
             await ws.recv()
             answered = time.perf_counter()
             times.append((answered - t) * 1e3)
             replies.append(answered - first_tick)
             dropped += answered > first_tick + (k + 1) * period_s
-    return times, replies, dropped
+    return times, replies, dropped, lags
 
 
 @dataclass(frozen=True)
@@ -272,6 +278,7 @@ class PacedFleet:
     dropped_steps: int
     p50_ms: float
     p99_ms: float
+    send_lag_p99_ms: float  # how late the benchmark's own loop sent a tick that was due
 
 
 async def paced_fleet(url: str, episodes: np.ndarray, rate: float) -> PacedFleet:
@@ -282,9 +289,10 @@ async def paced_fleet(url: str, episodes: np.ndarray, rate: float) -> PacedFleet
                                                 connected)) for r in range(FLEET)]
     await connected.wait()
     results = await asyncio.gather(*robots)
-    ms = [t for times, _, _ in results for t in times]
-    served = sum(len(replies) / max(len(replies) * period, replies[-1]) for _, replies, _ in results)
-    return PacedFleet(served, sum(d for _, _, d in results), *percentiles(ms))
+    ms = [t for times, _, _, _ in results for t in times]
+    served = sum(len(replies) / max(len(replies) * period, replies[-1]) for _, replies, _, _ in results)
+    lag = percentiles([t for _, _, _, lags in results for t in lags])[1]
+    return PacedFleet(served, sum(d for _, _, d, _ in results), *percentiles(ms), lag)
 
 
 def echo_app() -> FastAPI:
@@ -337,7 +345,8 @@ def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Nam
             paced = asyncio.run(paced_fleet(ws_url, episodes, args.rate))
             result.update(offered_steps_per_s=FLEET * args.rate, fleet_steps_per_s=paced.steps_per_s,
                           dropped_steps=paced.dropped_steps, fleet_ws_p50_ms=paced.p50_ms,
-                          fleet_ws_p99_ms=paced.p99_ms, unpaced_fleet_steps_per_s=stepped.steps_per_s)
+                          fleet_ws_p99_ms=paced.p99_ms, fleet_send_lag_p99_ms=paced.send_lag_p99_ms,
+                          unpaced_fleet_steps_per_s=stepped.steps_per_s)
         if record:
             result["rss_growth_mb_per_1000_sessions"] = rss_growth(ws_url, proc.pid, episodes, args.sessions)
     finally:
@@ -367,7 +376,7 @@ def main() -> None:
         if args.record:
             reference = measure(folder, episodes, False, args)
             result = measure(folder, episodes, True, args)
-            paced = ("fleet_ws_p99_ms", "unpaced_fleet_steps_per_s") if "dropped_steps" in result else ()
+            paced = ("fleet_ws_p99_ms", "fleet_send_lag_p99_ms", "unpaced_fleet_steps_per_s") if "dropped_steps" in result else ()
             for key in ("fleet_steps_per_s", "predict_p99_ms", "ws_p99_ms", *paced):
                 result[f"{key}_no_record"] = reference[key]
                 result[f"{key}_vs_no_record"] = result[key] / reference[key]
