@@ -28,7 +28,7 @@ from mcap.records import DataEnd, Footer
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 _DUMP = orjson.OPT_SERIALIZE_NUMPY
-CHUNK_SIZE = 16384  # bytes: what a kill may lose; a chunk of 4 KiB cost a third more time to write
+CHUNK_SIZE = 16384  # bytes: what a kill may lose; in 4 KiB chunks the same steps took 1.3-1.5x as long
 
 
 def _provisional_end() -> bytes:
