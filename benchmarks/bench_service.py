@@ -243,13 +243,19 @@ def warm_fleet(url: str, episodes: np.ndarray, steps: int) -> Fleet:
     return asyncio.run(fleet(url, episodes, FLEET, steps))
 
 
+@dataclass(frozen=True)
+class PacedRobot:
+    round_trips_ms: list[float]
+    replies_s: list[float]  # when each reply came, after the robot's first tick
+    dropped: int  # steps answered after the next tick was due
+    send_lags_ms: list[float]  # how late each tick left once due and the previous reply was in:
+    # the benchmark's own event loop, not the service
+
+
 async def paced_session(url: str, episode: np.ndarray, period_s: float, phase_s: float,
-                        connected: asyncio.Barrier) -> tuple[list[float], list[float], int, list[float]]:
+                        connected: asyncio.Barrier) -> PacedRobot:
     """One robot streaming ``episode`` at its pace: tick k sent at k periods plus ``phase_s``
-    after the fleet's start, or once the previous reply is in if that is later. Returns the
-    round trips (ms), the reply times (s after its first tick), the steps answered after the
-    next tick was due, and how late this process sent each tick (ms after it was due and the
-    previous reply was in: the benchmark's own event loop, not the service)."""
+    after the fleet's start, or once the previous reply is in if that is later."""
     times, replies, dropped, lags = [], [], 0, []
     async with websockets.connect(url) as ws:
         await ws.recv()
@@ -269,7 +275,7 @@ async def paced_session(url: str, episode: np.ndarray, period_s: float, phase_s:
             times.append((answered - t) * 1e3)
             replies.append(answered - first_tick)
             dropped += answered > first_tick + (k + 1) * period_s
-    return times, replies, dropped, lags
+    return PacedRobot(times, replies, dropped, lags)
 
 
 @dataclass(frozen=True)
@@ -289,10 +295,10 @@ async def paced_fleet(url: str, episodes: np.ndarray, rate: float) -> PacedFleet
                                                 connected)) for r in range(FLEET)]
     await connected.wait()
     results = await asyncio.gather(*robots)
-    ms = [t for times, _, _, _ in results for t in times]
-    served = sum(len(replies) / max(len(replies) * period, replies[-1]) for _, replies, _, _ in results)
-    lag = percentiles([t for _, _, _, lags in results for t in lags])[1]
-    return PacedFleet(served, sum(d for _, _, d, _ in results), *percentiles(ms), lag)
+    ms = [t for r in results for t in r.round_trips_ms]
+    served = sum(len(r.replies_s) / max(len(r.replies_s) * period, r.replies_s[-1]) for r in results)
+    lag = percentiles([t for r in results for t in r.send_lags_ms])[1]
+    return PacedFleet(served, sum(r.dropped for r in results), *percentiles(ms), lag)
 
 
 def echo_app() -> FastAPI:
