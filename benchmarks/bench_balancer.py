@@ -16,7 +16,7 @@ reader, ``rerun rrd verify``). Needs ``haproxy`` (Debian: apt-get install haprox
     python benchmarks/bench_balancer.py --via-balancer 2 [--fleet-steps 150] [--kill-steps 300]
 """
 
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import argparse
 import asyncio
@@ -36,8 +36,8 @@ import orjson
 import websockets
 
 from bench_service import SESSION, build_model, free_port, wait_until_up, warm_fleet
-from recordings.readers import read_mcap
-from sim.config import SIM
+from neural_asm.recordings.readers import read_mcap
+from neural_asm.sim.config import SIM
 
 HAPROXY_CFG = Path(__file__).resolve().parent.parent / "docker" / "haproxy.cfg"
 SESSIONS = 64
@@ -45,7 +45,7 @@ SESSIONS = 64
 
 def start_replica(folder: Path, name: str, port: int) -> subprocess.Popen:
     """A service process in a process group of its own (its recorder dies with it, as in a container)."""
-    cmd = [sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--models-dir", str(folder),
+    cmd = [sys.executable, "-m", "neural_asm.service.cli", "serve", "--port", str(port), "--models-dir", str(folder),
            "--recordings-dir", str(folder / "rec" / name), "--log-level", "warning", "--max-sessions", "128",
            "--max-sessions-per-client", "128", "--record"]
     proc = subprocess.Popen(cmd, start_new_session=True)

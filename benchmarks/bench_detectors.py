@@ -12,7 +12,7 @@ machines are shared and noisy. One JSON object is the last line.
 
 from __future__ import annotations
 
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import argparse
 import json
@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from models.baselines import LinearOneStep as RidgeOneStep
-from models.detectors import all_detectors
+from neural_asm.models.baselines import LinearOneStep as RidgeOneStep
+from neural_asm.models.detectors import all_detectors
 
 SKILLS, CONTEXT, STEPS, CHANNELS = ("pick", "place", "push", "stack"), 4, 15, 30
 

@@ -99,7 +99,7 @@ def write_bags(folder: Path, gigabytes: float) -> dict[str, Path]:
 
 def read_one(bag: Path, mapping_file: Path) -> None:
     """In its own process: read the bag, print seconds, episodes and the peak resident set."""
-    from logs.sources import load_log_sequences
+    from neural_asm.logs.sources import load_log_sequences
 
     t0, cpu0 = time.perf_counter(), time.process_time()
     seqs = load_log_sequences(bag, mapping_file)

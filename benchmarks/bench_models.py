@@ -21,7 +21,7 @@ report how far above the energy minimum they stop (``energy_gap_vs_converged``).
 
 from __future__ import annotations
 
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import argparse
 import json
@@ -31,14 +31,14 @@ from dataclasses import replace
 import numpy as np
 import torch
 
-from models.asm import NeuralASM
-from models.baselines import LinearOneStep, StepStatistics
-from models.config import FAITHFUL, FAST, RATE_DEFAULTS
-from models.kernels import compile_now
-from models.recall import Recaller
-from models.tpc import TemporalPC
-from pipelines.episodes import as_sequences
-from sim.dataset import demonstrations, held_out_normal, run_jobs
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.baselines import LinearOneStep, StepStatistics
+from neural_asm.models.config import FAITHFUL, FAST, RATE_DEFAULTS
+from neural_asm.models.kernels import compile_now
+from neural_asm.models.recall import Recaller
+from neural_asm.models.tpc import TemporalPC
+from neural_asm.pipelines.episodes import as_sequences
+from neural_asm.sim.dataset import demonstrations, held_out_normal, run_jobs
 
 
 def reference_epoch_ms(data: np.ndarray, epochs: int = 2) -> float:

@@ -37,7 +37,7 @@ answered) is the most the service takes at that rate.
     python benchmarks/bench_service.py [--record] [--rate 2|40] [--steps 400] [--fleet-steps N] [--sessions 1000]
 """
 
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import argparse
 import os
@@ -58,12 +58,12 @@ import orjson
 import websockets
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST
-from models.synthetic import make_skills
-from recordings.recorder import POLL_S
-from sim.config import RATES, SIM
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST
+from neural_asm.models.synthetic import make_skills
+from neural_asm.recordings.recorder import POLL_S
+from neural_asm.sim.config import RATES, SIM
 
 HERE = Path(__file__).parent
 ECHO_PADDING = 3350  # the reply is then ~3.4 kB, a 25-channel step reply's size
@@ -95,7 +95,7 @@ def build_model(folder: Path, rate: float) -> np.ndarray:
 
 
 def start_server(folder: Path, port: int, record: bool) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--models-dir", str(folder),
+    cmd = [sys.executable, "-m", "neural_asm.service.cli", "serve", "--port", str(port), "--models-dir", str(folder),
            "--recordings-dir", str(folder / "rec"), "--log-level", "warning", "--max-sessions", "128",
            "--max-sessions-per-client", "128",
            "--record" if record else "--no-record"]

@@ -11,7 +11,7 @@ import os
 import resource
 import time
 
-from sim.dataset import demonstrations, faults, run_jobs
+from neural_asm.sim.dataset import demonstrations, faults, run_jobs
 
 
 def _children_cpu() -> float:

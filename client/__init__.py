@@ -30,7 +30,7 @@ Exit codes: 0 done, 2 a bad option or the service refused (bad API key, unknown 
 CLI; it returns one ``EpisodeSummary`` per episode.
 """
 
-from client.run import run_client
-from client.summary import EpisodeSummary, StepLine
+from neural_asm.client.run import run_client
+from neural_asm.client.summary import EpisodeSummary, StepLine
 
 __all__ = ["EpisodeSummary", "StepLine", "run_client"]

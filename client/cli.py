@@ -8,15 +8,15 @@ from pathlib import Path
 
 import typer
 
-from runtime.cli import Command, Group
-from pipelines.default_model import RATE_MODES
-from client.run import MODES, falling_object, fault_spec, run_client
-from client.transport import TRANSPORTS, ServiceError, ServiceLost
-from recordings import DEFAULT_DIR
-from runtime.home import home_path
-from sim.cli import RATE_HELP, check_rate
-from sim.config import CONTROLLERS, SIM
-from sim.skills import SKILLS
+from neural_asm.runtime.cli import Command, Group
+from neural_asm.pipelines.default_model import RATE_MODES
+from neural_asm.client.run import MODES, falling_object, fault_spec, run_client
+from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost
+from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.runtime.home import home_path
+from neural_asm.sim.cli import RATE_HELP, check_rate
+from neural_asm.sim.config import CONTROLLERS, SIM
+from neural_asm.sim.skills import SKILLS
 
 Skill = Enum("Skill", {s: s for s in SKILLS}, type=str)
 Mode = Enum("Mode", {m: m for m in MODES}, type=str)

@@ -16,16 +16,16 @@ from typing import Any
 import numpy as np
 import typer
 
-from client.stream import stream_episode
-from client.summary import EpisodeSummary, summary_line
-from client.transport import ServiceError, ServiceLost, TRANSPORTS, served_models
-from logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
-from logs.errors import LogError
-from logs.sources import check_model, episode_position
-from models.recall import RECALL_MODES
-from models.sequences import Sequences
-from recordings import DEFAULT_DIR
-from sim.episode import Episode
+from neural_asm.client.stream import stream_episode
+from neural_asm.client.summary import EpisodeSummary, summary_line
+from neural_asm.client.transport import ServiceError, ServiceLost, TRANSPORTS, served_models
+from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.sources import check_model, episode_position
+from neural_asm.models.recall import RECALL_MODES
+from neural_asm.models.sequences import Sequences
+from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.sim.episode import Episode
 
 
 def as_episode(seqs: Sequences, i: int) -> Episode:

@@ -15,22 +15,22 @@ import contextlib
 from pathlib import Path
 from typing import Callable, Iterator
 
-from client.stream import stream_episode
-from client.summary import EpisodeSummary, closing_lines, say, summary_line
-from client.transport import TRANSPORTS, ServiceError, check_url, served_digest
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import SCORING
-from pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
-from pipelines.default_model import RATE_MODES, ensure_default_model, model_name
-from recordings import DEFAULT_DIR
-from runtime.home import home_path
-from sim.config import CONTROLLERS, RATES, SIM
-from sim.disturbances import FallingObject, elbow_hit
-from sim.episode import Episode
-from sim.faults import FaultSpec
-from sim.runner import run_episode
-from sim.skills import SKILLS
+from neural_asm.client.stream import stream_episode
+from neural_asm.client.summary import EpisodeSummary, closing_lines, say, summary_line
+from neural_asm.client.transport import TRANSPORTS, ServiceError, check_url, served_digest
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import SCORING
+from neural_asm.pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
+from neural_asm.pipelines.default_model import RATE_MODES, ensure_default_model, model_name
+from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.runtime.home import home_path
+from neural_asm.sim.config import CONTROLLERS, RATES, SIM
+from neural_asm.sim.disturbances import FallingObject, elbow_hit
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.runner import run_episode
+from neural_asm.sim.skills import SKILLS
 
 MODES = ("offline", "online")
 
@@ -95,8 +95,8 @@ def _service(url: str | None, api_key: str | None, models_dir: Path, out: Path, 
     if url:
         yield url
         return
-    from service.embedded import start_embedded  # only to start it in-process
-    from service.settings import Settings
+    from neural_asm.service.embedded import start_embedded  # only to start it in-process
+    from neural_asm.service.settings import Settings
 
     say(f"starting the service in-process (models: {models_dir}; the default Panda model at {rate:g} Hz is built "
         "on first run, which takes a few minutes)", quiet)

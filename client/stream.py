@@ -10,14 +10,14 @@ from typing import Any, Callable
 
 import numpy as np
 
-from client.summary import EpisodeSummary, StepLine, say, step_line
-from client.transport import TRANSPORTS, ServiceError, ServiceLost, Transport
-from client.world import world_records
-from models.fault import joint_channels
-from recordings import EpisodeRecorder, new_run_id
-from recordings.records import StepRecord
-from sim.config import SIM
-from sim.episode import Episode
+from neural_asm.client.summary import EpisodeSummary, StepLine, say, step_line
+from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost, Transport
+from neural_asm.client.world import world_records
+from neural_asm.models.fault import joint_channels
+from neural_asm.recordings import EpisodeRecorder, new_run_id
+from neural_asm.recordings.records import StepRecord
+from neural_asm.sim.config import SIM
+from neural_asm.sim.episode import Episode
 
 RECONNECT_ATTEMPTS = 5
 RECONNECT_BACKOFF_S = (0.5, 1.0, 2.0, 4.0, 8.0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from sim.config import SIM
+from neural_asm.sim.config import SIM
 
 
 @dataclass

@@ -16,7 +16,7 @@ import httpx
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 from websockets.sync.client import connect as ws_connect
 
-from runtime.net import is_loopback
+from neural_asm.runtime.net import is_loopback
 
 API_KEY_HEADER = "X-API-Key"
 SESSION_ID_HEADER = "X-Session-Id"  # as service/schemas.py

@@ -6,10 +6,10 @@ from typing import Iterator
 
 import numpy as np
 
-from recordings.records import Workcell, WorldRecord
-from sim.episode import Episode
-from sim.panda import dh_frames
-from sim.scene import BOX_HALF, CUBE_HALF, TABLE_CENTER, TABLE_HALF
+from neural_asm.recordings.records import Workcell, WorldRecord
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.panda import dh_frames
+from neural_asm.sim.scene import BOX_HALF, CUBE_HALF, TABLE_CENTER, TABLE_HALF
 
 WORKCELL = Workcell(table_center=TABLE_CENTER, table_half_size=TABLE_HALF, cube_half_size=CUBE_HALF,
                     box_half_size=BOX_HALF)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from rerun.chunk import RrdReader
 
-from recordings.readers import read_mcap
+from neural_asm.recordings.readers import read_mcap
 
 
 def problems(path: Path) -> str | None:

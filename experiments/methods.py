@@ -11,7 +11,7 @@ from typing import Callable
 
 import numpy as np
 
-from models.asm import NeuralASM
+from neural_asm.models.asm import NeuralASM
 
 Expect = Callable[[np.ndarray, np.ndarray], np.ndarray]  # normalised (N, T, D) and true skills -> (N, T, D)
 

@@ -27,7 +27,7 @@ from rosbags.rosbag2 import Reader as Ros2Reader
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from logs.errors import LogError
+from neural_asm.logs.errors import LogError
 
 METADATA = "metadata.yaml"  # rosbag2's description of a bag folder
 SUFFIXES = (".mcap", ".db3", ".bag")

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import typer
 
-from logs.errors import LogError
-from logs.sources import check_model, load_log_sequences
-from models import checkpoint
-from models.asm import NeuralASM
-from models.fault import THRESHOLD_KINDS
-from models.sequences import Sequences
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.sources import check_model, load_log_sequences
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.fault import THRESHOLD_KINDS
+from neural_asm.models.sequences import Sequences
 
 MAPPING_HELP = "channel mapping (.toml or .yaml): which topic or feature becomes which channel"
 SKIP_BAD_HELP = "skip bad or missing episodes with a warning naming each (default: refuse the source)"
@@ -59,7 +59,7 @@ def evaluate(
     json_out: Path | None = typer.Option(None, "--json", help="also write the per-episode results as JSON here"),
 ) -> None:
     """Faults-style evaluation on logs: faulty episodes detected, normal ones flagged, AUROC."""
-    from logs.evaluate import evaluate as run
+    from neural_asm.logs.evaluate import evaluate as run
 
     if threshold not in THRESHOLD_KINDS:
         raise fail(f"--threshold must be one of {', '.join(THRESHOLD_KINDS)}, got {threshold!r}")

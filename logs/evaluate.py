@@ -12,11 +12,11 @@ from typing import Any
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from logs.errors import LogError
-from models.asm import NeuralASM
-from models.calibration import Calibration
-from models.fault import ThresholdKind, flag_steps, isolate, threshold_for
-from models.sequences import Sequences
+from neural_asm.logs.errors import LogError
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.calibration import Calibration
+from neural_asm.models.fault import ThresholdKind, flag_steps, isolate, threshold_for
+from neural_asm.models.sequences import Sequences
 
 
 def _flags(model: NeuralASM, seqs: Sequences, mode: str, cal: Calibration, fpr: float,

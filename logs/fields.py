@@ -9,8 +9,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from logs.errors import LogError
-from logs.mapping import Channel
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.mapping import Channel
 
 NS = 1_000_000_000
 

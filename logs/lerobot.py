@@ -24,10 +24,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from logs.errors import LogError
-from logs.mapping import Channel, Mapping
-from logs.recorded import Recorded
-from logs.resample import EpisodeResampler, Group
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.mapping import Channel, Mapping
+from neural_asm.logs.recorded import Recorded
+from neural_asm.logs.resample import EpisodeResampler, Group
 
 INFO = Path("meta/info.json")
 TASKS_V2 = Path("meta/tasks.jsonl")

@@ -16,8 +16,8 @@ from typing import Any, Literal, Sequence
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from logs.errors import LogError
-from models.fault import JOINT_PREFIX
+from neural_asm.logs.errors import LogError
+from neural_asm.models.fault import JOINT_PREFIX
 
 Kind = Literal["rosbag", "lerobot"]
 

@@ -19,8 +19,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from logs.errors import LogError
-from logs.mapping import Channel, Timing
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.mapping import Channel, Timing
 
 EPS_S = 1e-5  # absorbs the rounding of float32 stamps (LeRobot) and of the grid; far below any step period
 

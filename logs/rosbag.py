@@ -17,12 +17,12 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from logs.bagfiles import Bag, BagRead, Decode, find_bags, read_messages
-from logs.errors import LogError
-from logs.fields import NS, extractor, header_stamp
-from logs.mapping import Mapping
-from logs.recorded import Recorded
-from logs.resample import EpisodeResampler, Group
+from neural_asm.logs.bagfiles import Bag, BagRead, Decode, find_bags, read_messages
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.fields import NS, extractor, header_stamp
+from neural_asm.logs.mapping import Mapping
+from neural_asm.logs.recorded import Recorded
+from neural_asm.logs.resample import EpisodeResampler, Group
 
 
 def topic_groups(mapping: Mapping) -> list[Group]:

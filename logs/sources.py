@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from logs import lerobot, rosbag
-from logs.errors import LogError
-from logs.mapping import Kind, Mapping, check_checkpoint, load_mapping, parse_mapping
-from logs.recorded import Recorded
-from models.sequences import Sequences
+from neural_asm.logs import lerobot, rosbag
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.mapping import Kind, Mapping, check_checkpoint, load_mapping, parse_mapping
+from neural_asm.logs.recorded import Recorded
+from neural_asm.models.sequences import Sequences
 
 
 def source_kind(source: Path) -> Kind:

@@ -15,16 +15,16 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from models import recall as recall_
-from models.calibration import Calibration, calibration_key, estimate, set_thresholds
-from models.config import DEFAULT_RATE_HZ, FAST, SCORING, Covariance, TPCConfig
-from models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_for
-from models.normaliser import Normaliser
-from models.plan import PlanMemory, PlanRecaller
-from models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
-from models.sequences import checked_array
-from models.tpc import TemporalPC, relative_precision
-from models.train import train
+from neural_asm.models import recall as recall_
+from neural_asm.models.calibration import Calibration, calibration_key, estimate, set_thresholds
+from neural_asm.models.config import DEFAULT_RATE_HZ, FAST, SCORING, Covariance, TPCConfig
+from neural_asm.models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_for
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.plan import PlanMemory, PlanRecaller
+from neural_asm.models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
+from neural_asm.models.sequences import checked_array
+from neural_asm.models.tpc import TemporalPC, relative_precision
+from neural_asm.models.train import train
 
 
 def as_sequences(data: np.ndarray, width: int, what: str = "sequences") -> np.ndarray:

@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.covariance import LedoitWolf
 
-from models.config import SCORING, Covariance
-from models.conformal import episode_threshold
-from models.scoring import quadratic, step_rows
+from neural_asm.models.config import SCORING, Covariance
+from neural_asm.models.conformal import episode_threshold
+from neural_asm.models.scoring import quadratic, step_rows
 
 
 @dataclass

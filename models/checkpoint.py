@@ -32,13 +32,13 @@ from safetensors import SafetensorError
 from safetensors.torch import load as st_load
 from safetensors.torch import save as st_save
 
-from models.asm import NeuralASM, context_index
-from models.calibration import Calibration
-from models.config import DEFAULT_RATE_HZ, TPCConfig
-from models.normaliser import Normaliser
-from models.plan import PlanMemory
-from models.tpc import TemporalPC
-from runtime.version import __version__
+from neural_asm.models.asm import NeuralASM, context_index
+from neural_asm.models.calibration import Calibration
+from neural_asm.models.config import DEFAULT_RATE_HZ, TPCConfig
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.plan import PlanMemory
+from neural_asm.models.tpc import TemporalPC
+from neural_asm.runtime.version import __version__
 
 # 2: observation precisions; 3: optional whitening precision matrices; 4: optional W_C and a
 # digest; 5: the inference solver in the config; 6: the observation rate (older: 2 Hz) and

@@ -15,7 +15,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from sklearn.model_selection import StratifiedKFold
 
-from models.sequences import checked_array
+from neural_asm.models.sequences import checked_array
 
 
 @runtime_checkable

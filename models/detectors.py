@@ -8,10 +8,10 @@ caller, the same way for every method.
 
 from __future__ import annotations
 
-from models.detector_base import Detector
-from models.one_step import LinearOneStep, TemplateResidualOneStep
-from models.sequence_detectors import LSTMVAE, GRUOneStep, RecurrentConfig
-from models.templates import (ConditionalTemplate, CueNearestDemos, CueTemplate, NearestDemos, PerSkillZScore,
+from neural_asm.models.detector_base import Detector
+from neural_asm.models.one_step import LinearOneStep, TemplateResidualOneStep
+from neural_asm.models.sequence_detectors import LSTMVAE, GRUOneStep, RecurrentConfig
+from neural_asm.models.templates import (ConditionalTemplate, CueNearestDemos, CueTemplate, NearestDemos, PerSkillZScore,
                               StepRidgeTemplate)
 
 __all__ = [

@@ -18,8 +18,8 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from models.calibration import Calibration
-from models.scoring import StepScore
+from neural_asm.models.calibration import Calibration
+from neural_asm.models.scoring import StepScore
 
 JOINT_PREFIX = "joint"
 ThresholdKind = Literal["step", "per_step", "episode"]

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.baselines import LinearOneStep as RidgeOneStep
-from models.detector_base import DetectorBase, episode_folds
-from models.templates import ConditionalTemplate, StepRidgeTemplate
+from neural_asm.models.baselines import LinearOneStep as RidgeOneStep
+from neural_asm.models.detector_base import DetectorBase, episode_folds
+from neural_asm.models.templates import ConditionalTemplate, StepRidgeTemplate
 
 ONE_STEP_RIDGES = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
 ONE_STEP_LAGS = (1, 2, 3)

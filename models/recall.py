@@ -20,7 +20,7 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from models.tpc import TemporalPC
+from neural_asm.models.tpc import TemporalPC
 
 NetworkMode = Literal["offline", "online"]
 RecallMode = Literal["offline", "online", "plan"]

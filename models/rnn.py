@@ -24,8 +24,8 @@ import torch
 from torch import nn
 from tqdm.auto import tqdm
 
-from models.config import TPCConfig
-from models.train import learning_rate
+from neural_asm.models.config import TPCConfig
+from neural_asm.models.train import learning_rate
 
 
 class SensoryToMotorRNN(nn.Module):

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from models.config import DEFAULT_RATE_HZ
+from neural_asm.models.config import DEFAULT_RATE_HZ
 
 
 def checked_array(data: Any, what: str = "sequences", width: int | None = None,

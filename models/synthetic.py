@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.sequences import Sequences
+from neural_asm.models.sequences import Sequences
 
 
 def make_skills(

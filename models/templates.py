@@ -21,8 +21,8 @@ from sklearn.linear_model import RidgeCV
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 
-from models.detector_base import DetectorBase, episode_folds
-from models.step_maps import apply_maps, input_features, ridge_maps, step_codes
+from neural_asm.models.detector_base import DetectorBase, episode_folds
+from neural_asm.models.step_maps import apply_maps, input_features, ridge_maps, step_codes
 
 RIDGE_ALPHAS = np.logspace(-3, 4, 15)
 NEIGHBOUR_COUNTS = (1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30, 40)

@@ -34,8 +34,8 @@ import math
 import numpy as np
 import torch
 
-from models.config import TPCConfig
-from models.kernels import gauss_newton, spectral_norm
+from neural_asm.models.config import TPCConfig
+from neural_asm.models.kernels import gauss_newton, spectral_norm
 
 
 def stable_wf_norm(inference_rate: float, margin: float = 0.5) -> float:

@@ -13,11 +13,11 @@ from typing import Callable, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from models.config import Optimizer, TPCConfig
-from models.kernels import adam_step
-from models.recall import run
-from models.sequences import checked_array
-from models.tpc import TemporalPC, relative_precision
+from neural_asm.models.config import Optimizer, TPCConfig
+from neural_asm.models.kernels import adam_step
+from neural_asm.models.recall import run
+from neural_asm.models.sequences import checked_array
+from neural_asm.models.tpc import TemporalPC, relative_precision
 
 EpochCallback = Callable[[int, float], None]
 

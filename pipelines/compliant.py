@@ -24,19 +24,19 @@ from pathlib import Path
 
 import numpy as np
 
-from models import checkpoint
-from models.asm import NeuralASM, step_streams
-from models.config import SCORING
-from models.fault import ThresholdKind
-from models.recall import NETWORK_MODES
-from pipelines.default_model import ensure_default_model, model_name
-from sim.config import SIM
-from sim.control import PlanCorrection, execute_recalled
-from sim.disturbances import FallingObject
-from sim.episode import Episode
-from sim.faults import FaultSpec
-from sim.runner import first_observation
-from sim.skills import SKILLS
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM, step_streams
+from neural_asm.models.config import SCORING
+from neural_asm.models.fault import ThresholdKind
+from neural_asm.models.recall import NETWORK_MODES
+from neural_asm.pipelines.default_model import ensure_default_model, model_name
+from neural_asm.sim.config import SIM
+from neural_asm.sim.control import PlanCorrection, execute_recalled
+from neural_asm.sim.disturbances import FallingObject
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.runner import first_observation
+from neural_asm.sim.skills import SKILLS
 
 CONTROLLER = "compliant"
 

@@ -11,14 +11,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST, RATE_DEFAULTS, SCORING, TPCConfig
-from models.sequences import Sequences
-from pipelines.episodes import NormalSets, load_normal_sets
-from runtime.home import home_path
-from sim.config import SIM
-from sim.dataset import set_folder
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST, RATE_DEFAULTS, SCORING, TPCConfig
+from neural_asm.models.sequences import Sequences
+from neural_asm.pipelines.episodes import NormalSets, load_normal_sets
+from neural_asm.runtime.home import home_path
+from neural_asm.sim.config import SIM
+from neural_asm.sim.dataset import set_folder
 
 DEFAULT_NAME = "panda"
 # The recall mode the default model monitors in per rate: at 40 Hz offline recall rolls 300

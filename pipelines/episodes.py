@@ -14,11 +14,11 @@ from typing import Callable
 
 import numpy as np
 
-from models.sequences import Sequences
-from runtime.parallel import Parallel
-from sim.config import SIM
-from sim.dataset import generate, load_episodes, set_folder
-from sim.episode import Episode
+from neural_asm.models.sequences import Sequences
+from neural_asm.runtime.parallel import Parallel
+from neural_asm.sim.config import SIM
+from neural_asm.sim.dataset import generate, load_episodes, set_folder
+from neural_asm.sim.episode import Episode
 
 MIN_HELD_OUT = 60
 DEFAULT_N_NORMAL = 400  # held-out normal episodes simulated when none is asked for

@@ -22,8 +22,8 @@ errors. After a kill (SIGKILL) what was written stays readable:
   interrupted (``recorder``, ``recover.recover_interrupted``).
 """
 
-from recordings.episode import EpisodeRecorder
-from recordings.paths import APP_ID, DEFAULT_DIR, new_run_id, run_paths
-from recordings.training import TrainingRecorder
+from neural_asm.recordings.episode import EpisodeRecorder
+from neural_asm.recordings.paths import APP_ID, DEFAULT_DIR, new_run_id, run_paths
+from neural_asm.recordings.training import TrainingRecorder
 
 __all__ = ["APP_ID", "DEFAULT_DIR", "EpisodeRecorder", "TrainingRecorder", "new_run_id", "run_paths"]

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import typer
 
-from runtime.cli import Command, Group
-from recordings.paths import DEFAULT_DIR
-from recordings.recover import recover as recover_file
-from recordings.view import RunNotFound, view as view_run
+from neural_asm.runtime.cli import Command, Group
+from neural_asm.recordings.paths import DEFAULT_DIR
+from neural_asm.recordings.recover import recover as recover_file
+from neural_asm.recordings.view import RunNotFound, view as view_run
 
 app = typer.Typer(cls=Group, help="Tools for the .rrd and .mcap recordings.", no_args_is_help=True,
                   pretty_exceptions_show_locals=False)

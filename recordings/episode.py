@@ -13,10 +13,10 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Iterable, Protocol
 
-from recordings.mcap_writer import McapEpisode
-from recordings.paths import DEFAULT_DIR, run_paths
-from recordings.records import StepRecord, WorldRecord
-from recordings.rerun_writer import RerunEpisode
+from neural_asm.recordings.mcap_writer import McapEpisode
+from neural_asm.recordings.paths import DEFAULT_DIR, run_paths
+from neural_asm.recordings.records import StepRecord, WorldRecord
+from neural_asm.recordings.rerun_writer import RerunEpisode
 
 FORMATS = ("rrd", "mcap")
 

@@ -12,8 +12,8 @@ import numpy as np
 from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, Pose, Quaternion, SceneEntity, SceneUpdate,
                                SpherePrimitive, Timestamp, Vector3)
 
-from recordings import drawing
-from recordings.records import WorldRecord, Workcell
+from neural_asm.recordings import drawing
+from neural_asm.recordings.records import WorldRecord, Workcell
 
 FRAME = "world"
 _MIN_LINK_M = 1e-3  # consecutive origins closer than this (Franka's frames 1-2, 5-6) share a sphere

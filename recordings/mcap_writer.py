@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, SceneUpdate, Timestamp, Vector3
 
-from recordings import foxglove_scene
-from recordings import mcap_schemas as schemas
-from recordings.mcap_file import McapFile
-from recordings.records import StepRecord, WorldRecord, Workcell
+from neural_asm.recordings import foxglove_scene
+from neural_asm.recordings import mcap_schemas as schemas
+from neural_asm.recordings.mcap_file import McapFile
+from neural_asm.recordings.records import StepRecord, WorldRecord, Workcell
 
 VECTOR_TOPICS = {
     "/observation": "the observation, original units",

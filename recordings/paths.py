@@ -12,7 +12,7 @@ import secrets
 import time
 from pathlib import Path
 
-from runtime.home import home_path
+from neural_asm.runtime.home import home_path
 
 APP_ID = "neural_asm"
 DEFAULT_DIR = home_path("recordings")

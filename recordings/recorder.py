@@ -45,14 +45,14 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from recordings import blueprint as bp
-from recordings import rerun_file
-from recordings.episode import EpisodeRecorder
-from recordings.paths import APP_ID, safe_name
-from recordings.records import StepRecord
-from recordings.recover import OPEN_MARKER, recover_interrupted, write_json, writer_identity
+from neural_asm.recordings import blueprint as bp
+from neural_asm.recordings import rerun_file
+from neural_asm.recordings.episode import EpisodeRecorder
+from neural_asm.recordings.paths import APP_ID, safe_name
+from neural_asm.recordings.records import StepRecord
+from neural_asm.recordings.recover import OPEN_MARKER, recover_interrupted, write_json, writer_identity
 
-log = logging.getLogger("recordings.recorder")
+log = logging.getLogger(__name__)
 _CTX = mp.get_context("spawn")  # no fork: the server has threads (uvicorn, inference, Rerun's)
 POLL_S = 1.0  # how soon a dead child (or, in the child, a dead server) is noticed
 LAYOUT_FILE = "episode.rbl"  # the layout of every session's .rrd, written beside them

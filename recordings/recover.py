@@ -28,8 +28,8 @@ from mcap.exceptions import McapError
 from mcap.reader import StreamReader
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 
-from recordings.mcap_file import McapFile
-from recordings.readers import repair_rrd
+from neural_asm.recordings.mcap_file import McapFile
+from neural_asm.recordings.readers import repair_rrd
 
 OPEN_MARKER = ".recording.json"
 INTERRUPTED_MARKER = ".interrupted.json"

@@ -24,7 +24,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rerun import bindings
 
-from recordings.paths import APP_ID
+from neural_asm.recordings.paths import APP_ID
 
 
 class RrdFile:

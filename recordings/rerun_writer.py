@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from recordings import blueprint as bp
-from recordings import drawing
-from recordings.records import StepRecord, WorldRecord, Workcell
-from recordings.rerun_file import RrdFile
+from neural_asm.recordings import blueprint as bp
+from neural_asm.recordings import drawing
+from neural_asm.recordings.records import StepRecord, WorldRecord, Workcell
+from neural_asm.recordings.rerun_file import RrdFile
 
 STEP_BATCH = 40  # steps per columnar send at most: a second at 40 Hz, more than a 2 Hz episode
 

@@ -14,11 +14,11 @@ from typing import Any, Sequence
 import numpy as np
 import rerun as rr
 
-from recordings import blueprint as bp
-from recordings import mcap_schemas as schemas
-from recordings.mcap_file import McapFile
-from recordings.paths import DEFAULT_DIR, run_paths
-from recordings.rerun_file import RrdFile
+from neural_asm.recordings import blueprint as bp
+from neural_asm.recordings import mcap_schemas as schemas
+from neural_asm.recordings.mcap_file import McapFile
+from neural_asm.recordings.paths import DEFAULT_DIR, run_paths
+from neural_asm.recordings.rerun_file import RrdFile
 
 
 class TrainingRecorder:

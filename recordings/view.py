@@ -20,8 +20,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from recordings import blueprint as bp
-from recordings.paths import APP_ID, DEFAULT_DIR
+from neural_asm.recordings import blueprint as bp
+from neural_asm.recordings.paths import APP_ID, DEFAULT_DIR
 
 SCREENSHOT_SIZE = "1600x1000"  # logical points; the PNG may have more pixels (the display's scale)
 

@@ -4,4 +4,4 @@ Importing the package applies the process settings of ``runtime`` (one BLAS/Open
 before numpy or torch load, so ``uvicorn service.app:...`` gets them too.
 """
 
-import runtime  # noqa: F401
+import neural_asm.runtime  # noqa: F401

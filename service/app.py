@@ -15,12 +15,12 @@ from typing import Any
 
 from fastapi import FastAPI
 
-from runtime.version import __version__
-from service import errors
-from service.limits import BodyLimit
-from service.routers import health, inference, models, sessions, stream
-from service.settings import Settings
-from service.state import ServiceState
+from neural_asm.runtime.version import __version__
+from neural_asm.service import errors
+from neural_asm.service.limits import BodyLimit
+from neural_asm.service.routers import health, inference, models, sessions, stream
+from neural_asm.service.settings import Settings
+from neural_asm.service.state import ServiceState
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:

@@ -12,7 +12,7 @@ from typing import Any
 from pydantic import BaseModel
 from pydantic.json_schema import models_json_schema
 
-from service.schemas import (EndedMessage, EndMessage, ErrorMessage, MetadataMessage, StartedMessage, StartMessage,
+from neural_asm.service.schemas import (EndedMessage, EndMessage, ErrorMessage, MetadataMessage, StartedMessage, StartMessage,
                              StepMessage, StepReply)
 
 VERSION = "3.0.0"

@@ -15,9 +15,9 @@ import typer
 import uvicorn
 from pydantic import ValidationError
 
-from runtime.cli import Command, Group
-from service.embedded import uvicorn_config
-from service.settings import Settings
+from neural_asm.runtime.cli import Command, Group
+from neural_asm.service.embedded import uvicorn_config
+from neural_asm.service.settings import Settings
 
 app = typer.Typer(cls=Group, help="The Neural ASM service.", no_args_is_help=True, pretty_exceptions_show_locals=False)
 

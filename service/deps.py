@@ -2,7 +2,7 @@
 
 from fastapi import Request
 
-from service.state import ServiceState
+from neural_asm.service.state import ServiceState
 
 
 def get_state(request: Request) -> ServiceState:

@@ -15,8 +15,8 @@ from types import TracebackType
 
 import uvicorn
 
-from service.app import create_app
-from service.settings import Settings
+from neural_asm.service.app import create_app
+from neural_asm.service.settings import Settings
 
 
 def uvicorn_config(settings: Settings, log_level: str = "info") -> uvicorn.Config:

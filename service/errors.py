@@ -13,7 +13,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from service.schemas import Error
+from neural_asm.service.schemas import Error
 
 
 class ServiceError(Exception):

@@ -12,9 +12,9 @@ import numpy as np
 import orjson
 from fastapi import Response
 
-from service.runner import StepOutcome
-from service.schemas import SessionInfo
-from service.sessions import Session
+from neural_asm.service.runner import StepOutcome
+from neural_asm.service.schemas import SessionInfo
+from neural_asm.service.sessions import Session
 
 
 def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:

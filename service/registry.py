@@ -17,18 +17,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from models import checkpoint
-from models.asm import NeuralASM
-from service.errors import UnknownModel
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.service.errors import UnknownModel
 
-log = logging.getLogger("service.registry")
+log = logging.getLogger(__name__)
 Origin = Literal["loaded", "built"]
 
 
 def build_default_model(models_dir: Path) -> Path:
     """Train and calibrate the default Panda model into ``models_dir``."""
     try:
-        from pipelines.default_model import ensure_default_model
+        from neural_asm.pipelines.default_model import ensure_default_model
     except ImportError as exc:
         raise RuntimeError(
             f"no checkpoint in {models_dir} and the default Panda model cannot be built here "

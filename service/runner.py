@@ -34,14 +34,14 @@ from typing import Any, Callable, TypeVar
 
 import numpy as np
 
-from models.asm import StreamStep, step_streams
-from models.fault import FaultDecision
-from models.scoring import StepScore
-from recordings.recorder import RecorderProcess, StepBatch
-from service.errors import BadObservation, ShuttingDown
-from service.sessions import Session
+from neural_asm.models.asm import StreamStep, step_streams
+from neural_asm.models.fault import FaultDecision
+from neural_asm.models.scoring import StepScore
+from neural_asm.recordings.recorder import RecorderProcess, StepBatch
+from neural_asm.service.errors import BadObservation, ShuttingDown
+from neural_asm.service.sessions import Session
 
-log = logging.getLogger("service.runner")
+log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 HANDOVER_PERIOD_S = 0.02  # recorded steps reach the recorder in one message this often at most

@@ -12,8 +12,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
 
-from models.config import SCORING
-from models.fault import ThresholdKind
+from neural_asm.models.config import SCORING
+from neural_asm.models.fault import ThresholdKind
 
 BOUND = 1e6
 MAX_CHANNELS = 1024

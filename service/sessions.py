@@ -15,15 +15,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from models.asm import SkillStream
-from models.fault import ThresholdKind, joint_channels
-from recordings.recorder import RecorderProcess, SessionRecording
-from service.errors import BadObservation, NotCalibrated, TooManySessions, UnknownSession
-from service.registry import ModelRegistry
-from service.schemas import Observation, SessionCreate
-from service.settings import Settings
+from neural_asm.models.asm import SkillStream
+from neural_asm.models.fault import ThresholdKind, joint_channels
+from neural_asm.recordings.recorder import RecorderProcess, SessionRecording
+from neural_asm.service.errors import BadObservation, NotCalibrated, TooManySessions, UnknownSession
+from neural_asm.service.registry import ModelRegistry
+from neural_asm.service.schemas import Observation, SessionCreate
+from neural_asm.service.settings import Settings
 
-log = logging.getLogger("service.sessions")
+log = logging.getLogger(__name__)
 
 
 @dataclass

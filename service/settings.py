@@ -7,9 +7,9 @@ from pathlib import Path
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from models.config import SCORING
-from runtime.home import home_path
-from runtime.net import is_loopback
+from neural_asm.models.config import SCORING
+from neural_asm.runtime.home import home_path
+from neural_asm.runtime.net import is_loopback
 
 
 class Settings(BaseSettings):

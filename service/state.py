@@ -8,13 +8,13 @@ import asyncio
 import logging
 import time
 
-from models.kernels import compile_now
-from recordings.recorder import RecorderProcess
-from service.registry import ModelRegistry
-from service.runner import Runner, StepOutcome
-from service.schemas import Observation, SessionCreate
-from service.sessions import Session, SessionStore, open_session
-from service.settings import Settings
+from neural_asm.models.kernels import compile_now
+from neural_asm.recordings.recorder import RecorderProcess
+from neural_asm.service.registry import ModelRegistry
+from neural_asm.service.runner import Runner, StepOutcome
+from neural_asm.service.schemas import Observation, SessionCreate
+from neural_asm.service.sessions import Session, SessionStore, open_session
+from neural_asm.service.settings import Settings
 
 log = logging.getLogger("service")
 CLOSE_TIMEOUT_S = 60.0  # a recorder this slow to finish a session's files is stuck: answer anyway

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import typer
 
-from runtime.cli import Command, Group
-from runtime.home import home_path
-from runtime.parallel import Backend
-from sim.config import SIM
+from neural_asm.runtime.cli import Command, Group
+from neural_asm.runtime.home import home_path
+from neural_asm.runtime.parallel import Backend
+from neural_asm.sim.config import SIM
 
 app = typer.Typer(cls=Group, help="Simulated Panda pick-and-place episode sets.", no_args_is_help=True)
 
@@ -58,12 +58,12 @@ def demos(
     n_normal: int = typer.Option(200, "--n-normal", min=1, help="Held-out normal episodes."),
 ) -> None:
     """Simulate episode sets and write <out>/<set>.mcap and <set>.npz."""
-    from sim.dataset import generate, load_episodes, set_folder
+    from neural_asm.sim.dataset import generate, load_episodes, set_folder
 
     if task == Task.varied:
         if rate != SIM.timing.observation_hz:
             raise typer.BadParameter(f"the varied task is observed at {SIM.timing.observation_hz:g} Hz only", param_hint="--rate")
-        from sim import varied_sets
+        from neural_asm.sim import varied_sets
 
         out = out or home_path("data_varied")
         for kind in varied_sets.VARIED_KINDS:

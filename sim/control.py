@@ -43,14 +43,14 @@ from typing import Callable
 
 import numpy as np
 
-from sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS
-from sim.config import SIM, ControllerKind, CorrectionGains
-from sim.disturbances import FallingObject
-from sim.episode import Episode
-from sim.faults import FaultSpec
-from sim.panda import TAU_MAX, dh_forward
-from sim.runner import N_JOINTS, ControlState, execute_plan, seed_variation
-from sim.skills import DOWN, PRECISE_STEPS, shared_ik, skill_spec, waypoints
+from neural_asm.sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS
+from neural_asm.sim.config import SIM, ControllerKind, CorrectionGains
+from neural_asm.sim.disturbances import FallingObject
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.panda import TAU_MAX, dh_forward
+from neural_asm.sim.runner import N_JOINTS, ControlState, execute_plan, seed_variation
+from neural_asm.sim.skills import DOWN, PRECISE_STEPS, shared_ik, skill_spec, waypoints
 
 Detector = Callable[[np.ndarray], bool]  # observations so far (k + 1, 25) -> fault at observation k?
 

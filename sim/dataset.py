@@ -39,13 +39,13 @@ import orjson
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from sim.config import SIM
-from sim.disturbances import FallingObject, elbow_hit
-from sim.episode import Episode
-from sim.faults import FaultSpec, fault_grid
-from runtime.parallel import Backend, parallel_map
-from sim.skills import SKILLS
-from sim.varied_faults import VariedFault
+from neural_asm.sim.config import SIM
+from neural_asm.sim.disturbances import FallingObject, elbow_hit
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.faults import FaultSpec, fault_grid
+from neural_asm.runtime.parallel import Backend, parallel_map
+from neural_asm.sim.skills import SKILLS
+from neural_asm.sim.varied_faults import VariedFault
 
 KINDS = ("demos", "normal", "faults", "twins", "hits", "hit_twins")
 HI_RATE = ("t_hi", "qpos_hi", "command_hi", "ee_hi", "cube_hi", "box_hi")
@@ -122,8 +122,8 @@ def jobs_for(kind: str, n_demos: int = 10, n_normal: int = 200, rate: float = SI
 
 def run_job(job: Job) -> Episode | str:
     """Run one job; a failed episode comes back as its error message (never as data)."""
-    from sim.runner import SimulationError, run_episode
-    from sim.skills import PlanError
+    from neural_asm.sim.runner import SimulationError, run_episode
+    from neural_asm.sim.skills import PlanError
 
     try:
         return run_episode(job.skill, job.seed, job.fault, job.disturbance, rate=job.rate)

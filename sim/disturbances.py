@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from dm_control import mjcf
 
-from sim.config import SIM
-from sim.effects import Tick
-from sim.scene import BOX_HALF, SceneHandles
+from neural_asm.sim.config import SIM
+from neural_asm.sim.effects import Tick
+from neural_asm.sim.scene import BOX_HALF, SceneHandles
 
 
 @dataclass(frozen=True)

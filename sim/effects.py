@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 from dm_control import mjcf
 
-from sim.scene import SceneHandles
+from neural_asm.sim.scene import SceneHandles
 
 
 @dataclass

@@ -8,13 +8,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS
-from sim.config import SIM
-from sim.disturbances import FallingObject
-from sim.faults import FaultSpec
+from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_CHANNELS
+from neural_asm.sim.config import SIM
+from neural_asm.sim.disturbances import FallingObject
+from neural_asm.sim.faults import FaultSpec
 
 if TYPE_CHECKING:
-    from sim.varied_faults import VariedFault
+    from neural_asm.sim.varied_faults import VariedFault
 
 
 @dataclass

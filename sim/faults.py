@@ -18,10 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 from dm_control import mjcf
 
-from sim.config import SIM
-from sim.effects import Tick
-from sim.panda import Q_MAX, Q_MIN
-from sim.scene import SceneHandles
+from neural_asm.sim.config import SIM
+from neural_asm.sim.effects import Tick
+from neural_asm.sim.panda import Q_MAX, Q_MIN
+from neural_asm.sim.scene import SceneHandles
 
 GRID_JOINTS = tuple(range(1, 8))
 GRID_TIMES_S = tuple(1.0 + 0.5 * i for i in range(10))  # 1.0 .. 5.5
@@ -66,7 +66,7 @@ class FaultSpec:
 def fault_grid(skills: tuple[str, ...] | None = None) -> list[tuple[str, FaultSpec]]:
     """The paper's 980 faults: 7 joints x 10 times x 7 overshoots x 2 skills."""
     if skills is None:
-        from sim.skills import SKILLS
+        from neural_asm.sim.skills import SKILLS
 
         skills = SKILLS
     return [(skill, FaultSpec(j, t, th)) for skill in skills for j in GRID_JOINTS

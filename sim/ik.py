@@ -14,7 +14,7 @@ import mink
 import numpy as np
 from dm_control import mjcf
 
-from sim.panda import build_panda
+from neural_asm.sim.panda import build_panda
 
 
 class IKError(RuntimeError):

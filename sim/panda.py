@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from dm_control import mjcf
 
-from sim.config import SIM, Servo
+from neural_asm.sim.config import SIM, Servo
 
 # Franka's modified DH parameters (a, d, alpha) for joints 1..7 and the flange.
 DH_A = (0.0, 0.0, 0.0, 0.0825, -0.0825, 0.0, 0.088, 0.0)

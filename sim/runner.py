@@ -25,15 +25,15 @@ import mujoco
 import numpy as np
 from dm_control import mjcf
 
-from sim.channels import EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS, WRENCH_CHANNELS
-from sim.config import SIM, ControllerKind
-from sim.disturbances import FallingObject, make_effect
-from sim.effects import Effect, Tick
-from sim.episode import Episode
-from sim.faults import FaultSpec, JointLock
-from sim.panda import Q_MAX, Q_MIN
-from sim.scene import BOX_PARK, CUBE_HALF, SceneHandles, build_scene
-from sim.skills import SKILLS, Variation, make_plan, sample_variation, skill_spec, target_position
+from neural_asm.sim.channels import EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS, WRENCH_CHANNELS
+from neural_asm.sim.config import SIM, ControllerKind
+from neural_asm.sim.disturbances import FallingObject, make_effect
+from neural_asm.sim.effects import Effect, Tick
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.faults import FaultSpec, JointLock
+from neural_asm.sim.panda import Q_MAX, Q_MIN
+from neural_asm.sim.scene import BOX_PARK, CUBE_HALF, SceneHandles, build_scene
+from neural_asm.sim.skills import SKILLS, Variation, make_plan, sample_variation, skill_spec, target_position
 
 _CHANNELS = np.arange(N_CHANNELS)
 N_JOINTS, N_EE = len(_CHANNELS[JOINT_CHANNELS]), len(_CHANNELS[EE_CHANNELS])

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from dm_control import mjcf
 
-from sim.panda import ARM_CONTYPE, PandaHandles, build_panda
+from neural_asm.sim.panda import ARM_CONTYPE, PandaHandles, build_panda
 
 CUBE_HALF = 0.025  # a 5 cm cube, comfortably inside the Franka Hand's 8 cm stroke
 CUBE_MASS = 0.1

@@ -16,10 +16,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from sim.config import SIM
-from sim.ik import PandaIK
-from sim.panda import DQ_MAX
-from sim.scene import CUBE_HALF
+from neural_asm.sim.config import SIM
+from neural_asm.sim.ik import PandaIK
+from neural_asm.sim.panda import DQ_MAX
+from neural_asm.sim.scene import CUBE_HALF
 
 SKILLS: tuple[str, ...] = ("pick_left_place_right", "pick_right_place_left")
 DOWN = np.diag([1.0, -1.0, -1.0])  # TCP pointing down, fingers closing along world y

@@ -26,12 +26,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from sim.channels import (CHANNEL_NAMES, EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_NAMES,
+from neural_asm.sim.channels import (CHANNEL_NAMES, EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_NAMES,
                           WRENCH_CHANNELS)
-from sim.config import SIM
-from sim.episode import Episode
-from sim.scene import CUBE_HALF, POST_PARK
-from sim.skills import DOWN, check_velocity, shared_ik
+from neural_asm.sim.config import SIM
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.scene import CUBE_HALF, POST_PARK
+from neural_asm.sim.skills import DOWN, check_velocity, shared_ik
 
 VARIED_SKILLS: tuple[str, ...] = ("pick_place_right", "pick_place_around", "lift_hold", "push")
 CONTEXT_NAMES: tuple[str, ...] = ("cube_seen_x", "cube_seen_y", "cube_seen_yaw", "goal_x", "goal_y", "post_x", "post_y")

@@ -24,11 +24,11 @@ from dataclasses import dataclass
 import numpy as np
 from dm_control import mjcf
 
-from sim.channels import CHANNEL_NAMES
-from sim.config import SIM
-from sim.effects import Effect, Tick
-from sim.faults import FaultSpec, JointLock
-from sim.scene import SceneHandles
+from neural_asm.sim.channels import CHANNEL_NAMES
+from neural_asm.sim.config import SIM
+from neural_asm.sim.effects import Effect, Tick
+from neural_asm.sim.faults import FaultSpec, JointLock
+from neural_asm.sim.scene import SceneHandles
 
 FAULT_KINDS: tuple[str, ...] = ("lock", "small_overshoot", "drift", "slip", "gripper_open", "force_bias",
                                 "stray_post", "wrong_side", "wrong_cube")

@@ -25,12 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.config import SIM
-from sim.episode import Episode
-from runtime.parallel import Backend, parallel_map
-from sim.varied import (VARIED_SKILLS, Context, draw_plan_noise, keyframes, make_plan, perceived, post_xy, sample_context,
+from neural_asm.sim.config import SIM
+from neural_asm.sim.episode import Episode
+from neural_asm.runtime.parallel import Backend, parallel_map
+from neural_asm.sim.varied import (VARIED_SKILLS, Context, draw_plan_noise, keyframes, make_plan, perceived, post_xy, sample_context,
                         with_context_channels)
-from sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestoreFriction, VariedFault, apply_sensor_fault,
+from neural_asm.sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestoreFriction, VariedFault, apply_sensor_fault,
                                execution_effects)
 
 VARIED_KINDS = ("demos", "normal", "ood", "faults", "twins", "val_faults", "val_twins")
@@ -92,7 +92,7 @@ class _CubeYaw:
 
 def run_varied(job: VariedJob) -> Episode:
     """Simulate one varied-task episode; its observations have 25 + 7 context channels."""
-    from sim.runner import execute
+    from neural_asm.sim.runner import execute
 
     ctx = context_of(job)
     fault = job.fault
@@ -189,9 +189,9 @@ def jobs_for(kind: str, n_demos: int | None = None, n_normal: int = 850, n_ood: 
 
 def run_job(job: VariedJob) -> Episode | str:
     """Run one job; a failed episode comes back as its error message (never as data)."""
-    from sim.ik import IKError
-    from sim.runner import SimulationError
-    from sim.skills import PlanError
+    from neural_asm.sim.ik import IKError
+    from neural_asm.sim.runner import SimulationError
+    from neural_asm.sim.skills import PlanError
 
     try:
         return run_varied(job)
@@ -202,7 +202,7 @@ def run_job(job: VariedJob) -> Episode | str:
 def generate(kind: str, out_dir: Path, workers: int = 2, backend: Backend = "processes", **sizes: int
              ) -> tuple[Path, list[str]]:
     """Simulate varied set `kind`; write `<out_dir>/<kind>.mcap` and its cache."""
-    from sim.dataset import write_cache, write_mcap
+    from neural_asm.sim.dataset import write_cache, write_mcap
 
     jobs = jobs_for(kind, **sizes)
     results = parallel_map(run_job, [(job,) for job in jobs], workers, backend, desc=f"varied {kind}", unit="ep",

@@ -1,4 +1,4 @@
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import os
 import shutil
@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST
-from models.synthetic import make_skills, split
-from sim.channels import CHANNEL_NAMES
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST
+from neural_asm.models.synthetic import make_skills, split
+from neural_asm.sim.channels import CHANNEL_NAMES
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -49,8 +49,8 @@ def rng():
 def small_panda_model() -> NeuralASM:
     """A small network trained on simulated Panda episodes (4 per skill), calibrated in both
     recall modes on others: the model the client tests serve."""
-    from sim.runner import run_episode
-    from sim.skills import SKILLS
+    from neural_asm.sim.runner import run_episode
+    from neural_asm.sim.skills import SKILLS
 
     def episodes(seeds: range) -> np.ndarray:
         return np.stack([run_episode(s, seed).observations for s in SKILLS for seed in seeds])
@@ -65,8 +65,8 @@ def small_panda_model() -> NeuralASM:
 @pytest.fixture(scope="module")
 def server(model_dir: Path, tmp_path_factory: pytest.TempPathFactory):
     """An embedded service on the requesting module's ``model_dir``."""
-    from service.embedded import start_embedded
-    from service.settings import Settings
+    from neural_asm.service.embedded import start_embedded
+    from neural_asm.service.settings import Settings
 
     settings = Settings(models_dir=model_dir, recordings_dir=tmp_path_factory.mktemp("service-recordings"),
                         build_default_model=False)

@@ -5,10 +5,10 @@ header back with each step."""
 import httpx
 import pytest
 
-from client.transport import SESSION_ID_HEADER, HttpTransport
-from service.embedded import start_embedded
-from service.schemas import SESSION_ID_HEADER as SERVICE_HEADER
-from service.settings import Settings
+from neural_asm.client.transport import SESSION_ID_HEADER, HttpTransport
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.schemas import SESSION_ID_HEADER as SERVICE_HEADER
+from neural_asm.service.settings import Settings
 
 
 @pytest.fixture(scope="module")

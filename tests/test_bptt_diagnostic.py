@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import torch
 
-from experiments.varied.bptt import BPTTConfig, Weights, energy, one_step_loss, online_expectations, relax, train_bptt
-from models.config import FAST
-from models.recall import run
-from models.tpc import TemporalPC
+from neural_asm.experiments.varied.bptt import BPTTConfig, Weights, energy, one_step_loss, online_expectations, relax, train_bptt
+from neural_asm.models.config import FAST
+from neural_asm.models.recall import run
+from neural_asm.models.tpc import TemporalPC
 
 TINY = FAST.with_(hidden_size=12)
 

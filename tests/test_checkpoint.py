@@ -4,8 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from models import checkpoint
-from models.checkpoint import CheckpointError
+from neural_asm.models import checkpoint
+from neural_asm.models.checkpoint import CheckpointError
 
 
 def test_round_trip_gives_identical_predictions(trained, skills, tmp_path):

@@ -3,7 +3,7 @@
 import pytest
 from typer.testing import CliRunner
 
-from nasm.cli import app
+from neural_asm.cli import app
 
 runner = CliRunner()
 COMMANDS = sorted(c.name or c.callback.__name__ for c in app.registered_commands)

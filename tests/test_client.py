@@ -13,16 +13,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from models import checkpoint
-from models.asm import NeuralASM
-from recordings.readers import read_mcap, read_rrd_series
-from service.embedded import start_embedded
-from service.settings import Settings
-from sim.channels import JOINT_NAMES
-from client import run_client
-from client.summary import summary_line
-from sim.faults import FaultSpec
-from sim.skills import SKILLS
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.recordings.readers import read_mcap, read_rrd_series
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.settings import Settings
+from neural_asm.sim.channels import JOINT_NAMES
+from neural_asm.client import run_client
+from neural_asm.client.summary import summary_line
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

@@ -16,21 +16,21 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from client import run_client
-from client.cli import app
-from client.run import falling_object
-from client.summary import summary_line
-from client.transport import ServiceError
-from experiments.correction.config import CORRECTION
-from experiments.correction.metrics import first_hit_step
-from models import checkpoint
-from models.asm import NeuralASM
-from pipelines.compliant import COMPLIANT_NAME, MonitorSeeds, ensure_compliant_model
-from recordings.readers import read_mcap
-from service.embedded import start_embedded
-from service.registry import ModelRegistry
-from service.settings import Settings
-from sim.config import SIM
+from neural_asm.client import run_client
+from neural_asm.client.cli import app
+from neural_asm.client.run import falling_object
+from neural_asm.client.summary import summary_line
+from neural_asm.client.transport import ServiceError
+from neural_asm.experiments.correction.config import CORRECTION
+from neural_asm.experiments.correction.metrics import first_hit_step
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.pipelines.compliant import COMPLIANT_NAME, MonitorSeeds, ensure_compliant_model
+from neural_asm.recordings.readers import read_mcap
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.registry import ModelRegistry
+from neural_asm.service.settings import Settings
+from neural_asm.sim.config import SIM
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
@@ -72,7 +72,7 @@ def test_cli_controller_is_a_typed_choice(tmp_path):
 
 def test_cli_passes_the_demo_options_on(monkeypatch, tmp_path):
     seen = {}
-    monkeypatch.setattr("client.cli.run_client", lambda *a, **kw: seen.update(args=a, kwargs=kw) or [])
+    monkeypatch.setattr("neural_asm.client.cli.run_client", lambda *a, **kw: seen.update(args=a, kwargs=kw) or [])
     result = runner.invoke(app, ["--falling-object", "--hit-momentum", "30", "--controller", "compliant", "--correct",
                                  "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output

@@ -16,22 +16,22 @@ import pytest
 from mcap.reader import make_reader
 from typer.testing import CliRunner
 
-from client import run_client
-from client.cli import app
-from client.run import falling_object
-from client.transport import ServiceError
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST
-from pipelines.compliant import MonitorSeeds, compliant_name, ensure_compliant_model
-from pipelines.default_model import model_name
-from recordings.readers import read_mcap, read_rrd_series
-from service.embedded import start_embedded
-from service.settings import Settings
-from sim.channels import CHANNEL_NAMES
-from sim.config import SIM
-from sim.runner import run_episode
-from sim.skills import SKILLS
+from neural_asm.client import run_client
+from neural_asm.client.cli import app
+from neural_asm.client.run import falling_object
+from neural_asm.client.transport import ServiceError
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST
+from neural_asm.pipelines.compliant import MonitorSeeds, compliant_name, ensure_compliant_model
+from neural_asm.pipelines.default_model import model_name
+from neural_asm.recordings.readers import read_mcap, read_rrd_series
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.settings import Settings
+from neural_asm.sim.channels import CHANNEL_NAMES
+from neural_asm.sim.config import SIM
+from neural_asm.sim.runner import run_episode
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes and trains networks
 
@@ -117,7 +117,7 @@ def test_a_service_without_a_40_hz_model_is_refused_by_name(small_panda_model, t
 
 def test_cli_passes_the_rate_and_pacing_on_and_refuses_other_rates(monkeypatch, tmp_path):
     seen = {}
-    monkeypatch.setattr("client.cli.run_client", lambda *a, **kw: seen.update(args=a, kwargs=kw) or [])
+    monkeypatch.setattr("neural_asm.client.cli.run_client", lambda *a, **kw: seen.update(args=a, kwargs=kw) or [])
     result = CliRunner().invoke(app, ["--rate", "40", "--realtime", "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
     assert seen["kwargs"]["rate"] == RATE and seen["kwargs"]["realtime"] is True

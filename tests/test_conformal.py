@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from models.calibration import Thresholds
-from models.config import SCORING
-from models.conformal import (
+from neural_asm.models.calibration import Thresholds
+from neural_asm.models.config import SCORING
+from neural_asm.models.conformal import (
     TimeVaryingThreshold,
     binomial_interval,
     episode_threshold,

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST
 
 from test_detectors import varied_task
 

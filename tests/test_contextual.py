@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 import torch
 
-from experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, SKILLS
-from experiments.contextual.dataset import MOTOR_CHANNELS, conditions_data, hand, motor_index, sensory_index
-from experiments.contextual.metrics import pead
-from experiments.contextual.protocol import run_protocol
-from experiments.contextual.report import PLANNING, expressed, expressed_per_seed, separates_every_seed
-from models.config import PRESETS
-from models.rnn import SensorimotorRNN, SensoryToMotorRNN
+from neural_asm.experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, SKILLS
+from neural_asm.experiments.contextual.dataset import MOTOR_CHANNELS, conditions_data, hand, motor_index, sensory_index
+from neural_asm.experiments.contextual.metrics import pead
+from neural_asm.experiments.contextual.protocol import run_protocol
+from neural_asm.experiments.contextual.report import PLANNING, expressed, expressed_per_seed, separates_every_seed
+from neural_asm.models.config import PRESETS
+from neural_asm.models.rnn import SensorimotorRNN, SensoryToMotorRNN
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

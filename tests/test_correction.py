@@ -8,16 +8,16 @@ import json
 import numpy as np
 import pytest
 
-from experiments.correction.config import CORRECTION
-from experiments.correction.metrics import detection, deviation_deg, first_hit_step
-from pipelines.compliant import MonitorSeeds
-from sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS
-from sim.config import SIM, CorrectionGains
-from sim.control import PlanCorrection, anchor_plan, plan_from_recall
-from sim.disturbances import elbow_hit
-from sim.panda import TAU_MAX, dh_forward
-from sim.runner import ControlState, execute_plan, seed_variation
-from sim.skills import PRECISE_STEPS, SKILLS, make_plan, nominal_plan, skill_spec, waypoints
+from neural_asm.experiments.correction.config import CORRECTION
+from neural_asm.experiments.correction.metrics import detection, deviation_deg, first_hit_step
+from neural_asm.pipelines.compliant import MonitorSeeds
+from neural_asm.sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS
+from neural_asm.sim.config import SIM, CorrectionGains
+from neural_asm.sim.control import PlanCorrection, anchor_plan, plan_from_recall
+from neural_asm.sim.disturbances import elbow_hit
+from neural_asm.sim.panda import TAU_MAX, dh_forward
+from neural_asm.sim.runner import ControlState, execute_plan, seed_variation
+from neural_asm.sim.skills import PRECISE_STEPS, SKILLS, make_plan, nominal_plan, skill_spec, waypoints
 
 SEED = CORRECTION.selection_seeds[0]  # a selection seed: where the hit family was chosen
 # A 20 kg box dropped onto the elbow during the carry at 2 m/s: on this seed it comes to rest on the arm.
@@ -200,9 +200,9 @@ def test_detection_counts_only_steps_that_can_see_the_hit():
 
 @pytest.mark.slow
 def test_a_small_run_writes_the_results_contract(tmp_path):
-    from experiments.correction.figures import write_figure
-    from experiments.correction.pipeline import fit_model, run_correction
-    from experiments.correction.report import write_json, write_markdown
+    from neural_asm.experiments.correction.figures import write_figure
+    from neural_asm.experiments.correction.pipeline import fit_model, run_correction
+    from neural_asm.experiments.correction.report import write_json, write_markdown
 
     config = CORRECTION.with_(n_seeds=1, momenta=(40.0,), monitor=MonitorSeeds(per_split=3), epochs=40)
     result = run_correction(fit_model(config), config, progress=False)
@@ -228,8 +228,8 @@ def test_test_seeds_may_not_overlap_the_selection_or_monitor_seeds(first):
 
 @pytest.mark.slow
 def test_a_small_run_at_40_hz_over_two_trainings_gives_each_training_and_their_mean(tmp_path):
-    from experiments.correction.pipeline import run_trainings
-    from experiments.correction.report import write_json
+    from neural_asm.experiments.correction.pipeline import run_trainings
+    from neural_asm.experiments.correction.report import write_json
 
     config = CORRECTION.with_(n_seeds=1, momenta=(40.0,), monitor=MonitorSeeds(per_split=3), epochs=10, rate=40.0,
                               trainings=2, controllers=("compliant",))

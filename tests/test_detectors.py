@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from models.detectors import (
+from neural_asm.models.detectors import (
     LSTMVAE,
     ConditionalTemplate,
     CueNearestDemos,
@@ -17,7 +17,7 @@ from models.detectors import (
     TemplateResidualOneStep,
     all_detectors,
 )
-from models.one_step import delay_embed, fit_one_step
+from neural_asm.models.one_step import delay_embed, fit_one_step
 
 T, D, C = 10, 8, 2
 CONTEXT = list(range(C))

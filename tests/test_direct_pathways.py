@@ -6,10 +6,10 @@ import pytest
 import torch
 from conftest import SMALL
 
-from models import checkpoint, recall
-from models.asm import NeuralASM
-from models.one_step import delay_embed
-from models.tpc import TemporalPC
+from neural_asm.models import checkpoint, recall
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.one_step import delay_embed
+from neural_asm.models.tpc import TemporalPC
 
 LAGS = 2
 

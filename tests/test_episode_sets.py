@@ -6,11 +6,11 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
-from nasm.cli import app
-from pipelines.episodes import SetMismatch, paper_sets
-from sim.dataset import write_mcap
-from sim.runner import run_episode
-from sim.skills import SKILLS
+from neural_asm.cli import app
+from neural_asm.pipelines.episodes import SetMismatch, paper_sets
+from neural_asm.sim.dataset import write_mcap
+from neural_asm.sim.runner import run_episode
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes
 

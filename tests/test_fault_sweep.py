@@ -6,18 +6,18 @@ import json
 import numpy as np
 import pytest
 
-from experiments.fault_sweep.data import make_benchmark
-from experiments.fault_sweep.figures import write_figures
-from experiments.fault_sweep.methods import baseline_methods
-from experiments.fault_sweep.metrics import FPRS, MAIN_FPR
-from experiments.fault_sweep.report import write_csv, write_json, write_markdown
-from experiments.fault_sweep.run import score_methods, train_models
-from experiments.methods import neural_asm_methods
-from models.config import FAST
-from sim.config import SIM
-from sim.dataset import Job, run_jobs
-from sim.faults import FaultSpec
-from sim.skills import SKILLS
+from neural_asm.experiments.fault_sweep.data import make_benchmark
+from neural_asm.experiments.fault_sweep.figures import write_figures
+from neural_asm.experiments.fault_sweep.methods import baseline_methods
+from neural_asm.experiments.fault_sweep.metrics import FPRS, MAIN_FPR
+from neural_asm.experiments.fault_sweep.report import write_csv, write_json, write_markdown
+from neural_asm.experiments.fault_sweep.run import score_methods, train_models
+from neural_asm.experiments.methods import neural_asm_methods
+from neural_asm.models.config import FAST
+from neural_asm.sim.config import SIM
+from neural_asm.sim.dataset import Job, run_jobs
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

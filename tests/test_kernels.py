@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from models.kernels import _cholesky, _cholesky_solve, _gram, _tanh
+from neural_asm.models.kernels import _cholesky, _cholesky_solve, _gram, _tanh
 
 
 def test_rational_tanh_is_within_3e_7_of_numpy_and_saturates():

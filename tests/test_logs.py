@@ -13,14 +13,14 @@ import pytest
 import yaml
 from rosbags.rosbag2 import StoragePlugin
 
-from experiments.robot_logs.write import (START_NS, BagWriter, _write, bag_file, bag_mapping, lerobot_mapping, write_bag, write_bag_folders,
+from neural_asm.experiments.robot_logs.write import (START_NS, BagWriter, _write, bag_file, bag_mapping, lerobot_mapping, write_bag, write_bag_folders,
                                           write_lerobot, write_mapping)
-from logs.errors import LogError
-from logs.mapping import check_checkpoint, load_mapping, parse_mapping
-from logs.sources import episode_position, read_mapped
-from sim.channels import CHANNEL_NAMES
-from sim.runner import run_episode
-from sim.skills import SKILLS
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.mapping import check_checkpoint, load_mapping, parse_mapping
+from neural_asm.logs.sources import episode_position, read_mapped
+from neural_asm.sim.channels import CHANNEL_NAMES
+from neural_asm.sim.runner import run_episode
+from neural_asm.sim.skills import SKILLS
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "panda_ros2.toml"
 

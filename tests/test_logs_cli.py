@@ -10,20 +10,20 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from experiments.robot_logs.write import bag_mapping, lerobot_mapping, write_bag, write_lerobot, write_mapping
-from logs.mapping import parse_mapping
-from logs.sources import read_mapped
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST
-from nasm.cli import app
-from recordings.readers import read_mcap
-from service.embedded import start_embedded
-from service.settings import Settings
-from client.stream import stream_episode
-from sim.faults import FaultSpec
-from sim.runner import run_episode
-from sim.skills import SKILLS
+from neural_asm.experiments.robot_logs.write import bag_mapping, lerobot_mapping, write_bag, write_lerobot, write_mapping
+from neural_asm.logs.mapping import parse_mapping
+from neural_asm.logs.sources import read_mapped
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST
+from neural_asm.cli import app
+from neural_asm.recordings.readers import read_mcap
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.settings import Settings
+from neural_asm.client.stream import stream_episode
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.runner import run_episode
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

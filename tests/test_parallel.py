@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from sim.config import SIM
-from sim.dataset import Job, run_jobs
-from runtime.parallel import parallel_map
-from sim.skills import SKILLS
+from neural_asm.sim.config import SIM
+from neural_asm.sim.dataset import Job, run_jobs
+from neural_asm.runtime.parallel import parallel_map
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

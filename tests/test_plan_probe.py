@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from experiments.varied.plan_probe import PlanOneStep, plan_features
-from models.one_step import TemplateResidualOneStep
+from neural_asm.experiments.varied.plan_probe import PlanOneStep, plan_features
+from neural_asm.models.one_step import TemplateResidualOneStep
 
 
 MAPS = np.random.default_rng(7).normal(size=(8, 3, 3))
@@ -63,8 +63,8 @@ def test_a_residual_weight_of_zero_is_the_template_alone(rng):
 def test_skill_recognition_reads_the_skill_from_the_first_observation_only(rng):
     from types import SimpleNamespace
 
-    from experiments.varied.plan_probe import skill_recognition
-    from models.normaliser import Normaliser
+    from neural_asm.experiments.varied.plan_probe import skill_recognition
+    from neural_asm.models.normaliser import Normaliser
 
     def episodes(n, apart):
         labels = np.repeat(["a", "b"], n // 2)

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from models import checkpoint
-from models.asm import NeuralASM, step_streams
-from models.config import FAST
-from models.plan import PlanMemory
-from models.synthetic import make_skills
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM, step_streams
+from neural_asm.models.config import FAST
+from neural_asm.models.plan import PlanMemory
+from neural_asm.models.synthetic import make_skills
 
 CONFIG = FAST.with_(epochs=60, hidden_size=32, plan_memory=True)
 
@@ -96,8 +96,8 @@ def test_a_plan_memory_of_the_wrong_shape_is_refused(model):
 def test_without_states_plan_recall_is_the_one_ridge_template_with_its_residual_predictor(rng):
     """The benchmark's rival `step_ridge_template_residual` is plan recall's linear special case:
     the same expectations, told the skill where plan recall recognises it."""
-    from models.one_step import TemplateResidualOneStep
-    from models.templates import StepRidgeTemplate
+    from neural_asm.models.one_step import TemplateResidualOneStep
+    from neural_asm.models.templates import StepRidgeTemplate
 
     steps, maps = 10, rng.normal(size=(10, 2, 3))
     c = rng.uniform(-1, 1, (30, 2))

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from recordings import EpisodeRecorder
-from recordings.records import StepRecord, WorldRecord
+from neural_asm.recordings import EpisodeRecorder
+from neural_asm.recordings.records import StepRecord, WorldRecord
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

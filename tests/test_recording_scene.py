@@ -12,16 +12,16 @@ from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
 from rerun.chunk import RrdReader
 
-from client.world import WORKCELL, world_records
-from recordings import EpisodeRecorder
-from recordings import blueprint as bp
-from recordings import view
-from recordings.paths import APP_ID
-from recordings.readers import read_mcap
-from recordings.records import StepRecord
-from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS
-from sim.disturbances import FallingObject
-from sim.episode import Episode
+from neural_asm.client.world import WORKCELL, world_records
+from neural_asm.recordings import EpisodeRecorder
+from neural_asm.recordings import blueprint as bp
+from neural_asm.recordings import view
+from neural_asm.recordings.paths import APP_ID
+from neural_asm.recordings.readers import read_mcap
+from neural_asm.recordings.records import StepRecord
+from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_CHANNELS
+from neural_asm.sim.disturbances import FallingObject
+from neural_asm.sim.episode import Episode
 
 LAYOUT = Path(__file__).resolve().parents[1] / "recordings" / "layouts" / "neural_asm.json"
 FAULT_STEP = 2

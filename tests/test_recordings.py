@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from recordings import EpisodeRecorder, TrainingRecorder, new_run_id
-from recordings.blueprint import ENERGY, ERRORS, TRAIN_ENERGY
-from recordings.readers import read_mcap, read_rrd_series, repair_rrd
-from recordings.records import StepRecord, WorldRecord
+from neural_asm.recordings import EpisodeRecorder, TrainingRecorder, new_run_id
+from neural_asm.recordings.blueprint import ENERGY, ERRORS, TRAIN_ENERGY
+from neural_asm.recordings.readers import read_mcap, read_rrd_series, repair_rrd
+from neural_asm.recordings.records import StepRecord, WorldRecord
 
 NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("ee_x", "ee_y", "ee_z")
 
@@ -106,7 +106,7 @@ def test_unknown_format_is_refused(tmp_path):
 
 
 def test_a_run_is_found_from_its_id_or_any_of_its_files(tmp_path):
-    from recordings.view import RunNotFound, run_files
+    from neural_asm.recordings.view import RunNotFound, run_files
 
     names = ["client-1-a.rrd", "client-1-a.mcap", "service-client-1-a-s1.rrd", "service-client-1-a-s2.rrd",
              "client-2-b.rrd", "service-client-2-b-s3.rrd"]
@@ -123,7 +123,7 @@ def test_a_run_is_found_from_its_id_or_any_of_its_files(tmp_path):
 def test_without_a_run_id_the_newest_client_run_is_found(tmp_path):
     import os
 
-    from recordings.view import RunNotFound, run_files
+    from neural_asm.recordings.view import RunNotFound, run_files
 
     with pytest.raises(RunNotFound, match="no client run"):
         run_files(None, tmp_path)
@@ -135,7 +135,7 @@ def test_without_a_run_id_the_newest_client_run_is_found(tmp_path):
 
 
 def test_a_screenshot_without_a_display_runs_under_xvfb(monkeypatch, tmp_path):
-    from recordings import view
+    from neural_asm.recordings import view
 
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.setattr(view.shutil, "which", lambda name: "/usr/bin/xvfb-run" if name == "xvfb-run" else None)

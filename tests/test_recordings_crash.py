@@ -16,10 +16,10 @@ from mcap.reader import NonSeekingReader, SeekingReader, make_reader
 from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 
-from recordings import EpisodeRecorder
-from recordings.mcap_file import CHUNK_SIZE
-from recordings.readers import read_mcap
-from recordings.records import StepRecord
+from neural_asm.recordings import EpisodeRecorder
+from neural_asm.recordings.mcap_file import CHUNK_SIZE
+from neural_asm.recordings.readers import read_mcap
+from neural_asm.recordings.records import StepRecord
 
 NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("ee_x", "ee_y", "ee_z")
 STEPS = 160  # several 16 KiB chunks
@@ -28,8 +28,8 @@ STEPS = 160  # several 16 KiB chunks
 CHILD = f"""
 import sys
 import numpy as np
-from recordings import EpisodeRecorder
-from recordings.records import StepRecord
+from neural_asm.recordings import EpisodeRecorder
+from neural_asm.recordings.records import StepRecord
 rec = EpisodeRecorder("killed", {NAMES!r}, folder=sys.argv[1], formats=("mcap",))
 for k in range({STEPS}):
     x = np.random.default_rng(k).normal(size={len(NAMES)})

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from recordings.recover import OPEN_MARKER, process_start, recover_interrupted, writing
+from neural_asm.recordings.recover import OPEN_MARKER, process_start, recover_interrupted, writing
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process start times come from /proc")
 

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from models import checkpoint
-from models.asm import weigh_step
-from models.calibration import error_precision, error_spread
-from models.config import SCORING
-from models.fault import isolate, isolate_rows
-from models.scoring import energy
-from pipelines.default_model import calibrated_as_now
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import weigh_step
+from neural_asm.models.calibration import error_precision, error_spread
+from neural_asm.models.config import SCORING
+from neural_asm.models.fault import isolate, isolate_rows
+from neural_asm.models.scoring import energy
+from neural_asm.pipelines.default_model import calibrated_as_now
 
 
 @pytest.fixture

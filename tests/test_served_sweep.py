@@ -7,12 +7,12 @@ import copy
 import numpy as np
 import pytest
 
-from experiments.fault_sweep.rate_figures import write_latency_figure
-from experiments.fault_sweep.rate import markdown, spread
-from experiments.fault_sweep.served import (Flagged, Onsets, each_ms, flagged, flagged_over_resplits, from_visible,
+from neural_asm.experiments.fault_sweep.rate_figures import write_latency_figure
+from neural_asm.experiments.fault_sweep.rate import markdown, spread
+from neural_asm.experiments.fault_sweep.served import (Flagged, Onsets, each_ms, flagged, flagged_over_resplits, from_visible,
                                             latency_ms, percentiles_ms, quiet, subsampled)
-from models.fault import flag_steps
-from models.sequences import Sequences
+from neural_asm.models.fault import flag_steps
+from neural_asm.models.sequences import Sequences
 
 
 @pytest.fixture(scope="module")

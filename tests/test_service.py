@@ -19,21 +19,21 @@ import websockets
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from models import checkpoint
-from models.asm import NeuralASM, step_streams
-from recordings.blueprint import ENERGY
-from recordings.readers import read_mcap, read_rrd_series
-from service.app import create_app
-from service.auth import HEADER
-from service.cli import app as cli_app
-from service.embedded import start_embedded
-from service.errors import TooManySessions
-from recordings.recorder import SessionRecording
-from service import runner as runner_module
-from service.runner import Runner
-from service.sessions import Session, SessionStore
-from service.settings import Settings
-from sim.channels import CHANNEL_NAMES
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM, step_streams
+from neural_asm.recordings.blueprint import ENERGY
+from neural_asm.recordings.readers import read_mcap, read_rrd_series
+from neural_asm.service.app import create_app
+from neural_asm.service.auth import HEADER
+from neural_asm.service.cli import app as cli_app
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.errors import TooManySessions
+from neural_asm.recordings.recorder import SessionRecording
+from neural_asm.service import runner as runner_module
+from neural_asm.service.runner import Runner
+from neural_asm.service.sessions import Session, SessionStore
+from neural_asm.service.settings import Settings
+from neural_asm.sim.channels import CHANNEL_NAMES
 
 MAX_SESSIONS = 12
 
@@ -454,7 +454,7 @@ def test_no_models_is_a_clear_404(tmp_path):
 
 
 def test_step_payloads_match_their_declared_schemas(client, episodes, server):
-    from service.schemas import FaultResponse, PredictResponse, StepResult
+    from neural_asm.service.schemas import FaultResponse, PredictResponse, StepResult
 
     sid = open_session(client)["session_id"]
     x = episodes[0, 0].tolist()

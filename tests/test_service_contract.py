@@ -11,11 +11,11 @@ import jsonschema
 import pytest
 from fastapi.testclient import TestClient
 
-from models.config import SCORING
-from service.app import create_app
-from service.auth import HEADER
-from service.settings import Settings
-from sim.channels import CHANNEL_NAMES
+from neural_asm.models.config import SCORING
+from neural_asm.service.app import create_app
+from neural_asm.service.auth import HEADER
+from neural_asm.service.settings import Settings
+from neural_asm.sim.channels import CHANNEL_NAMES
 
 
 @pytest.fixture(scope="module")

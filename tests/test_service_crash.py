@@ -27,18 +27,18 @@ import pytest
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST
-from recordings.blueprint import ENERGY
-from recordings.readers import read_mcap, read_rrd_series
-from recordings.recover import INTERRUPTED_MARKER, OPEN_MARKER, RECOVERY_METADATA
-from service.embedded import start_embedded
-from service.settings import Settings
-from sim.channels import CHANNEL_NAMES
-from client import run_client
-from sim.runner import run_episode
-from sim.skills import SKILLS
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST
+from neural_asm.recordings.blueprint import ENERGY
+from neural_asm.recordings.readers import read_mcap, read_rrd_series
+from neural_asm.recordings.recover import INTERRUPTED_MARKER, OPEN_MARKER, RECOVERY_METADATA
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.settings import Settings
+from neural_asm.sim.channels import CHANNEL_NAMES
+from neural_asm.client import run_client
+from neural_asm.sim.runner import run_episode
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
@@ -92,7 +92,7 @@ def _serve(model_dir: Path, recordings: Path) -> tuple[subprocess.Popen, str]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    cmd = [sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--models-dir", str(model_dir),
+    cmd = [sys.executable, "-m", "neural_asm.service.cli", "serve", "--port", str(port), "--models-dir", str(model_dir),
            "--recordings-dir", str(recordings), "--no-build-default-model", "--log-level", "warning"]
     proc = subprocess.Popen(cmd, start_new_session=True)  # its own group: the recorder dies with it
     url = f"http://127.0.0.1:{port}"
@@ -150,7 +150,7 @@ def test_kill_9_mid_episode_leaves_files_the_standard_readers_read(model_dir, tm
     copies = tmp_path / "copies"
     copies.mkdir()
     copied = [Path(shutil.copy(p, copies)) for p in (mcap, rrd)]
-    result = subprocess.run([sys.executable, "-m", "nasm.cli", "recordings", "recover", *map(str, copied)],
+    result = subprocess.run([sys.executable, "-m", "neural_asm.cli", "recordings", "recover", *map(str, copied)],
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "was cut short" in result.stdout
@@ -176,7 +176,7 @@ def test_kill_9_mid_episode_leaves_files_the_standard_readers_read(model_dir, tm
 def test_recover_names_what_it_cannot_recover(tmp_path):
     from typer.testing import CliRunner
 
-    from recordings.cli import app
+    from neural_asm.recordings.cli import app
 
     (tmp_path / "notes.txt").write_text("x")
     result = CliRunner().invoke(app, ["recover", str(tmp_path / "missing.mcap"), str(tmp_path / "notes.txt")])

@@ -11,13 +11,13 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAST
-from models.synthetic import make_skills
-from service.app import create_app
-from service.settings import Settings
-from sim.channels import CHANNEL_NAMES
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST
+from neural_asm.models.synthetic import make_skills
+from neural_asm.service.app import create_app
+from neural_asm.service.settings import Settings
+from neural_asm.sim.channels import CHANNEL_NAMES
 
 
 def corrupt_weights(path: Path) -> None:

@@ -14,11 +14,11 @@ import httpx
 import numpy as np
 import pytest
 
-from recordings.readers import read_mcap
-from recordings.recorder import LAYOUT_FILE
-from recordings.recover import INTERRUPTED_MARKER, OPEN_MARKER
-from service.embedded import start_embedded
-from service.settings import Settings
+from neural_asm.recordings.readers import read_mcap
+from neural_asm.recordings.recorder import LAYOUT_FILE
+from neural_asm.recordings.recover import INTERRUPTED_MARKER, OPEN_MARKER
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.settings import Settings
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from dm_control import mjcf
 
-from sim.channels import CHANNEL_NAMES, JOINT_CHANNELS, WRENCH_CHANNELS
-from sim.disturbances import FallingObject, elbow_hit
-from sim.faults import FaultSpec, fault_grid
-from sim.panda import Q_MAX, Q_MIN, build_panda, dh_forward
-from sim.runner import execute_plan, first_observation, run_episode
-from sim.skills import SKILLS
+from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_CHANNELS, WRENCH_CHANNELS
+from neural_asm.sim.disturbances import FallingObject, elbow_hit
+from neural_asm.sim.faults import FaultSpec, fault_grid
+from neural_asm.sim.panda import Q_MAX, Q_MIN, build_panda, dh_forward
+from neural_asm.sim.runner import execute_plan, first_observation, run_episode
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
@@ -140,7 +140,7 @@ def test_fault_grid_is_the_papers_980():
 
 
 def test_compliant_controller_tracks_the_plan_softer_than_the_stiff_servos(demo):
-    from sim.config import SIM, SimConfig
+    from neural_asm.sim.config import SIM, SimConfig
 
     compliant = run_episode(SKILLS[0], 3, controller="compliant")
     assert compliant.success

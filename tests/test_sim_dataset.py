@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from sim.dataset import (
+from neural_asm.sim.dataset import (
     demonstrations,
     faults,
     held_out_normal,
@@ -16,10 +16,10 @@ from sim.dataset import (
     write_cache,
     write_mcap,
 )
-from sim.disturbances import FallingObject
-from sim.faults import FaultSpec
-from sim.runner import run_episode
-from sim.skills import SKILLS
+from neural_asm.sim.disturbances import FallingObject
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.runner import run_episode
+from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

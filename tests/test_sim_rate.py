@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from experiments.twins import onset_steps
-from sim.config import SIM
-from sim.dataset import hit_twins, hits, jobs_for, load_episodes, set_folder, write_cache, write_mcap
-from sim.disturbances import elbow_hit
-from sim.faults import FaultSpec
-from sim.runner import run_episode
-from sim.skills import SKILLS
+from neural_asm.experiments.twins import onset_steps
+from neural_asm.sim.config import SIM
+from neural_asm.sim.dataset import hit_twins, hits, jobs_for, load_episodes, set_folder, write_cache, write_mcap
+from neural_asm.sim.disturbances import elbow_hit
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.runner import run_episode
+from neural_asm.sim.skills import SKILLS
 
 
 def test_rates_and_their_sizes():

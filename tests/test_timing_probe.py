@@ -2,10 +2,10 @@
 
 import numpy as np
 
-from experiments.varied.timing_probe import GRID, TOLD, InferredSpeedPlan, ToldPlan, only, plan_context
-from models.normaliser import Normaliser
-from models.one_step import TemplateResidualOneStep
-from models.templates import StepRidgeTemplate
+from neural_asm.experiments.varied.timing_probe import GRID, TOLD, InferredSpeedPlan, ToldPlan, only, plan_context
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.one_step import TemplateResidualOneStep
+from neural_asm.models.templates import StepRidgeTemplate
 
 STEPS = 12
 

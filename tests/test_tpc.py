@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 import torch
 
-from models import recall
-from models.asm import NeuralASM, channel_precision
-from models.config import FAITHFUL, TPCConfig
-from models.kernels import spectral_norm
-from models.tpc import TemporalPC, relative_precision, stable_wf_norm
-from models.train import WeightUpdate, learning_rate, recall_error, train
+from neural_asm.models import recall
+from neural_asm.models.asm import NeuralASM, channel_precision
+from neural_asm.models.config import FAITHFUL, TPCConfig
+from neural_asm.models.kernels import spectral_norm
+from neural_asm.models.tpc import TemporalPC, relative_precision, stable_wf_norm
+from neural_asm.models.train import WeightUpdate, learning_rate, recall_error, train
 
 from conftest import SMALL
 

@@ -7,12 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sim.config import SIM
-from sim.varied import (CONTEXT_NAMES, VARIED_SKILLS, Context, channel_names, context_columns, keyframes,
+from neural_asm.sim.config import SIM
+from neural_asm.sim.varied import (CONTEXT_NAMES, VARIED_SKILLS, Context, channel_names, context_columns, keyframes,
                         layout_of, post_xy, sample_context)
-from sim.varied_faults import FORCE_CHANNELS, VariedFault
-from sim.episode import Episode
-from sim.varied_sets import VariedJob, fault_jobs, jobs_for, run_job, run_varied
+from neural_asm.sim.varied_faults import FORCE_CHANNELS, VariedFault
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.varied_sets import VariedJob, fault_jobs, jobs_for, run_job, run_varied
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
@@ -119,7 +119,7 @@ def test_sets_use_disjoint_seeds_and_fault_specs_are_checked():
     # validation faults: every family on the same skills, a quarter as many (at least 8), and their twins
     from collections import Counter
 
-    from sim.varied_sets import FAULT_PLAN
+    from neural_asm.sim.varied_sets import FAULT_PLAN
 
     val = jobs_for("val_faults")
     counts = Counter((j.fault.kind, j.skill) for j in val)
@@ -134,8 +134,8 @@ def test_sets_use_disjoint_seeds_and_fault_specs_are_checked():
 
 
 def test_a_fault_is_consequential_only_when_its_task_fails_where_its_twin_placed():
-    from experiments.twins import consequences
-    from sim.varied_sets import fault_jobs
+    from neural_asm.experiments.twins import consequences
+    from neural_asm.sim.varied_sets import fault_jobs
 
     jobs = fault_jobs()
     lock_misses, lock_twin_misses, slow_drift = jobs[0], jobs[3], jobs[321]  # a -5 deg lock; a 0.83 deg/s drift

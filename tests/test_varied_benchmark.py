@@ -9,18 +9,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from experiments.methods import Method, neural_asm_methods
-from experiments.varied.ceiling import ceiling, ceiling_markdown, oracle_rates
-from experiments.varied.data import make_benchmark
-from experiments.varied.methods import train_neural_asm
-from experiments.varied.pairs import PAIR
-from experiments.varied.score import headline, score_all
-from models.config import FAST, PRECISE
-from models.detectors import ConditionalTemplate, CueTemplate, PerSkillZScore
-from runtime.parallel import Parallel, parallel_map
-from sim.episode import Episode
-from sim.varied import VARIED_SKILLS
-from sim.varied_sets import VariedJob, fault_jobs, run_job
+from neural_asm.experiments.methods import Method, neural_asm_methods
+from neural_asm.experiments.varied.ceiling import ceiling, ceiling_markdown, oracle_rates
+from neural_asm.experiments.varied.data import make_benchmark
+from neural_asm.experiments.varied.methods import train_neural_asm
+from neural_asm.experiments.varied.pairs import PAIR
+from neural_asm.experiments.varied.score import headline, score_all
+from neural_asm.models.config import FAST, PRECISE
+from neural_asm.models.detectors import ConditionalTemplate, CueTemplate, PerSkillZScore
+from neural_asm.runtime.parallel import Parallel, parallel_map
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.varied import VARIED_SKILLS
+from neural_asm.sim.varied_sets import VariedJob, fault_jobs, run_job
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
@@ -111,8 +111,8 @@ def test_headline_follows_the_contract(bench, tmp_path):
     assert c["n"] == failed.sum() and set(bench.consequence) <= {"consequential", "deviating", "invisible", "unattributed"}
     if failed.any():
         assert c["detection"] == pytest.approx(detected[failed].mean()) and 0.0 <= c["auroc"] <= 1.0
-    from experiments.varied.report import write_json, write_markdown
-    from experiments.varied.run import VariedResult
+    from neural_asm.experiments.varied.report import write_json, write_markdown
+    from neural_asm.experiments.varied.run import VariedResult
 
     result = VariedResult(bench, summaries, outcomes, h, {})
     write_json(result, tmp_path / "fault_sweep.json", 1.0)
@@ -127,9 +127,9 @@ def test_headline_follows_the_contract(bench, tmp_path):
 def test_the_service_hosts_a_varied_model(bench, tmp_path):
     from fastapi.testclient import TestClient
 
-    from models import checkpoint
-    from service.app import create_app
-    from service.settings import Settings
+    from neural_asm.models import checkpoint
+    from neural_asm.service.app import create_app
+    from neural_asm.service.settings import Settings
 
     model = train_neural_asm(bench, FAST.with_(epochs=2, hidden_size=16), progress=False)
     checkpoint.save(model, tmp_path / "varied_hidden.safetensors")
@@ -142,7 +142,7 @@ def test_the_service_hosts_a_varied_model(bench, tmp_path):
 
 
 def test_ablation_rows_carry_validation_error_and_test_scores(bench):
-    from experiments.varied.ablation import ablate, ablation_markdown
+    from neural_asm.experiments.varied.ablation import ablate, ablation_markdown
 
     tiny = FAST.with_(epochs=2, hidden_size=16)
     rows = ablate(bench, {"a": ("capped", tiny), "b": ("uncapped", tiny.with_(wf_max_norm=None))}, progress=False,
@@ -157,8 +157,8 @@ def test_ablation_rows_carry_validation_error_and_test_scores(bench):
         assert set(r["training_mse_per_group"]) == set(r["validation_mse_per_group"]) >= {"all", "joints"}
         assert all(v > 0 for v in r["training_mse_per_group"].values())
     # the visible validation faults flagged, by the benchmark's own rule on the validation set
-    from experiments.varied.pairs import validation_scores
-    from experiments.varied.score import energies
+    from neural_asm.experiments.varied.pairs import validation_scores
+    from neural_asm.experiments.varied.score import energies
 
     model = train_neural_asm(bench, tiny, progress=False)
     online = next(m for m in neural_asm_methods(model, "a", "capped") if m.name.endswith("online"))
@@ -221,10 +221,10 @@ def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path, mod
     service flags exactly the normal episodes, and detects exactly the faults, the benchmark does,
     in online and in plan recall. The model has the featured network's form (direct pathways into
     the hidden state, learned precisions, a plan memory)."""
-    from client.transport import WebSocketTransport
-    from models import checkpoint
-    from service.embedded import start_embedded
-    from service.settings import Settings
+    from neural_asm.client.transport import WebSocketTransport
+    from neural_asm.models import checkpoint
+    from neural_asm.service.embedded import start_embedded
+    from neural_asm.service.settings import Settings
 
     model = train_neural_asm(bench, PRECISE.with_(epochs=3, hidden_size=32), progress=False)
     summaries, outcomes = score_all(bench, neural_asm_methods(model, "nasm", "Neural ASM"), model.normaliser)
@@ -252,9 +252,9 @@ def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path, mod
 
 
 def test_headline_diagnostics_follow_the_contract(bench):
-    from experiments.varied.bptt import BPTTConfig
-    from experiments.varied.diagnostic import headline_diagnostics
-    from models.normaliser import Normaliser
+    from neural_asm.experiments.varied.bptt import BPTTConfig
+    from neural_asm.experiments.varied.diagnostic import headline_diagnostics
+    from neural_asm.models.normaliser import Normaliser
 
     d = headline_diagnostics(bench, Normaliser.fit(bench.demos.data), FAST.with_(hidden_size=16),
                              bptt=BPTTConfig(epochs=2, batch_size=8, eval_every=1))
@@ -268,7 +268,7 @@ def test_headline_diagnostics_follow_the_contract(bench):
 
 
 def test_an_unknown_context_is_refused_before_anything_is_simulated(tmp_path):
-    from experiments.varied.data import load_varied_benchmark
+    from neural_asm.experiments.varied.data import load_varied_benchmark
 
     with pytest.raises(ValueError, match="context must be one of"):
         load_varied_benchmark(tmp_path / "data", "foo")
@@ -276,7 +276,7 @@ def test_an_unknown_context_is_refused_before_anything_is_simulated(tmp_path):
 
 
 def test_the_featured_mode_is_the_one_that_flags_most_validation_faults():
-    from experiments.varied.run import featured_mode
+    from neural_asm.experiments.varied.run import featured_mode
 
     assert featured_mode({"nasm_offline": 0.41, "nasm_online": 0.34, "nasm_plan": 0.52}) == "nasm_plan"
     assert featured_mode({"nasm_offline": 0.41, "nasm_online": 0.46}) == "nasm_online"

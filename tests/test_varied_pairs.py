@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from experiments.methods import Method
-from experiments.varied.data import FaultSet, VariedBenchmark
-from experiments.varied.pairs import best_pair, choose, combined, scale
-from experiments.varied.outcomes import VALIDATION, after_onset, outcomes
-from models.calibration import Thresholds
-from models.sequences import Sequences
+from neural_asm.experiments.methods import Method
+from neural_asm.experiments.varied.data import FaultSet, VariedBenchmark
+from neural_asm.experiments.varied.pairs import best_pair, choose, combined, scale
+from neural_asm.experiments.varied.outcomes import VALIDATION, after_onset, outcomes
+from neural_asm.models.calibration import Thresholds
+from neural_asm.models.sequences import Sequences
 
 T, ONSET, SPIKE = 12, 4, 6.0  # steps, every fault's onset, a fault's peak in units of its detector's scale
 SIZES = {"precision": 150, "calibration": 300, "test": 100, "ood": 40, "faults": 20, VALIDATION: 20}

@@ -10,9 +10,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = """
 import sys
 sys.modules["matplotlib"] = None  # as if not installed: importing it raises ImportError
-import service.app, client.cli, recordings.recover
+import neural_asm.service.app, neural_asm.client.cli, neural_asm.recordings.recover
 from typer.testing import CliRunner
-from nasm.cli import app
+from neural_asm.cli import app
 assert not any(m.startswith("matplotlib") for m in sys.modules if sys.modules[m] is not None)
 for args in (["faults"], ["faults", "--task", "varied"], ["contextual", "--quick"], ["correction", "--seeds", "1"]):
     result = CliRunner().invoke(app, args)

@@ -2,21 +2,21 @@
 
 from __future__ import annotations
 
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 from pathlib import Path
 
 import typer
 
-from runtime.cli import Command, Group
-from experiments.contextual import report
-from experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, QUICK
-from experiments.contextual.dataset import conditions_data
-from experiments.contextual.protocol import run_protocol
-from experiments.plotting import require_matplotlib
-from models.config import PRESETS
-from runtime.home import home_path
-from runtime.parallel import Backend
+from neural_asm.runtime.cli import Command, Group
+from neural_asm.experiments.contextual import report
+from neural_asm.experiments.contextual.config import CONTEXTUAL, DEFAULT_PRESET, QUICK
+from neural_asm.experiments.contextual.dataset import conditions_data
+from neural_asm.experiments.contextual.protocol import run_protocol
+from neural_asm.experiments.plotting import require_matplotlib
+from neural_asm.models.config import PRESETS
+from neural_asm.runtime.home import home_path
+from neural_asm.runtime.parallel import Backend
 
 app = typer.Typer(cls=Group, help=__doc__, no_args_is_help=True, pretty_exceptions_show_locals=False)
 
@@ -39,7 +39,7 @@ def contextual(
         typer.secho(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}", fg="red", err=True)
         raise typer.Exit(2)
     require_matplotlib("contextual")
-    from experiments.contextual import figures
+    from neural_asm.experiments.contextual import figures
 
     cfg = QUICK if quick else CONTEXTUAL
     cfg = cfg.with_(**{k: v for k, v in (("seeds", seeds), ("epochs", epochs)) if v is not None})

@@ -21,8 +21,8 @@ from typing import Sequence
 
 import numpy as np
 
-from experiments.contextual.config import CONDITIONS, SKILLS, ContextualConfig, Skill
-from models.sequences import Sequences
+from neural_asm.experiments.contextual.config import CONDITIONS, SKILLS, ContextualConfig, Skill
+from neural_asm.models.sequences import Sequences
 
 HAND_CHANNELS = ("ee_x", "ee_y")
 JOINT_CHANNELS = tuple(f"q{i}" for i in range(1, 8))
@@ -76,14 +76,14 @@ def hand_path(skill: Skill, cfg: ContextualConfig, rng: np.random.Generator) -> 
 
 @lru_cache(maxsize=1)
 def _ik():  # one solver per process: building the MuJoCo model takes ~0.5 s
-    from sim.ik import PandaIK
+    from neural_asm.sim.ik import PandaIK
 
     return PandaIK(tol_m=1e-4, tol_rad=1e-3, max_iters=200)
 
 
 def joint_angles(path: np.ndarray, cfg: ContextualConfig) -> np.ndarray:
     """Panda joint angles (steps, 7) along a hand path, tool pointing down."""
-    from sim.skills import DOWN
+    from neural_asm.sim.skills import DOWN
 
     q, out = HOME_POSTURE, []
     for xy in path:

@@ -10,9 +10,9 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments.contextual.config import CONDITIONS, LABELS, MODELS, SKILLS, ContextualConfig
-from experiments.contextual.dataset import JOINT_CHANNELS, hand, sensory_index
-from models.sequences import Sequences
+from neural_asm.experiments.contextual.config import CONDITIONS, LABELS, MODELS, SKILLS, ContextualConfig
+from neural_asm.experiments.contextual.dataset import JOINT_CHANNELS, hand, sensory_index
+from neural_asm.models.sequences import Sequences
 
 CUE_COLOURS = {"CW": "tab:red", "CCW": "tab:blue", "CW_wide": "tab:orange", "CCW_wide": "tab:cyan"}
 

@@ -9,14 +9,14 @@ from typing import Callable
 import numpy as np
 import torch
 
-from experiments.contextual.dataset import motor_index, sensory_index
-from models.asm import NeuralASM
-from models.config import TPCConfig
-from models.normaliser import Normaliser
-from models.recall import offline_recall
-from models.sequences import Sequences
-from models.rnn import SensorimotorRNN, SensoryToMotorRNN, roll_out, train_rnn
-from models.tpc import TemporalPC
+from neural_asm.experiments.contextual.dataset import motor_index, sensory_index
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import TPCConfig
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.recall import offline_recall
+from neural_asm.models.sequences import Sequences
+from neural_asm.models.rnn import SensorimotorRNN, SensoryToMotorRNN, roll_out, train_rnn
+from neural_asm.models.tpc import TemporalPC
 
 
 @dataclass

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.contextual.config import ContextualConfig
+from neural_asm.experiments.contextual.config import ContextualConfig
 
 
 def lateral_deviation(hand: np.ndarray, cfg: ContextualConfig) -> np.ndarray:

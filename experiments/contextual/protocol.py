@@ -11,11 +11,11 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig
-from experiments.contextual.dataset import MOTOR_CHANNELS, channel_names
-from experiments.contextual.tasks import separation_task, skills_task
-from models.config import TPCConfig
-from runtime.parallel import Backend, parallel_map
+from neural_asm.experiments.contextual.config import CONDITIONS, MODELS, SKILLS, ContextualConfig
+from neural_asm.experiments.contextual.dataset import MOTOR_CHANNELS, channel_names
+from neural_asm.experiments.contextual.tasks import separation_task, skills_task
+from neural_asm.models.config import TPCConfig
+from neural_asm.runtime.parallel import Backend, parallel_map
 
 Job = tuple[Callable[..., dict[str, Any]], tuple[Any, ...]]
 CUES = tuple(s.name for s in SKILLS[:2])

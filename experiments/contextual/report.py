@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from experiments.contextual.config import CONDITIONS, LABELS, MODELS
+from neural_asm.experiments.contextual.config import CONDITIONS, LABELS, MODELS
 
 PLANNING = ("plan_and_execute", "plan_only")
 

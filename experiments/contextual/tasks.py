@@ -9,14 +9,14 @@ from typing import Any
 
 import numpy as np
 
-from experiments.contextual.config import SKILLS, ContextualConfig
-from experiments.contextual.dataset import HAND_CHANNELS, conditions_data, hand, motor_index
-from experiments.contextual.learners import fit
-from experiments.contextual.metrics import pead, recall_error
-from models.config import TPCConfig
-from models.normaliser import Normaliser
-from models.tpc import TemporalPC
-from models.train import train
+from neural_asm.experiments.contextual.config import SKILLS, ContextualConfig
+from neural_asm.experiments.contextual.dataset import HAND_CHANNELS, conditions_data, hand, motor_index
+from neural_asm.experiments.contextual.learners import fit
+from neural_asm.experiments.contextual.metrics import pead, recall_error
+from neural_asm.models.config import TPCConfig
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.tpc import TemporalPC
+from neural_asm.models.train import train
 
 
 def per_cue(values: np.ndarray, labels: np.ndarray) -> dict[str, Any]:

@@ -2,18 +2,18 @@
 
 from __future__ import annotations
 
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 from pathlib import Path
 
 import typer
 
-from runtime.cli import Command, Group
-from experiments.correction.config import CORRECTION
-from experiments.plotting import require_matplotlib
-from runtime.home import home_path
-from sim.cli import RATE_HELP, check_rate
-from sim.config import SIM
+from neural_asm.runtime.cli import Command, Group
+from neural_asm.experiments.correction.config import CORRECTION
+from neural_asm.experiments.plotting import require_matplotlib
+from neural_asm.runtime.home import home_path
+from neural_asm.sim.cli import RATE_HELP, check_rate
+from neural_asm.sim.config import SIM
 
 app = typer.Typer(cls=Group)
 
@@ -35,9 +35,9 @@ def correction(
     the memory's correction; writes correction.json, correction.md and correction.png."""
 
     require_matplotlib("correction")
-    from experiments.correction.figures import write_figure
-    from experiments.correction.pipeline import run_trainings
-    from experiments.correction.report import write_json, write_markdown
+    from neural_asm.experiments.correction.figures import write_figure
+    from neural_asm.experiments.correction.pipeline import run_trainings
+    from neural_asm.experiments.correction.report import write_json, write_markdown
 
     try:
         config = CORRECTION.with_(n_seeds=seeds, test_seed=first_seed, epochs=epochs, rate=float(rate),

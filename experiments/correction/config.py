@@ -10,11 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
-from models.config import SCORING
-from models.recall import RECALL_MODES
-from pipelines.compliant import SERVED_MONITOR, MonitorSeeds
-from pipelines.default_model import RATE_MODES
-from sim.config import CONTROLLERS, RATES, SIM, CorrectionGains, ElbowHit
+from neural_asm.models.config import SCORING
+from neural_asm.models.recall import RECALL_MODES
+from neural_asm.pipelines.compliant import SERVED_MONITOR, MonitorSeeds
+from neural_asm.pipelines.default_model import RATE_MODES
+from neural_asm.sim.config import CONTROLLERS, RATES, SIM, CorrectionGains, ElbowHit
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from experiments.correction.metrics import deviation_deg
-from experiments.correction.pipeline import CORRECTIONS, Result
-from experiments.correction.report import summarise
+from neural_asm.experiments.correction.metrics import deviation_deg
+from neural_asm.experiments.correction.pipeline import CORRECTIONS, Result
+from neural_asm.experiments.correction.report import summarise
 
 COLOURS = {("stiff", "none"): "tab:grey", ("stiff", "corrected"): "tab:green",
            ("compliant", "none"): "tab:red", ("compliant", "corrected"): "tab:blue"}

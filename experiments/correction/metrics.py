@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.correction.config import CorrectionConfig
-from sim.config import SIM
-from sim.episode import Episode
+from neural_asm.experiments.correction.config import CorrectionConfig
+from neural_asm.sim.config import SIM
+from neural_asm.sim.episode import Episode
 
 
 def reference_hi(plan: np.ndarray, t_hi: np.ndarray) -> np.ndarray:

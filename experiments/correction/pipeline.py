@@ -24,19 +24,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from experiments.correction.config import CorrectionConfig
-from experiments.correction.metrics import detection, run_metrics
-from models.asm import NeuralASM
-from models.config import RATE_DEFAULTS
-from models.fault import threshold_for
-from pipelines.compliant import ServedMonitor, calibrated_for, planner_of, recall_plan, skill_of
-from sim.channels import CHANNEL_NAMES
-from sim.config import SIM
-from sim.control import PlanCorrection, execute_recalled
-from sim.disturbances import FallingObject, elbow_hit
-from sim.episode import Episode
-from sim.runner import SimulationError, run_episode
-from sim.skills import SKILLS
+from neural_asm.experiments.correction.config import CorrectionConfig
+from neural_asm.experiments.correction.metrics import detection, run_metrics
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import RATE_DEFAULTS
+from neural_asm.models.fault import threshold_for
+from neural_asm.pipelines.compliant import ServedMonitor, calibrated_for, planner_of, recall_plan, skill_of
+from neural_asm.sim.channels import CHANNEL_NAMES
+from neural_asm.sim.config import SIM
+from neural_asm.sim.control import PlanCorrection, execute_recalled
+from neural_asm.sim.disturbances import FallingObject, elbow_hit
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.runner import SimulationError, run_episode
+from neural_asm.sim.skills import SKILLS
 
 CORRECTIONS: tuple[str, ...] = ("none", "corrected")
 

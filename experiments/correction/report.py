@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.correction.metrics import first_hit_step
-from experiments.correction.pipeline import CORRECTIONS, Result
-from sim.config import SIM
+from neural_asm.experiments.correction.metrics import first_hit_step
+from neural_asm.experiments.correction.pipeline import CORRECTIONS, Result
+from neural_asm.sim.config import SIM
 
 
 def _mean(values: list) -> float:

@@ -9,15 +9,15 @@ from pathlib import Path
 
 import typer
 
-from runtime.cli import Command, Group
-from experiments.plotting import require_matplotlib
-from models.config import FAITHFUL
-from pipelines.episodes import SetMismatch
-from runtime.home import home_path
-from runtime.parallel import Backend, Parallel
-from sim.dataset import set_folder
-from sim.cli import RATE_HELP, Task, check_rate
-from sim.config import SIM
+from neural_asm.runtime.cli import Command, Group
+from neural_asm.experiments.plotting import require_matplotlib
+from neural_asm.models.config import FAITHFUL
+from neural_asm.pipelines.episodes import SetMismatch
+from neural_asm.runtime.home import home_path
+from neural_asm.runtime.parallel import Backend, Parallel
+from neural_asm.sim.dataset import set_folder
+from neural_asm.sim.cli import RATE_HELP, Task, check_rate
+from neural_asm.sim.config import SIM
 
 # The paper's batch-1 training over 160 varied demonstrations costs ~3 s per epoch here: the
 # varied benchmark caps the paper-configured network's epochs to stay within minutes.
@@ -89,9 +89,9 @@ def faults(
 
 def _paper(out: Path, data: Path, paper_epochs: int, n_normal: int | None, fast_epochs: int | None, *,
            parallel: Parallel) -> None:
-    from experiments.fault_sweep.figures import write_figures
-    from experiments.fault_sweep.report import write_csv, write_json, write_markdown
-    from experiments.fault_sweep.run import run_sweep
+    from neural_asm.experiments.fault_sweep.figures import write_figures
+    from neural_asm.experiments.fault_sweep.report import write_csv, write_json, write_markdown
+    from neural_asm.experiments.fault_sweep.run import run_sweep
 
     out.mkdir(parents=True, exist_ok=True)
     result = run_sweep(data, out, paper_epochs, n_normal, fast_epochs, parallel=parallel)
@@ -105,8 +105,8 @@ def _paper(out: Path, data: Path, paper_epochs: int, n_normal: int | None, fast_
 
 def _rate(rate: int, out: Path, data: Path, n_normal: int | None, epochs: int | None, trainings: int, *,
           parallel: Parallel) -> None:
-    from experiments.fault_sweep.rate import markdown, run_rate_sweep, write
-    from experiments.fault_sweep.rate_figures import write_latency_figure
+    from neural_asm.experiments.fault_sweep.rate import markdown, run_rate_sweep, write
+    from neural_asm.experiments.fault_sweep.rate_figures import write_latency_figure
 
     out.mkdir(parents=True, exist_ok=True)
     result = run_rate_sweep(data, out, rate, n_normal, epochs, trainings, parallel=parallel)
@@ -118,9 +118,9 @@ def _rate(rate: int, out: Path, data: Path, n_normal: int | None, epochs: int | 
 
 def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_epochs: int, *,
             parallel: Parallel) -> None:
-    from experiments.varied.report import write_figures, write_json, write_markdown
-    from experiments.varied.run import run_varied
-    from models.config import PRECISE
+    from neural_asm.experiments.varied.report import write_figures, write_json, write_markdown
+    from neural_asm.experiments.varied.run import run_varied
+    from neural_asm.models.config import PRECISE
 
     start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
@@ -135,7 +135,7 @@ def _varied(context: str, out: Path, data: Path, fast_epochs: int | None, paper_
 
 def _ablation(context: str, out: Path, data: Path, epochs: int | None, names: tuple[str, ...], seeds: int, *,
               parallel: Parallel) -> None:
-    from experiments.varied.ablation import ablation_markdown, run_ablation
+    from neural_asm.experiments.varied.ablation import ablation_markdown, run_ablation
 
     rows = run_ablation(data, context, epochs, names=names, seeds=tuple(range(seeds)), parallel=parallel)
     out.mkdir(parents=True, exist_ok=True)
@@ -145,8 +145,8 @@ def _ablation(context: str, out: Path, data: Path, epochs: int | None, names: tu
 
 
 def _diagnostic(context: str, out: Path, data: Path, seeds: int, *, parallel: Parallel) -> None:
-    from experiments.varied.diagnostic import run_diagnostic
-    from experiments.varied.diagnostic_report import diagnostic_markdown, per_group_markdown
+    from neural_asm.experiments.varied.diagnostic import run_diagnostic
+    from neural_asm.experiments.varied.diagnostic_report import diagnostic_markdown, per_group_markdown
 
     start = time.perf_counter()
     result = run_diagnostic(data, context, tuple(range(seeds)), parallel=parallel)
@@ -159,7 +159,7 @@ def _diagnostic(context: str, out: Path, data: Path, seeds: int, *, parallel: Pa
 
 
 def _ceiling(context: str, out: Path, data: Path, *, parallel: Parallel) -> None:
-    from experiments.varied.ceiling import ceiling_markdown, run_ceiling
+    from neural_asm.experiments.varied.ceiling import ceiling_markdown, run_ceiling
 
     start = time.perf_counter()
     result = run_ceiling(data, context, parallel=parallel)

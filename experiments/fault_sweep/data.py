@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from models.sequences import Sequences
-from pipelines.episodes import NormalSets, as_sequences, paper_sets, split_normal
-from runtime.parallel import Parallel
-from sim.episode import Episode
+from neural_asm.models.sequences import Sequences
+from neural_asm.pipelines.episodes import NormalSets, as_sequences, paper_sets, split_normal
+from neural_asm.runtime.parallel import Parallel
+from neural_asm.sim.episode import Episode
 
 SETS = ("demos", "normal", "faults", "twins")
 

@@ -7,11 +7,11 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, Weighted, weigh
-from experiments.fault_sweep.run import SweepResult
-from models.calibration import Thresholds
-from sim.channels import JOINT_CHANNELS, JOINT_NAMES, WRENCH_CHANNELS
-from sim.config import SIM
+from neural_asm.experiments.fault_sweep.metrics import FPRS, MAIN_FPR, WEIGHTINGS, Weighted, weigh
+from neural_asm.experiments.fault_sweep.run import SweepResult
+from neural_asm.models.calibration import Thresholds
+from neural_asm.sim.channels import JOINT_CHANNELS, JOINT_NAMES, WRENCH_CHANNELS
+from neural_asm.sim.config import SIM
 
 BEST = ("nasm_offline", "whitened")  # the paper's setting, errors weighted by a full precision
 EXAMPLES = ((5, 3.0, 10.0), (2, 3.0, 10.0))  # (joint, time s, overshoot deg), the paper's two

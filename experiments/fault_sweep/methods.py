@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.methods import Expect, Method
-from models.baselines import LinearOneStep, StepStatistics
+from neural_asm.experiments.methods import Expect, Method
+from neural_asm.models.baselines import LinearOneStep, StepStatistics
 
 
 def baseline_methods(demos: np.ndarray, skills: np.ndarray) -> list[Method]:

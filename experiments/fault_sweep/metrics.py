@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from experiments.twins import VISIBLE_K, visible_from, whitened_deviation
-from models.calibration import Thresholds, estimate
-from models.config import SCORING
-from models.fault import isolated_joint, joint_channels
-from models.scoring import energy
+from neural_asm.experiments.twins import VISIBLE_K, visible_from, whitened_deviation
+from neural_asm.models.calibration import Thresholds, estimate
+from neural_asm.models.config import SCORING
+from neural_asm.models.fault import isolated_joint, joint_channels
+from neural_asm.models.scoring import energy
 
 FPRS = SCORING.fprs  # the thresholds a model calibrates
 MAIN_FPR = SCORING.default_fpr  # the one its decisions use

@@ -15,16 +15,16 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from experiments.fault_sweep.data import SETS
-from experiments.fault_sweep.served import Onsets, evaluate, subsampled
-from experiments.twins import VISIBLE_K
-from models import checkpoint
-from models.config import RATE_DEFAULTS, TPCConfig
-from models.recall import NETWORK_MODES
-from pipelines.default_model import model_name, provenance_of, train_calibrated
-from pipelines.episodes import NormalSets, as_sequences, paper_sets, split_normal
-from runtime.parallel import Parallel
-from sim.config import SIM
+from neural_asm.experiments.fault_sweep.data import SETS
+from neural_asm.experiments.fault_sweep.served import Onsets, evaluate, subsampled
+from neural_asm.experiments.twins import VISIBLE_K
+from neural_asm.models import checkpoint
+from neural_asm.models.config import RATE_DEFAULTS, TPCConfig
+from neural_asm.models.recall import NETWORK_MODES
+from neural_asm.pipelines.default_model import model_name, provenance_of, train_calibrated
+from neural_asm.pipelines.episodes import NormalSets, as_sequences, paper_sets, split_normal
+from neural_asm.runtime.parallel import Parallel
+from neural_asm.sim.config import SIM
 
 HIT_SETS = ("hits", "hit_twins")
 KINDS = ("lock", "falling_object")  # the headline's fault kinds
@@ -89,7 +89,7 @@ def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | N
         "onset": "first 40 Hz tick at which the observations differ from the same seed's twin",
         "visible_onset": (f"first 40 Hz tick at which some channel departs from the twin by more than {VISIBLE_K:g} "
                           "normal standard deviations (per skill, tick and channel over the precision split; "
-                          "experiments.twins): latency.<kind>.from_visible counts from it"),
+                          "neural_asm.experiments.twins): latency.<kind>.from_visible counts from it"),
         "rates": by_rate,
         "seconds": round(time.perf_counter() - start, 1),
     }

@@ -6,8 +6,8 @@ import csv
 import json
 from pathlib import Path
 
-from experiments.fault_sweep.metrics import FPRS, MAIN_FPR
-from experiments.fault_sweep.run import SweepResult
+from neural_asm.experiments.fault_sweep.metrics import FPRS, MAIN_FPR
+from neural_asm.experiments.fault_sweep.run import SweepResult
 
 PAPER = {
     "neural_asm": {"detection_rate": "82-83 % (1-5 % FPR)", "isolation": "79.5 %"},

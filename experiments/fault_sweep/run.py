@@ -14,16 +14,16 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from experiments.fault_sweep.data import Benchmark, load_benchmark
-from experiments.fault_sweep.methods import baseline_methods
-from experiments.methods import Method, neural_asm_methods
-from experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
-from pipelines.default_model import provenance_of, train_calibrated
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import FAITHFUL, FAST, TPCConfig
-from models.normaliser import Normaliser
-from runtime.parallel import Parallel
+from neural_asm.experiments.fault_sweep.data import Benchmark, load_benchmark
+from neural_asm.experiments.fault_sweep.methods import baseline_methods
+from neural_asm.experiments.methods import Method, neural_asm_methods
+from neural_asm.experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
+from neural_asm.pipelines.default_model import provenance_of, train_calibrated
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAITHFUL, FAST, TPCConfig
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.runtime.parallel import Parallel
 
 
 @dataclass

@@ -25,13 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from experiments.twins import first_visible_steps, onset_steps, whitened_deviation
-from models.asm import NeuralASM
-from models.config import SCORING
-from models.calibration import conformal_episode_threshold
-from models.fault import flag_steps, is_fault, isolated_joint, threshold_for
-from models.scoring import step_rows
-from models.sequences import Sequences
+from neural_asm.experiments.twins import first_visible_steps, onset_steps, whitened_deviation
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import SCORING
+from neural_asm.models.calibration import conformal_episode_threshold
+from neural_asm.models.fault import flag_steps, is_fault, isolated_joint, threshold_for
+from neural_asm.models.scoring import step_rows
+from neural_asm.models.sequences import Sequences
 
 THRESHOLD = "episode"  # the service's default threshold kind
 RESPLITS = 1000

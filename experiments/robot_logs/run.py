@@ -10,7 +10,7 @@ does on the native episodes; both results are printed side by side.
 
 from __future__ import annotations
 
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import dataclasses
 import json
@@ -20,16 +20,16 @@ from pathlib import Path
 
 import typer
 
-from experiments.fault_sweep.data import SETS, make_benchmark
-from experiments.methods import neural_asm_methods
-from experiments.fault_sweep.run import score_methods, train_models
-from experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
-from logs.sources import load_log_sequences
-from models.config import FAST
-from pipelines.episodes import SetMismatch, paper_sets
-from runtime.parallel import Parallel
-from runtime.home import home_path
-from sim.episode import Episode
+from neural_asm.experiments.fault_sweep.data import SETS, make_benchmark
+from neural_asm.experiments.methods import neural_asm_methods
+from neural_asm.experiments.fault_sweep.run import score_methods, train_models
+from neural_asm.experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
+from neural_asm.logs.sources import load_log_sequences
+from neural_asm.models.config import FAST
+from neural_asm.pipelines.episodes import SetMismatch, paper_sets
+from neural_asm.runtime.parallel import Parallel
+from neural_asm.runtime.home import home_path
+from neural_asm.sim.episode import Episode
 
 ROWS = (("detected @1 % FPR", "detection_rate", "0.01"), ("detected @5 % FPR", "detection_rate", "0.05"),
         ("measured FPR @1 %", "measured_fpr", "0.01"), ("normal episodes flagged @1 %", "episode_false_alarm_rate", "0.01"),

@@ -28,9 +28,9 @@ from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from sim.channels import CHANNEL_NAMES, EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_NAMES, WRENCH_CHANNELS
-from sim.config import SIM
-from sim.episode import Episode
+from neural_asm.sim.channels import CHANNEL_NAMES, EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_NAMES, WRENCH_CHANNELS
+from neural_asm.sim.config import SIM
+from neural_asm.sim.episode import Episode
 
 JOINT_STATE_NAMES = [f"panda_{j}" for j in JOINT_NAMES] + ["panda_finger_joint1", "panda_finger_joint2"]
 RATES_HZ = {"/joint_states": 40.0, "/ee_position": 10.0, "/gripper_closed": 4.0,

@@ -16,15 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.methods import neural_asm_methods
-from experiments.varied.methods import train_neural_asm
-from experiments.varied.outcomes import ALPHA
-from experiments.varied.score import score_all
-from models.asm import NeuralASM
-from models.config import FAST, PATHWAYS, PRECISE, ROBUST, TPCConfig
-from runtime.parallel import Parallel
-from sim.varied import channel_groups
+from neural_asm.experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from neural_asm.experiments.methods import neural_asm_methods
+from neural_asm.experiments.varied.methods import train_neural_asm
+from neural_asm.experiments.varied.outcomes import ALPHA
+from neural_asm.experiments.varied.score import score_all
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import FAST, PATHWAYS, PRECISE, ROBUST, TPCConfig
+from neural_asm.runtime.parallel import Parallel
+from neural_asm.sim.varied import channel_groups
 
 VARIANTS: dict[str, tuple[str, TPCConfig]] = {
     "default": ("robust preset: training noise 0.35 (the featured network before direct pathways)", ROBUST),

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from models.kernels import MAX_HALVINGS
-from models.tpc import TemporalPC
+from neural_asm.models.kernels import MAX_HALVINGS
+from neural_asm.models.tpc import TemporalPC
 
 
 @dataclass(frozen=True)

@@ -38,21 +38,21 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.varied.outcomes import ALPHA, outcomes, summary
-from experiments.varied.score import SETS, held_out_error
-from models.calibration import error_precision, error_spread
-from models.config import SCORING
-from models.normaliser import Normaliser
-from models.scoring import energy
-from models.sequences import Sequences
-from pipelines.episodes import as_sequences
-from runtime.parallel import Parallel
-from sim.config import SIM
-from sim.dataset import load_episodes, write_cache, write_mcap
-from sim.episode import Episode
-from sim.varied import channel_groups, context_columns
-from sim.varied_sets import VariedJob, run_job
+from neural_asm.experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from neural_asm.experiments.varied.outcomes import ALPHA, outcomes, summary
+from neural_asm.experiments.varied.score import SETS, held_out_error
+from neural_asm.models.calibration import error_precision, error_spread
+from neural_asm.models.config import SCORING
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.scoring import energy
+from neural_asm.models.sequences import Sequences
+from neural_asm.pipelines.episodes import as_sequences
+from neural_asm.runtime.parallel import Parallel
+from neural_asm.sim.config import SIM
+from neural_asm.sim.dataset import load_episodes, write_cache, write_mcap
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.varied import channel_groups, context_columns
+from neural_asm.sim.varied_sets import VariedJob, run_job
 
 LOWER_FLOORS = (0.01, 0.002)  # normalised units, against ScoringConfig.error_std_floor (0.05)
 REPLICATES = {"fresh": {"replicate": 1}, "same_start": {"replicate": 2, "same_start": True}}

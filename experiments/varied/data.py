@@ -21,13 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.twins import consequences, onset_steps, visible_from, whitened_deviation
-from models.sequences import Sequences
-from pipelines.episodes import as_sequences, ensure_sets, split_three
-from runtime.parallel import Parallel
-from sim.episode import Episode
-from sim.varied import channel_names, check_context, context_columns
-from sim.varied_sets import VARIED_KINDS, generate, jobs_for
+from neural_asm.experiments.twins import consequences, onset_steps, visible_from, whitened_deviation
+from neural_asm.models.sequences import Sequences
+from neural_asm.pipelines.episodes import as_sequences, ensure_sets, split_three
+from neural_asm.runtime.parallel import Parallel
+from neural_asm.sim.episode import Episode
+from neural_asm.sim.varied import channel_names, check_context, context_columns
+from neural_asm.sim.varied_sets import VARIED_KINDS, generate, jobs_for
 
 SPLIT = (150, 300)  # precision, calibration; the rest of the normal set is the test split
 

@@ -19,19 +19,19 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.varied.bptt import BPTTConfig, train_bptt
-from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.methods import Method
-from experiments.varied.methods import train_neural_asm
-from experiments.varied.outcomes import ALPHA
-from experiments.varied.score import held_out_error, score_all
-from models.asm import NeuralASM, channel_precision, context_index
-from models.baselines import LinearOneStep as RidgeOneStep
-from models.config import ROBUST, TPCConfig
-from models.normaliser import Normaliser
-from models.one_step import ONE_STEP_LAGS, ONE_STEP_RIDGES, delay_embed
-from models.tpc import TemporalPC
-from runtime.parallel import Parallel
+from neural_asm.experiments.varied.bptt import BPTTConfig, train_bptt
+from neural_asm.experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from neural_asm.experiments.methods import Method
+from neural_asm.experiments.varied.methods import train_neural_asm
+from neural_asm.experiments.varied.outcomes import ALPHA
+from neural_asm.experiments.varied.score import held_out_error, score_all
+from neural_asm.models.asm import NeuralASM, channel_precision, context_index
+from neural_asm.models.baselines import LinearOneStep as RidgeOneStep
+from neural_asm.models.config import ROBUST, TPCConfig
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.one_step import ONE_STEP_LAGS, ONE_STEP_RIDGES, delay_embed
+from neural_asm.models.tpc import TemporalPC
+from neural_asm.runtime.parallel import Parallel
 
 BPTT = BPTTConfig()
 LABEL = "diagnostic (beyond the paper): the default network trained by BPTT through its online recall"
@@ -105,7 +105,7 @@ def _linear_errors(models: dict, x: np.ndarray, labels: np.ndarray, lags: int) -
 
 def _per_step(errors: np.ndarray, channel_names: tuple[str, ...]) -> list[float]:
     """Mean squared error of the joint channels at every step (step 0 included, for alignment)."""
-    from sim.varied import channel_groups
+    from neural_asm.sim.varied import channel_groups
 
     return (errors[..., channel_groups(channel_names)["joints"]].astype(np.float64) ** 2).mean(axis=(0, 2)).tolist()
 
@@ -179,7 +179,7 @@ def joints_probe(data_dir: Path, context: str, seeds: tuple[int, ...] = (0, 1, 2
     """BPTT on the joint channels' one-step error alone (the kept epoch chosen by it too): how close
     the network's form can come to the linear model where the faults show, when nothing else
     competes for its weights. Rows as in ``run_diagnostic``."""
-    from sim.varied import channel_groups
+    from neural_asm.sim.varied import channel_groups
 
     bench = load_varied_benchmark(data_dir, context)
     norm = Normaliser.fit(bench.demos.data)

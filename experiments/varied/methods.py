@@ -11,12 +11,12 @@ from __future__ import annotations
 
 from tqdm.auto import tqdm
 
-from experiments.methods import Method
-from experiments.varied.data import VariedBenchmark
-from models.asm import NeuralASM
-from models.config import TPCConfig
-from models.detectors import all_detectors
-from models.normaliser import Normaliser
+from neural_asm.experiments.methods import Method
+from neural_asm.experiments.varied.data import VariedBenchmark
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import TPCConfig
+from neural_asm.models.detectors import all_detectors
+from neural_asm.models.normaliser import Normaliser
 
 
 def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool = True) -> NeuralASM:

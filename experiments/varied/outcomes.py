@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from experiments.varied.data import VariedBenchmark
-from models.calibration import Thresholds
-from models.config import SCORING
-from models.conformal import TimeVaryingThreshold, binomial_interval
-from sim.config import SIM
+from neural_asm.experiments.varied.data import VariedBenchmark
+from neural_asm.models.calibration import Thresholds
+from neural_asm.models.config import SCORING
+from neural_asm.models.conformal import TimeVaryingThreshold, binomial_interval
+from neural_asm.sim.config import SIM
 
 ALPHA = SCORING.default_fpr  # the episode false-alarm rate every method is held to
 VALIDATION = "val_faults"  # the validation faults' energies: read by the pair's choice only

@@ -21,10 +21,10 @@ from itertools import combinations
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from experiments.methods import Method
-from experiments.varied.data import FaultSet, VariedBenchmark
-from experiments.varied.outcomes import ALPHA, VALIDATION, Outcome, after_onset, outcomes, summary
-from models.calibration import Thresholds
+from neural_asm.experiments.methods import Method
+from neural_asm.experiments.varied.data import FaultSet, VariedBenchmark
+from neural_asm.experiments.varied.outcomes import ALPHA, VALIDATION, Outcome, after_onset, outcomes, summary
+from neural_asm.models.calibration import Thresholds
 
 PAIR = "best_pair"  # the either-of-two rival's name
 Energies = dict[str, np.ndarray]  # set -> (N, T) whitened energies

@@ -32,19 +32,19 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 from tqdm.auto import tqdm
 
-from experiments.methods import Method, neural_asm_methods
-from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.varied.methods import train_neural_asm
-from experiments.varied.outcomes import ALPHA, outcomes, summary
-from experiments.varied.pairs import validation_scores
-from experiments.varied.score import energies
-from models.asm import NeuralASM
-from models.config import PRECISE
-from models.detector_base import DetectorBase, episode_folds
-from models.normaliser import Normaliser
-from models.one_step import ONE_STEP_RIDGES, TemplateResidualOneStep, delay_embed, fit_one_step
-from models.plan import PlanMemory
-from models.recall import offline_recall
+from neural_asm.experiments.methods import Method, neural_asm_methods
+from neural_asm.experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from neural_asm.experiments.varied.methods import train_neural_asm
+from neural_asm.experiments.varied.outcomes import ALPHA, outcomes, summary
+from neural_asm.experiments.varied.pairs import validation_scores
+from neural_asm.experiments.varied.score import energies
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import PRECISE
+from neural_asm.models.detector_base import DetectorBase, episode_folds
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.one_step import ONE_STEP_RIDGES, TemplateResidualOneStep, delay_embed, fit_one_step
+from neural_asm.models.plan import PlanMemory
+from neural_asm.models.recall import offline_recall
 
 LAGS = 2  # the pooled linear model's choice on the demonstrations (models.one_step.fit_one_step)
 

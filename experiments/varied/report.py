@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.varied.run import VariedResult
+from neural_asm.experiments.varied.run import VariedResult
 
 
 def _facts(result: VariedResult) -> dict:

@@ -26,11 +26,11 @@ from sklearn.model_selection import StratifiedKFold, cross_val_score
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from experiments.varied.data import ensure_varied_sets, load_varied_benchmark
-from experiments.varied.methods import train_neural_asm
-from models.asm import NeuralASM
-from models.config import PRECISE
-from sim.varied import context_columns
+from neural_asm.experiments.varied.data import ensure_varied_sets, load_varied_benchmark
+from neural_asm.experiments.varied.methods import train_neural_asm
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import PRECISE
+from neural_asm.sim.varied import context_columns
 
 MOVE = 0.5  # normalised units of ee_x across the route (about 3.8 cm)
 

@@ -23,15 +23,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from experiments.varied.ceiling import oracle_rates
-from experiments.varied.data import VariedBenchmark, load_varied_benchmark
-from experiments.methods import Method, neural_asm_methods
-from experiments.varied.methods import baseline_methods, train_neural_asm
-from experiments.varied.outcomes import ALPHA
-from experiments.varied.score import headline, score_all
-from models import checkpoint
-from models.config import FAITHFUL, PRECISE, TPCConfig
-from runtime.parallel import Parallel
+from neural_asm.experiments.varied.ceiling import oracle_rates
+from neural_asm.experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from neural_asm.experiments.methods import Method, neural_asm_methods
+from neural_asm.experiments.varied.methods import baseline_methods, train_neural_asm
+from neural_asm.experiments.varied.outcomes import ALPHA
+from neural_asm.experiments.varied.score import headline, score_all
+from neural_asm.models import checkpoint
+from neural_asm.models.config import FAITHFUL, PRECISE, TPCConfig
+from neural_asm.runtime.parallel import Parallel
 
 FEATURED_NETWORK = "nasm"
 
@@ -76,7 +76,7 @@ def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = PR
         "oracle": oracle, "featured_chosen_by": {"validation_fault_detection": validation}}
     if diagnostics:
         # A measurement beyond the paper, kept out of the methods and the paired tests (docs/diagnostic_bptt.md).
-        from experiments.varied.diagnostic import headline_diagnostics
+        from neural_asm.experiments.varied.diagnostic import headline_diagnostics
 
         # It trains the paper's form of the network (no direct pathways, the demonstrations'
         # precisions, fixed) by BPTT.

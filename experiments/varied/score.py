@@ -16,14 +16,14 @@ from __future__ import annotations
 import numpy as np
 from tqdm.auto import tqdm
 
-from experiments.varied.data import VariedBenchmark
-from experiments.methods import Method
-from experiments.varied.outcomes import ALPHA, VALIDATION, outcomes, summary
-from experiments.varied.pairs import PAIR, best_pair, validation_scores
-from models.calibration import estimate
-from models.conformal import mcnemar_exact
-from models.normaliser import Normaliser
-from sim.varied import channel_groups
+from neural_asm.experiments.varied.data import VariedBenchmark
+from neural_asm.experiments.methods import Method
+from neural_asm.experiments.varied.outcomes import ALPHA, VALIDATION, outcomes, summary
+from neural_asm.experiments.varied.pairs import PAIR, best_pair, validation_scores
+from neural_asm.models.calibration import estimate
+from neural_asm.models.conformal import mcnemar_exact
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.sim.varied import channel_groups
 
 SETS = ("precision", "calibration", "test", "ood", "faults")
 

@@ -47,18 +47,18 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 from tqdm.auto import tqdm
 
-from experiments.methods import Method
-from experiments.varied.data import VariedBenchmark, ensure_varied_sets, load_varied_benchmark
-from experiments.varied.outcomes import outcomes, summary
-from experiments.varied.score import energies
-from models.config import SCORING
-from models.detector_base import DetectorBase, episode_folds
-from models.normaliser import Normaliser
-from models.one_step import fit_one_step
-from models.sequences import Sequences
-from models.step_maps import apply_maps, input_features, ridge_maps, step_codes
-from sim.config import SIM
-from sim.varied import channel_groups
+from neural_asm.experiments.methods import Method
+from neural_asm.experiments.varied.data import VariedBenchmark, ensure_varied_sets, load_varied_benchmark
+from neural_asm.experiments.varied.outcomes import outcomes, summary
+from neural_asm.experiments.varied.score import energies
+from neural_asm.models.config import SCORING
+from neural_asm.models.detector_base import DetectorBase, episode_folds
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.one_step import fit_one_step
+from neural_asm.models.sequences import Sequences
+from neural_asm.models.step_maps import apply_maps, input_features, ridge_maps, step_codes
+from neural_asm.sim.config import SIM
+from neural_asm.sim.varied import channel_groups
 
 TOLD = ("route_side", "speed")  # the appended channels
 CENTRES = 1.0 + SIM.varied.speed * np.linspace(-1.0, 1.0, 5)  # the speed's basis functions

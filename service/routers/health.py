@@ -2,9 +2,9 @@ import time
 
 from fastapi import APIRouter, Depends
 
-from service.deps import get_state
-from service.schemas import Health
-from service.state import ServiceState
+from neural_asm.service.deps import get_state
+from neural_asm.service.schemas import Health
+from neural_asm.service.state import ServiceState
 
 router = APIRouter(tags=["health"])
 

@@ -4,12 +4,12 @@ the session's id in the ``X-Session-Id`` header (a load balancer keeps routing t
 
 from fastapi import APIRouter, Depends, Response
 
-from service.auth import require_api_key
-from service.deps import get_state
-from service.errors import ERROR_RESPONSES
-from service.payloads import fault_payload, json_response, predict_payload
-from service.schemas import SESSION_ID_HEADER, Error, FaultResponse, PredictResponse, StepRequest
-from service.state import ServiceState
+from neural_asm.service.auth import require_api_key
+from neural_asm.service.deps import get_state
+from neural_asm.service.errors import ERROR_RESPONSES
+from neural_asm.service.payloads import fault_payload, json_response, predict_payload
+from neural_asm.service.schemas import SESSION_ID_HEADER, Error, FaultResponse, PredictResponse, StepRequest
+from neural_asm.service.state import ServiceState
 
 router = APIRouter(
     tags=["inference"],

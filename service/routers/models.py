@@ -1,11 +1,11 @@
 from fastapi import APIRouter, Depends
 
-from service.auth import require_api_key
-from service.deps import get_state
-from service.errors import ERROR_RESPONSES
-from service.registry import Hosted
-from service.schemas import CalibrationInfo, ModelInfo
-from service.state import ServiceState
+from neural_asm.service.auth import require_api_key
+from neural_asm.service.deps import get_state
+from neural_asm.service.errors import ERROR_RESPONSES
+from neural_asm.service.registry import Hosted
+from neural_asm.service.schemas import CalibrationInfo, ModelInfo
+from neural_asm.service.state import ServiceState
 
 router = APIRouter(tags=["models"], dependencies=[Depends(require_api_key)], responses=ERROR_RESPONSES)
 

@@ -2,12 +2,12 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path, Request, Response, status
 
-from service.auth import client_of, require_api_key
-from service.deps import get_state
-from service.errors import ERROR_RESPONSES
-from service.payloads import session_info
-from service.schemas import SESSION_ID_HEADER, SESSION_ID_PATTERN, Error, SessionCreate, SessionInfo
-from service.state import ServiceState
+from neural_asm.service.auth import client_of, require_api_key
+from neural_asm.service.deps import get_state
+from neural_asm.service.errors import ERROR_RESPONSES
+from neural_asm.service.payloads import session_info
+from neural_asm.service.schemas import SESSION_ID_HEADER, SESSION_ID_PATTERN, Error, SessionCreate, SessionInfo
+from neural_asm.service.state import ServiceState
 
 router = APIRouter(
     prefix="/sessions",

@@ -28,14 +28,14 @@ import orjson
 from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect, status
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
-from service import asyncapi
+from neural_asm.service import asyncapi
 
-from service.auth import HEADER, client_of, key_ok
-from service.errors import ServiceError, describe, json_problem, undecodable
-from service.payloads import session_info, step_payload
-from service.schemas import ClientMessage, EndMessage, MetadataMessage, SessionCreate, StartMessage
-from service.sessions import Session
-from service.state import ServiceState
+from neural_asm.service.auth import HEADER, client_of, key_ok
+from neural_asm.service.errors import ServiceError, describe, json_problem, undecodable
+from neural_asm.service.payloads import session_info, step_payload
+from neural_asm.service.schemas import ClientMessage, EndMessage, MetadataMessage, SessionCreate, StartMessage
+from neural_asm.service.sessions import Session
+from neural_asm.service.state import ServiceState
 
 PROTOCOL = 1
 router = APIRouter()

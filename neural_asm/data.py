@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from models.sequences import Sequences
-from models.synthetic import make_skills
+from neural_asm.models.sequences import Sequences
+from neural_asm.models.synthetic import make_skills
 
 SYNTHETIC = "synthetic"
 
@@ -20,7 +20,7 @@ def load_sequences(source: str, mapping: str | Path | None = None) -> Sequences:
     ``skills``) or an episode set ``file.mcap`` from the simulator; given a ``mapping`` file,
     ROS 2 bags or a LeRobot dataset read through it."""
     if mapping is not None:
-        from logs.sources import load_log_sequences  # the log readers are only needed for logs
+        from neural_asm.logs.sources import load_log_sequences  # the log readers are only needed for logs
 
         return load_log_sequences(source, mapping)
     if source == SYNTHETIC:
@@ -38,8 +38,8 @@ def load_sequences(source: str, mapping: str | Path | None = None) -> Sequences:
             names = tuple(str(n) for n in f["channel_names"])
         return Sequences(data, labels, names, provenance={"source": str(path)})
     if path.suffix == ".mcap":
-        from pipelines.episodes import as_sequences  # the simulator is only needed for its files
-        from sim.dataset import load_episodes
+        from neural_asm.pipelines.episodes import as_sequences  # the simulator is only needed for its files
+        from neural_asm.sim.dataset import load_episodes
 
         episodes = load_episodes(path)
         if not episodes:

@@ -3,7 +3,7 @@ the packages offer (simulated demonstrations, the service, the experiments)."""
 
 from __future__ import annotations
 
-import runtime  # noqa: F401  (first: one BLAS thread, no display)
+import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import json
 import os
@@ -12,24 +12,24 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from runtime.cli import Command, Group
-from client.cli import client
-from client.replay import replay
-from experiments.contextual.cli import contextual
-from experiments.correction.cli import correction
-from experiments.fault_sweep.cli import faults
-from logs.cli import MAPPING_HELP, SKIP_BAD_HELP, evaluate, read_logs
-from models import checkpoint
-from models.asm import NeuralASM
-from models.config import PRESETS
-from models.recall import RECALL_MODES
-from nasm.calibrate import calibrate
-from nasm.data import SYNTHETIC, load_sequences
-from recordings.cli import app as recordings_app
-from recordings.cli import view
-from runtime.home import home, home_path
-from service.cli import serve
-from sim.cli import demos
+from neural_asm.runtime.cli import Command, Group
+from neural_asm.client.cli import client
+from neural_asm.client.replay import replay
+from neural_asm.experiments.contextual.cli import contextual
+from neural_asm.experiments.correction.cli import correction
+from neural_asm.experiments.fault_sweep.cli import faults
+from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, evaluate, read_logs
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.config import PRESETS
+from neural_asm.models.recall import RECALL_MODES
+from neural_asm.calibrate import calibrate
+from neural_asm.data import SYNTHETIC, load_sequences
+from neural_asm.recordings.cli import app as recordings_app
+from neural_asm.recordings.cli import view
+from neural_asm.runtime.home import home, home_path
+from neural_asm.service.cli import serve
+from neural_asm.sim.cli import demos
 
 app = typer.Typer(cls=Group, help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
                   "models, stream the client and run the experiments.", no_args_is_help=True,

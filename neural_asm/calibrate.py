@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 import typer
 
-from logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
-from models import checkpoint
-from models.asm import NeuralASM
-from models.sequences import Sequences
-from nasm.data import load_sequences
+from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.sequences import Sequences
+from neural_asm.data import load_sequences
 
 MIN_EPISODES = 2  # per role: a precision matrix needs two episodes' errors
 
