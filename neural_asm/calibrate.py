@@ -10,11 +10,8 @@ or NORMAL's episodes alternate between the two roles.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-import numpy as np
 import typer
 
 from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
@@ -22,8 +19,8 @@ from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.sequences import Sequences
 from neural_asm.data import load_sequences
+from neural_asm.memory import SkillMemory
 
-MIN_EPISODES = 2  # per role: a precision matrix needs two episodes' errors
 
 
 def _load(source: str, mapping: Path | None, model: NeuralASM, skip_bad: bool) -> Sequences:
@@ -36,21 +33,6 @@ def _load(source: str, mapping: Path | None, model: NeuralASM, skip_bad: bool) -
     if tuple(seqs.channel_names) != model.channel_names:
         raise fail(f"{source} has channels {list(seqs.channel_names)}; the model expects {list(model.channel_names)}")
     return seqs
-
-
-def calibrate_model(model: NeuralASM, precision: np.ndarray, thresholds: np.ndarray, source: str,
-                    labels: Sequence[str] | None = None) -> dict[str, Any]:
-    """Calibrate every recall mode on cue length 1 (what sessions use); the thresholds per mode.
-    `labels` name the skills of the precision episodes."""
-    if min(len(precision), len(thresholds)) < MIN_EPISODES:
-        raise ValueError(f"calibration needs at least {MIN_EPISODES} normal episodes for the precisions and "
-                         f"{MIN_EPISODES} for the thresholds; got {len(precision)} and {len(thresholds)}")
-    report: dict[str, Any] = {"precision_episodes": len(precision), "threshold_episodes": len(thresholds), "modes": {}}
-    for mode in model.recall_modes:
-        cal = model.calibrate(precision, thresholds, mode, 1, source=source, labels=labels)
-        report["modes"][mode] = {"episode_thresholds": {str(f): t for f, t in sorted(cal.episode_thresholds.items())},
-                                 "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}
-    return report
 
 
 def calibrate(
@@ -71,17 +53,17 @@ def calibrate(
         raise fail(exc) from None
     seqs = _load(normal, mapping, model, skip_bad)
     if precision is None:
-        spread, held, labels = seqs.data[0::2], seqs.data[1::2], seqs.labels[0::2]
+        spread_seqs = None
         source = f"{normal}: episodes alternate between precisions and thresholds"
     else:
         spread_seqs = _load(precision, mapping, model, skip_bad)
-        spread, held, labels = spread_seqs.data, seqs.data, spread_seqs.labels
         source = f"precisions from {precision}, thresholds from {normal}"
+    memory = SkillMemory(model)
     try:
-        report = calibrate_model(model, spread, held, source, labels)
+        report = memory.calibrate(seqs, spread_seqs, source=source)
     except ValueError as exc:
         raise fail(exc) from None
-    target = checkpoint.save(model, out or model_path)
+    target = memory.save(out or model_path)
     n = report["threshold_episodes"]
     for mode, tables in report["modes"].items():
         shown = ", ".join(f"{float(f) * 100:g} %: {t:.4g}" for f, t in tables["episode_thresholds"].items())

@@ -25,6 +25,7 @@ from neural_asm.models.config import PRESETS
 from neural_asm.models.recall import RECALL_MODES
 from neural_asm.calibrate import calibrate
 from neural_asm.data import SYNTHETIC, load_sequences
+from neural_asm.memory import SkillMemory
 from neural_asm.recordings.cli import app as recordings_app
 from neural_asm.recordings.cli import view
 from neural_asm.runtime.home import home, home_path
@@ -74,13 +75,10 @@ def train(
     if hidden is not None:
         config = config.with_(hidden_size=hidden)
     seqs = read_logs(data, mapping, skip_bad=skip_bad) if mapping else load_sequences(data)
-    provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs)}
-    if seqs.seeds is not None:
-        provenance["seeds"] = seqs.seeds.tolist()
-    model = NeuralASM.fit(seqs.data, seqs.channel_names, config, provenance=provenance, rate_hz=seqs.rate_hz,
-                          labels=seqs.labels)
-    checkpoint.save(model, out)
-    typer.echo(f"trained on {len(seqs)} sequences at {seqs.rate_hz:g} Hz; final energy {model.history[-1]:.4g}; wrote {out}")
+    memory = SkillMemory.fit(seqs, preset=config)
+    memory.save(out)
+    typer.echo(f"trained on {len(seqs)} sequences at {seqs.rate_hz:g} Hz; final energy {memory.model.history[-1]:.4g}; "
+               f"wrote {out}")
 
 
 @app.command(cls=Command)

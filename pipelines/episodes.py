@@ -17,7 +17,7 @@ import numpy as np
 from neural_asm.models.sequences import Sequences
 from neural_asm.runtime.parallel import Parallel
 from neural_asm.sim.config import SIM
-from neural_asm.sim.dataset import generate, load_episodes, set_folder
+from neural_asm.sim.dataset import generate, jobs_for, load_episodes, run_jobs, set_folder
 from neural_asm.sim.episode import Episode
 
 MIN_HELD_OUT = 60
@@ -44,6 +44,15 @@ def as_sequences(episodes: list[Episode], columns: np.ndarray | None = None,
         data, names = data[:, :, columns], tuple(names[c] for c in columns)
     return Sequences(data, np.array([e.skill for e in episodes]), names,
                      seeds=np.array([e.seed for e in episodes]), provenance=provenance or {}, rate_hz=rates.pop())
+
+
+def simulate_sequences(kind: str = "demos", n_demos: int = 10, n_normal: int = 200,
+                       rate_hz: float = SIM.timing.observation_hz, workers: int = 2) -> Sequences:
+    """Simulate one of the paper task's episode sets (``sim.dataset.KINDS``: ``demos``, ``normal``,
+    ``faults``...) as ``Sequences``; the episodes MuJoCo could not run are left out and named in
+    the provenance's ``dropped``."""
+    episodes, dropped = run_jobs(jobs_for(kind, n_demos, n_normal, rate_hz), workers, desc=kind)
+    return as_sequences(episodes, provenance={"simulated": kind, "dropped": dropped})
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,60 @@
+"""A running Neural ASM service from Python: its models, and episodes streamed to it.
+
+    client = ServiceClient("http://127.0.0.1:8000", api_key=KEY)
+    with client.session(model="panda", fpr=0.01) as session:
+        for x in episode:
+            answer = session.step(x)   # the websocket "step" answer: fault, energy, isolated_joint, ...
+
+The session runs over the websocket ``/stream`` (one connection per session); the answers
+are the protocol's messages as dictionaries (``/asyncapi.json`` describes them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+
+from neural_asm.client.transport import TIMEOUT_S, WebSocketTransport, check_url, served_models
+
+
+class ServiceSession:
+    """One episode streamed to the service: ``step(x)`` per observation."""
+
+    def __init__(self, transport: WebSocketTransport, info: dict[str, Any]) -> None:
+        self._transport = transport
+        self.info = info  # the "started" message: session id, model, rate, threshold settings
+
+    def step(self, observation: Sequence[float] | np.ndarray) -> dict[str, Any]:
+        """Send one raw observation (channel order of the model); the service's verdict on it."""
+        return self._transport.step([float(v) for v in observation])
+
+
+class ServiceClient:
+    """The service at ``url``; ``ServiceError`` when it refuses, ``ServiceLost`` when it is gone."""
+
+    def __init__(self, url: str = "http://127.0.0.1:8000", api_key: str | None = None,
+                 timeout_s: float = TIMEOUT_S) -> None:
+        self.url = check_url(url)
+        self.api_key = api_key
+        self.timeout_s = timeout_s
+
+    def models(self) -> list[dict[str, Any]]:
+        """Every checkpoint the service hosts or refused, with its channels and provenance."""
+        return served_models(self.url, self.api_key)
+
+    @contextmanager
+    def session(self, model: str | None = None, mode: str = "offline", fpr: float | None = None,
+                **settings: Any) -> Iterator[ServiceSession]:
+        """A session of ``model`` (the default model if None); ``settings`` are the protocol's other
+        start fields (``threshold``, ``cue_steps``, ``rate_hz``, ``recording_id``). Ended on exit."""
+        transport = WebSocketTransport(self.url, self.api_key, self.timeout_s)
+        try:
+            params = {"model": model, "mode": mode, "fpr": fpr, **settings}
+            session = ServiceSession(transport, transport.start({k: v for k, v in params.items() if v is not None}))
+            yield session
+            transport.end()
+        finally:
+            transport.close()

@@ -1,0 +1,184 @@
+"""``SkillMemory``: the Neural ASM as a Python object, the one the ``nasm`` commands use.
+
+Fit it on demonstrations (arrays or ``Sequences``: simulated episodes, a lab's logs),
+calibrate its fault thresholds on normal episodes it was not trained on, recall a skill from
+a cue, score whole sequences, and monitor a live stream step by step with ``monitor()``,
+whose verdicts are those the service returns for the same observations (both run
+``models.asm.step_streams``). ``save`` writes the checkpoint ``nasm serve`` hosts.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM, SkillStream, step_streams
+from neural_asm.models.config import DEFAULT_RATE_HZ, PRESETS, SCORING, TPCConfig
+from neural_asm.models.fault import ThresholdKind
+from neural_asm.models.scoring import SequenceScore
+from neural_asm.models.sequences import Sequences
+
+MIN_CALIBRATION_EPISODES = 2  # per role: a precision matrix needs two episodes' errors
+Observation = Sequence[float] | np.ndarray | Mapping[str, float]
+
+
+def _data(sequences: Sequences | np.ndarray) -> np.ndarray:
+    return sequences.data if isinstance(sequences, Sequences) else np.asarray(sequences, np.float64)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One observation judged: the fields of the service's step answer."""
+
+    step: int  # index of the observation just scored (0 = first)
+    fault: bool
+    energy: float  # precision-weighted squared prediction error of this step
+    threshold: float
+    isolated_joint: str | None  # the joint channel with the largest |weighted error|
+    ranked_channels: list[str]  # every channel, largest |weighted error| first
+    expected: np.ndarray  # (D,) what the memory expected of this observation, original units
+    prediction: np.ndarray  # (D,) its forecast of the next observation, original units
+
+
+class Monitor:
+    """One episode monitored as the service monitors a session: ``step(x) -> Verdict``."""
+
+    def __init__(self, stream: SkillStream) -> None:
+        self._stream = stream
+
+    @property
+    def steps(self) -> int:
+        """Observations judged so far."""
+        return self._stream.t
+
+    def step(self, observation: Observation) -> Verdict:
+        """Judge one raw observation (a vector in channel order, or a channel -> value mapping);
+        a ValueError names what is wrong with it."""
+        result = step_streams([self._stream], self._stream.check(observation)[None])[0]
+        if result is None or result.decision is None:
+            raise FloatingPointError(f"step {self._stream.t}: the memory's outputs are not finite")
+        score, decision = result.score, result.decision
+        return Verdict(score.step, decision.fault, score.energy, decision.threshold, decision.isolated_joint,
+                       decision.ranked_channels, score.expected, score.prediction)
+
+
+class SkillMemory:
+    """A Neural ASM: a temporal predictive coding network that has learnt several skills, with
+    the normaliser, calibrations and provenance it needs to face raw sensorimotor data.
+
+    >>> memory = SkillMemory.fit(demos)          # (N, T, D) array or Sequences
+    >>> memory.calibrate(normal)                 # held-out normal episodes
+    >>> monitor = memory.monitor(fpr=0.01)
+    >>> verdict = monitor.step(observation)      # verdict.fault, verdict.isolated_joint
+    """
+
+    def __init__(self, model: NeuralASM) -> None:
+        self.model = model  # the underlying network and its calibrations (``models.asm.NeuralASM``)
+
+    @classmethod
+    def fit(
+        cls,
+        demonstrations: Sequences | np.ndarray,
+        channel_names: Sequence[str] | None = None,
+        skills: Sequence[str] | np.ndarray | None = None,
+        *,
+        preset: str | TPCConfig = "fast",
+        rate_hz: float | None = None,
+        progress: bool = True,
+    ) -> SkillMemory:
+        """Learn the skills of ``demonstrations``: ``Sequences``, or an (N, T, D) array with its
+        ``channel_names`` (default ``x0``, ``x1``, ...) and each sequence's skill.
+
+        ``preset`` is one of ``models.config.PRESETS`` (``faithful``: the paper's
+        hyper-parameters) or a ``TPCConfig``. The thresholds set here come from the training
+        data and are optimistic: ``calibrate`` on held-out normal episodes before deciding.
+        """
+        config = PRESETS[preset] if isinstance(preset, str) else preset
+        if isinstance(demonstrations, Sequences):
+            seqs = demonstrations
+        else:
+            data = np.asarray(demonstrations, np.float64)
+            width = data.shape[-1] if data.ndim >= 2 else 0
+            names = tuple(channel_names) if channel_names is not None else tuple(f"x{i}" for i in range(width))
+            labels = np.asarray(skills) if skills is not None else np.full(len(data), "skill")
+            seqs = Sequences(data, labels, names, rate_hz=rate_hz or DEFAULT_RATE_HZ)
+        provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs)}
+        if seqs.seeds is not None:
+            provenance["seeds"] = seqs.seeds.tolist()
+        model = NeuralASM.fit(seqs.data, seqs.channel_names, config, progress=progress, provenance=provenance,
+                              labels=seqs.labels, rate_hz=rate_hz or seqs.rate_hz)
+        return cls(model)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> SkillMemory:
+        """A checkpoint written by ``save`` or ``nasm train``; ``CheckpointError`` if it is not one."""
+        return cls(checkpoint.load(path))
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the checkpoint ``nasm serve`` hosts (safetensors weights + JSON metadata), atomically."""
+        return checkpoint.save(self.model, path)
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        return self.model.channel_names
+
+    @property
+    def rate_hz(self) -> float:
+        """Observations per second of the sequences it learnt: its thresholds hold at this rate."""
+        return self.model.rate_hz
+
+    @property
+    def recall_modes(self) -> tuple[str, ...]:
+        return self.model.recall_modes
+
+    def recall(self, cue: np.ndarray, horizon: int) -> np.ndarray:
+        """Offline recall (paper eq. 6): the (N, horizon, D) course of the skill cued by the raw
+        first observations ``cue`` (N, T_n, D) or (T_n, D)."""
+        return self.model.recall(cue, horizon)
+
+    def score(self, sequences: Sequences | np.ndarray, mode: str = "offline") -> SequenceScore:
+        """Expected observations, prediction errors and energy of every step of raw sequences,
+        recalled in ``mode`` (``offline``: from the first observation; ``online``: from each)."""
+        return self.model.score(_data(sequences), mode)
+
+    def calibrate(
+        self,
+        normal: Sequences | np.ndarray,
+        precision: Sequences | np.ndarray | None = None,
+        *,
+        fprs: tuple[float, ...] = SCORING.fprs,
+        source: str = "held-out normal episodes",
+    ) -> dict[str, Any]:
+        """Set every recall mode's precisions and fault thresholds from normal episodes the memory
+        was not trained on: the precisions from ``precision`` and the thresholds from ``normal``,
+        or, without ``precision``, from alternate episodes of ``normal`` (estimating both on the
+        same episodes would make the false-positive rate optimistic). Returns the thresholds."""
+        if precision is None:
+            held = _data(normal)
+            spread, held = held[0::2], held[1::2]
+            labels = normal.labels[0::2] if isinstance(normal, Sequences) else None
+        else:
+            spread, held = _data(precision), _data(normal)
+            labels = precision.labels if isinstance(precision, Sequences) else None
+        if min(len(spread), len(held)) < MIN_CALIBRATION_EPISODES:
+            raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
+                             f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
+        report: dict[str, Any] = {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {}}
+        for mode in self.model.recall_modes:
+            cal = self.model.calibrate(spread, held, mode, 1, fprs, source=source,
+                                       labels=None if labels is None else list(labels))
+            report["modes"][mode] = {"episode_thresholds": {str(f): t for f, t in sorted(cal.episode_thresholds.items())},
+                                     "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}
+        return report
+
+    def monitor(self, mode: str = "offline", fpr: float = 0.01, threshold: ThresholdKind = "episode") -> Monitor:
+        """A new episode monitored step by step at false-positive rate ``fpr``, as a service
+        session with the same settings decides (``threshold``: ``episode``, calibrated so that
+        ``fpr`` of normal episodes are flagged anywhere, or ``step``: of normal steps)."""
+        return Monitor(self.model.stream(mode, 1, True, fpr, threshold))
