@@ -33,8 +33,11 @@ if TYPE_CHECKING:
     from neural_asm.models.config import PRESETS, TPCConfig
     from neural_asm.models.scoring import SequenceScore
     from neural_asm.models.sequences import Sequences
-    from neural_asm.pipelines.episodes import simulate_sequences
+    from neural_asm.pipelines.episodes import simulate_sequences, simulated_episodes
+    from neural_asm.service.embedded import start_embedded as start_service
+    from neural_asm.service.settings import Settings as ServiceSettings
     from neural_asm.sim.episode import Episode
+    from neural_asm.sim.faults import FaultSpec
     from neural_asm.sim.runner import run_episode
 
 # public name -> (module, attribute)
@@ -49,9 +52,13 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "CheckpointError": ("neural_asm.models.checkpoint", "CheckpointError"),
     "run_episode": ("neural_asm.sim.runner", "run_episode"),
     "Episode": ("neural_asm.sim.episode", "Episode"),
+    "FaultSpec": ("neural_asm.sim.faults", "FaultSpec"),
     "simulate_sequences": ("neural_asm.pipelines.episodes", "simulate_sequences"),
+    "simulated_episodes": ("neural_asm.pipelines.episodes", "simulated_episodes"),
     "read_logs": ("neural_asm.logs.sources", "load_log_sequences"),
     "LogError": ("neural_asm.logs.errors", "LogError"),
+    "ServiceSettings": ("neural_asm.service.settings", "Settings"),
+    "start_service": ("neural_asm.service.embedded", "start_embedded"),
     "ServiceClient": ("neural_asm.client.session", "ServiceClient"),
     "ServiceSession": ("neural_asm.client.session", "ServiceSession"),
     "ServiceError": ("neural_asm.client.transport", "ServiceError"),

@@ -8,6 +8,7 @@ false-positive rates.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -46,13 +47,20 @@ def as_sequences(episodes: list[Episode], columns: np.ndarray | None = None,
                      seeds=np.array([e.seed for e in episodes]), provenance=provenance or {}, rate_hz=rates.pop())
 
 
+def simulated_episodes(kind: str = "demos", n_demos: int = 10, n_normal: int = 200,
+                       rate_hz: float = SIM.timing.observation_hz, workers: int = 2) -> list[Episode]:
+    """Simulate one of the paper task's episode sets (``sim.dataset.KINDS``: ``demos``, ``normal``,
+    ``faults``...); the episodes MuJoCo could not run are left out with a warning."""
+    episodes, dropped = run_jobs(jobs_for(kind, n_demos, n_normal, rate_hz), workers, desc=kind)
+    for message in dropped:
+        warnings.warn(f"left out: {message}", stacklevel=2)
+    return episodes
+
+
 def simulate_sequences(kind: str = "demos", n_demos: int = 10, n_normal: int = 200,
                        rate_hz: float = SIM.timing.observation_hz, workers: int = 2) -> Sequences:
-    """Simulate one of the paper task's episode sets (``sim.dataset.KINDS``: ``demos``, ``normal``,
-    ``faults``...) as ``Sequences``; the episodes MuJoCo could not run are left out and named in
-    the provenance's ``dropped``."""
-    episodes, dropped = run_jobs(jobs_for(kind, n_demos, n_normal, rate_hz), workers, desc=kind)
-    return as_sequences(episodes, provenance={"simulated": kind, "dropped": dropped})
+    """``simulated_episodes`` as ``Sequences``: observations, skills, seeds and rate."""
+    return as_sequences(simulated_episodes(kind, n_demos, n_normal, rate_hz, workers), provenance={"simulated": kind})
 
 
 @dataclass(frozen=True)
