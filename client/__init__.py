@@ -5,14 +5,14 @@
     python sim/client.py --url http://127.0.0.1:8000 --api-key KEY --episodes 5 --reconnect
     python sim/client.py --falling-object --controller compliant --correct   # the reactive-correction demo
 
-Each episode is simulated first (``sim.runner.run_episode``; under ``--controller compliant``
-the memory's recalled plan, see ``client.run``), then its 15 observations
+Each episode is simulated first (``neural_asm.sim.runner.run_episode``; under ``--controller compliant``
+the memory's recalled plan, see ``neural_asm.client.run``), then its 15 observations
 are streamed to the service one step at a time over the websocket ``/stream`` (or, with
 ``--transport http``, ``POST /sessions`` + ``POST /fault``). A live line is printed per
 step (energy, threshold, flag, isolated joint) and a summary per episode.
 
 The client talks to the service only over HTTP/websocket. With no ``--url`` it starts the
-service in-process on a free loopback port (``service.embedded``), which builds the
+service in-process on a free loopback port (``neural_asm.service.embedded``), which builds the
 default Panda model on first run (a few minutes, with a progress bar).
 
 Every episode is recorded to ``<out>/client-....rrd`` and ``.mcap`` (``recordings``) under

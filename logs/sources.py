@@ -49,7 +49,9 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
 
 
 def load_log_sequences(source: str | Path, mapping_file: str | Path, skip_bad: bool = False) -> Sequences:
-    """``read_mapped`` with the mapping read from its file."""
+    """Every episode of a bag source or LeRobot dataset as ``Sequences``, read through the
+    channel mapping file ``mapping_file`` (TOML or YAML); a ``LogError`` names what is wrong, or
+    with ``skip_bad`` a bad episode is left out with a warning in the provenance."""
     return read_mapped(source, load_mapping(mapping_file), str(mapping_file), skip_bad)
 
 

@@ -46,6 +46,8 @@ def quadratic(weighted: np.ndarray, precision: np.ndarray | None) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SequenceScore:
+    """Every step of every scored sequence: what the memory expected, the errors and the energy."""
+
     expected: np.ndarray  # (N, T, D) what the model expected, original units
     errors: np.ndarray  # (N, T, D) observation minus expectation, normalised units
     energy: np.ndarray  # (N, T)

@@ -30,6 +30,9 @@ def checked_array(data: Any, what: str = "sequences", width: int | None = None,
 
 @dataclass(frozen=True)
 class Sequences:
+    """(N, T, D) sequences in original units, the skill of each, and the names of their D
+    channels: what every training, calibration and scoring call takes."""
+
     data: np.ndarray  # (N, T, D), original units
     labels: np.ndarray  # (N,) skill of each sequence: a name, or an index into a skill list
     channel_names: tuple[str, ...]

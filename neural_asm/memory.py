@@ -4,7 +4,7 @@ Fit it on demonstrations (arrays or ``Sequences``: simulated episodes, a lab's l
 calibrate its fault thresholds on normal episodes it was not trained on, recall a skill from
 a cue, score whole sequences, and monitor a live stream step by step with ``monitor()``,
 whose verdicts are those the service returns for the same observations (both run
-``models.asm.step_streams``). ``save`` writes the checkpoint ``nasm serve`` hosts.
+``neural_asm.models.asm.step_streams``). ``save`` writes the checkpoint ``nasm serve`` hosts.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ class SkillMemory:
     """
 
     def __init__(self, model: NeuralASM) -> None:
-        self.model = model  # the underlying network and its calibrations (``models.asm.NeuralASM``)
+        self.model = model  # the underlying network and its calibrations (``neural_asm.models.asm.NeuralASM``)
 
     @classmethod
     def fit(
@@ -95,7 +95,7 @@ class SkillMemory:
         """Learn the skills of ``demonstrations``: ``Sequences``, or an (N, T, D) array with its
         ``channel_names`` (default ``x0``, ``x1``, ...) and each sequence's skill.
 
-        ``preset`` is one of ``models.config.PRESETS`` (``faithful``: the paper's
+        ``preset`` is one of ``neural_asm.PRESETS`` (``faithful``: the paper's
         hyper-parameters) or a ``TPCConfig``. The thresholds set here come from the training
         data and are optimistic: ``calibrate`` on held-out normal episodes before deciding.
         """
@@ -126,6 +126,7 @@ class SkillMemory:
 
     @property
     def channel_names(self) -> tuple[str, ...]:
+        """The channels of every observation, in order."""
         return self.model.channel_names
 
     @property
@@ -135,6 +136,7 @@ class SkillMemory:
 
     @property
     def recall_modes(self) -> tuple[str, ...]:
+        """How it can recall an episode: ``offline``, ``online`` (and ``plan`` with a plan memory)."""
         return self.model.recall_modes
 
     def recall(self, cue: np.ndarray, horizon: int) -> np.ndarray:

@@ -49,7 +49,7 @@ def as_sequences(episodes: list[Episode], columns: np.ndarray | None = None,
 
 def simulated_episodes(kind: str = "demos", n_demos: int = 10, n_normal: int = 200,
                        rate_hz: float = SIM.timing.observation_hz, workers: int = 2) -> list[Episode]:
-    """Simulate one of the paper task's episode sets (``sim.dataset.KINDS``: ``demos``, ``normal``,
+    """Simulate one of the paper task's episode sets (``neural_asm.sim.dataset.KINDS``: ``demos``, ``normal``,
     ``faults``...); the episodes MuJoCo could not run are left out with a warning."""
     episodes, dropped = run_jobs(jobs_for(kind, n_demos, n_normal, rate_hz), workers, desc=kind)
     for message in dropped:

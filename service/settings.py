@@ -13,6 +13,8 @@ from neural_asm.runtime.net import is_loopback
 
 
 class Settings(BaseSettings):
+    """The service's settings, each also read from its ``NASM_`` environment variable."""
+
     model_config = SettingsConfigDict(env_prefix="NASM_", extra="ignore")
 
     host: str = Field("127.0.0.1", description="address to bind; non-loopback requires an API key")
