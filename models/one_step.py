@@ -101,7 +101,7 @@ class TemplateResidualOneStep(DetectorBase):
     def __init__(self, residual_weight: float = 1.0, template: type[ConditionalTemplate | StepRidgeTemplate]
                  = ConditionalTemplate) -> None:
         """``residual_weight`` scales the residual's prediction: 1 is the baseline, 0 the template
-        alone (experiments/varied/plan_probe.py measures what lies between). With ``template=
+        alone (lab/plan_probe.py measures what lies between). With ``template=
         StepRidgeTemplate`` it is plan recall without the network, the rival
         `step_ridge_template_residual`."""
         super().__init__()

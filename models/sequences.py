@@ -57,6 +57,3 @@ class Sequences:
         """The sequences at ``index`` (integer indices or a boolean mask), same channels."""
         seeds = None if self.seeds is None else self.seeds[index]
         return replace(self, data=self.data[index], labels=self.labels[index], seeds=seeds)
-
-    def of_skill(self, skill: Any) -> Sequences:
-        return self.take(self.labels == skill)

@@ -174,24 +174,3 @@ def run_diagnostic(data_dir: Path, context: str, seeds: tuple[int, ...] = (0, 1,
                   f"({row['seconds']:.0f} s)", flush=True)
     return result
 
-
-def joints_probe(data_dir: Path, context: str, seeds: tuple[int, ...] = (0, 1, 2), bptt: BPTTConfig = BPTT) -> list[dict]:
-    """BPTT on the joint channels' one-step error alone (the kept epoch chosen by it too): how close
-    the network's form can come to the linear model where the faults show, when nothing else
-    competes for its weights. Rows as in ``run_diagnostic``."""
-    from neural_asm.sim.varied import channel_groups
-
-    bench = load_varied_benchmark(data_dir, context)
-    norm = Normaliser.fit(bench.demos.data)
-    joints = tuple(channel_groups(bench.channel_names)["joints"])
-    rows = []
-    for seed in seeds:
-        start = time.perf_counter()
-        model = train_bptt_asm(bench, bptt=BPTTConfig(**{**vars(bptt), "seed": seed, "loss_channels": joints}))
-        row = measure(bench, model, "bptt_joints_online", "bptt, joints loss", norm)
-        row.update(seed=seed, kept_epoch=model.provenance["kept_epoch"], seconds=round(time.perf_counter() - start, 1))
-        rows.append(row)
-        print(f"{context} bptt (joints loss) seed {seed}: held-out joints {row['held_out_mse_per_group']['joints']:.4f} "
-              f"training joints {row['training_mse_per_group']['joints']:.4f} all {row['held_out_mse']:.4f} "
-              f"detection {row['detection']:.3f} ({row['seconds']:.0f} s)", flush=True)
-    return rows

@@ -54,7 +54,7 @@ class VariedResult:
 
 
 def run_varied(data_dir: Path, out_dir: Path, context: str, fast: TPCConfig = PRECISE, paper_epochs: int = 200,
-               *, parallel: Parallel = Parallel(), alpha: float = ALPHA, diagnostics: bool = True) -> VariedResult:
+               *, parallel: Parallel = Parallel(), alpha: float = ALPHA, diagnostics: bool = False) -> VariedResult:
     bench = load_varied_benchmark(data_dir, context, parallel)
     configs = {"nasm": ("Neural ASM, featured (precise preset)", fast),
                "nasm_paper": ("Neural ASM, paper configuration", FAITHFUL.with_(epochs=paper_epochs))}

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from neural_asm.experiments.varied.plan_probe import PlanOneStep, plan_features
+from lab.plan_probe import PlanOneStep, plan_features
 from neural_asm.models.one_step import TemplateResidualOneStep
 
 
@@ -63,7 +63,7 @@ def test_a_residual_weight_of_zero_is_the_template_alone(rng):
 def test_skill_recognition_reads_the_skill_from_the_first_observation_only(rng):
     from types import SimpleNamespace
 
-    from neural_asm.experiments.varied.plan_probe import skill_recognition
+    from lab.plan_probe import skill_recognition
     from neural_asm.models.normaliser import Normaliser
 
     def episodes(n, apart):

@@ -4,7 +4,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from neural_asm.experiments.varied.route_probe import across_moves
+from lab.route_probe import across_moves
 
 
 def _model(expected_of):
@@ -42,7 +42,7 @@ def test_an_expectation_that_knows_the_route_is_right_and_one_that_follows_is_la
 
 
 def test_routes_set_by_a_context_channel_are_named_from_it_and_found_without_labels(rng):
-    from neural_asm.experiments.varied.route_probe import route_naming
+    from lab.route_probe import route_naming
 
     route = np.arange(40) % 2 == 0
     x = rng.normal(size=(40, 8, 4))

@@ -11,7 +11,7 @@ demonstrations: given each demonstration's route (the side of its post offset), 
 logistic regression names it from the cue (5-fold cross-validation), and how often 2-means on
 the whole demonstrations, without the routes, splits them by route.
 
-    python -m experiments.varied.route_probe DATA_DIR [--context hidden] [--no-noise]
+    python -m lab.route_probe DATA_DIR [--context hidden] [--no-noise]
 """
 
 from __future__ import annotations

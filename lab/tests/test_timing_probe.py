@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from neural_asm.experiments.varied.timing_probe import GRID, TOLD, InferredSpeedPlan, ToldPlan, only, plan_context
+from lab.timing_probe import GRID, TOLD, InferredSpeedPlan, ToldPlan, only, plan_context
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.one_step import TemplateResidualOneStep
 from neural_asm.models.templates import StepRidgeTemplate

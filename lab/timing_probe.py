@@ -31,7 +31,7 @@ them. Each row is scored by the benchmark's own code. The plan's forms:
 Every row is also scored on the end effector's channels alone (`only`): where the detour shows
 when the rest of the arm's errors are left out.
 
-    python -m experiments.varied.timing_probe DATA_DIR [--context hidden]
+    python -m lab.timing_probe DATA_DIR [--context hidden]
 """
 
 from __future__ import annotations

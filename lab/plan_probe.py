@@ -17,7 +17,7 @@ motion, expects the locked arm to stay. Each row is scored by the benchmark's ow
   that grew out of this probe (models/plan.py), and the same with the network's part taken out
   (the input and departure pathways alone, a linear model); one row per training.
 
-    python -m experiments.varied.plan_probe DATA_DIR [--context hidden] [--seeds 3]
+    python -m lab.plan_probe DATA_DIR [--context hidden] [--seeds 3]
 """
 
 from __future__ import annotations
