@@ -59,9 +59,10 @@ def make_sets(segs: Segments, split: Split) -> Sets:
 def _one_training(sets: Sets, config: KittingConfig, seed: int, progress: tqdm) -> tuple[dict[str, Scored], NeuralASM]:
     model = fit_network(sets.train, config, seed)
     progress.update()
-    scored = {"nasm_one": score_network(model, sets, config.recall_mode, True, config.fprs),
+    # The served calibration (skill recognised, centred) last: it is the one the model keeps.
+    scored = {"nasm_one_pooled": score_network(model, sets, config.recall_mode, False, config.fprs),
               "nasm_one_online": score_network(model, sets, "online", True, config.fprs),
-              "nasm_one_pooled": score_network(model, sets, config.recall_mode, False, config.fprs)}
+              "nasm_one": score_network(model, sets, config.recall_mode, True, config.fprs)}
     scored["nasm_per_skill"] = score_per_skill(sets, config, seed, config.headline_skills)
     progress.update()
     scored.update(score_baselines(sets, config, seed, learned_only=seed != config.seeds[0]))
@@ -123,7 +124,7 @@ def run(config: KittingConfig) -> KittingResult:
     counts = {"segments": len(segs), "train_normal": len(sets.train), "precision_normal": len(sets.precision),
               "threshold_normal": len(sets.threshold), "test_normal": int(test.normal.sum()),
               "test_anomalous_scored": len(w.anomalous),
-              "n_normal_train": {s: int((sets.train.skills == s).sum()) for s in sorted(set(segs.skills))},
+              "n_normal_train": {str(s): int((sets.train.skills == s).sum()) for s in sorted(set(segs.skills))},
               "anomalies_from_test_runs": int(np.isin(test.runs[w.anomalous], split.test).sum())}
     for name in methods:
         for s, row in methods[name]["per_skill"].items():
