@@ -70,7 +70,7 @@ class _Reader:
             raise LogError(f"{path}: empty file")
         try:
             if fmt == "parquet":
-                self.parquet = pq.ParquetFile(path)
+                self.parquet = pq.ParquetFile(path, pre_buffer=False)  # pre-buffering holds whole row groups: peak memory
                 self.names = list(self.parquet.schema_arrow.names)
             elif fmt in ("csv", "tsv"):
                 self.names = pacsv.open_csv(path, parse_options=self._csv_options()).schema.names
