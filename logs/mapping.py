@@ -1,5 +1,7 @@
 """The channel mapping file: which topic field or dataset feature element becomes which model
-channel, in which units, at which step period, and which channels are joints.
+channel, in which units, at which step period, and which channels are joints; for a lab's
+tables (CSV/TSV, whitespace text, Parquet), which files, which column is time and where each
+episode's skill, anomaly label and onset come from (``[table]``).
 
 A mapping is TOML (``.toml``, read with tomllib) or YAML (``.yaml``/``.yml``); both hold the
 same tables, checked here with one schema so that a typo is refused with the table, the
@@ -19,7 +21,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from neural_asm.logs.errors import LogError
 from neural_asm.models.fault import JOINT_PREFIX
 
-Kind = Literal["rosbag", "lerobot"]
+Kind = Literal["rosbag", "lerobot", "table"]
+TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}  # seconds per unit
 
 
 class _Strict(BaseModel):
@@ -33,6 +36,8 @@ class Timing(_Strict):
     steps: int = Field(ge=2, description="steps per episode; shorter episodes are refused")
     max_gap_s: float | None = Field(None, gt=0, description="longest silence of a stream inside an "
                                     "episode (default: period_s)")
+    shorter: Literal["refuse", "hold"] = Field("refuse", description="an episode shorter than steps: refused, "
+                                               "or (tables) padded by holding its last sample")
 
     @property
     def gap_limit_s(self) -> float:
@@ -62,8 +67,50 @@ class Episodes(_Strict):
         return self
 
 
+class Value(_Strict):
+    """Where an episode's skill, label or onset comes from: a ``column`` (its first row; for an
+    onset, the time of the first row where it is non-zero), the name of the ``folder`` holding the
+    file (1) or of one above it (2, ...), a ``sidecar`` label pickle beside the file (its label;
+    its time for an onset), or a constant ``value``. ``pattern`` keeps a regex's first group of
+    the text; ``missing`` stands in when the sidecar is not there."""
+
+    column: str | None = None
+    folder: int | None = Field(None, ge=1)
+    sidecar: str | None = Field(None, min_length=1)
+    value: str | None = None
+    pattern: str | None = None
+    missing: str | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> "Value":
+        given = [k for k in ("column", "folder", "sidecar", "value") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"give one of column, folder, sidecar or value, got {given or 'none'}")
+        if self.missing is not None and self.sidecar is None:
+            raise ValueError("missing is for a sidecar file that may not be there")
+        return self
+
+
+class Table(_Strict):
+    """A lab's tables: which files, their format, the time column and where labels come from."""
+
+    files: str = Field("**/*", description="glob of the tables under the source folder (a source that "
+                       "is a file is read alone)")
+    format: Literal["auto", "csv", "tsv", "whitespace", "parquet"] = Field(
+        "auto", description="auto: by suffix (.csv, .tsv, .txt/.dat = whitespace, .parquet)")
+    time_column: str | int = Field(description="the time column: its name, or its position from 0")
+    time_unit: Literal["s", "ms", "us", "ns"] = "s"
+    episode_column: str | None = Field(None, description="one table holds many episodes, told apart "
+                                       "by this column (their rows contiguous); default: one per file")
+    skill: Value | None = Field(None, description="default: the file's name")
+    label: Value | None = Field(None, description="the anomaly label (default: none, a normal episode)")
+    normal: list[str] = Field(["normal"], description="labels that mean a normal episode")
+    onset: Value | None = None
+
+
 class Channel(_Strict):
-    """One model channel: ``topic`` + ``field`` in a bag, or ``feature`` in a LeRobot dataset."""
+    """One model channel: ``topic`` + ``field`` in a bag, ``feature`` in a LeRobot dataset, or a
+    table's ``column``."""
 
     name: str = Field(min_length=1)
     units: str = Field(min_length=1, description="the channel's units, e.g. rad, m, N, N m, or 1")
@@ -71,6 +118,7 @@ class Channel(_Strict):
     topic: str | None = None
     field: str | None = Field(None, description="dotted path in the message, e.g. position or wrench.force.x")
     feature: str | None = None
+    column: str | None = None
     index: int | None = Field(None, ge=0, description="element of an array field or vector feature")
     key: str | None = Field(None, description="element by name: the message's name[] (JointState) "
                             "or the feature's names in meta/info.json")
@@ -79,12 +127,14 @@ class Channel(_Strict):
 
     @model_validator(mode="after")
     def _consistent(self) -> "Channel":
-        if (self.topic is None) == (self.feature is None):
-            raise ValueError("give either topic (a bag) or feature (a LeRobot dataset)")
+        if [self.topic, self.feature, self.column].count(None) != 2:
+            raise ValueError("give one source: either topic (a bag) or feature (a LeRobot dataset) or column (a table)")
         if self.topic is not None and not self.field:
             raise ValueError("a topic channel needs field, e.g. 'position' or 'wrench.force.x'")
         if self.feature is not None and self.field is not None:
             raise ValueError("field is for topics; pick a feature's element with index or key")
+        if self.column is not None and (self.field is not None or self.index is not None or self.key is not None):
+            raise ValueError("a column channel reads its column whole: no field, index or key")
         if self.index is not None and self.key is not None:
             raise ValueError("give index or key, not both")
         if self.joint != self.name.startswith(JOINT_PREFIX):
@@ -95,6 +145,8 @@ class Channel(_Strict):
     @property
     def source(self) -> str:
         """Where the channel is read, for messages."""
+        if self.column is not None:
+            return f"column {self.column}"
         return f"{self.topic} {self.field}" if self.topic is not None else f"feature {self.feature}"
 
 
@@ -102,6 +154,7 @@ class Mapping(_Strict):
     description: str = ""
     timing: Timing
     episodes: Episodes | None = Field(None, description="bags only")
+    table: Table | None = Field(None, description="tables only")
     channels: list[Channel] = Field(min_length=1)
 
     @model_validator(mode="after")
@@ -110,9 +163,13 @@ class Mapping(_Strict):
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
             raise ValueError(f"channel names must be unique; repeated: {repeated}")
-        kinds = {"rosbag" if c.topic is not None else "lerobot" for c in self.channels}
+        kinds = {_kind(c) for c in self.channels}
         if len(kinds) > 1:
-            raise ValueError("channels mix topics and features: one mapping reads one kind of source")
+            raise ValueError("channels mix topics, features and columns: one mapping reads one kind of source")
+        if ("table" in kinds) != (self.table is not None):
+            raise ValueError("column channels need a [table] section, and only they")
+        if self.timing.shorter == "hold" and "table" not in kinds:
+            raise ValueError("timing.shorter = 'hold' is for tables")
         if "lerobot" in kinds and self.episodes is not None:
             raise ValueError("[episodes] is for bags; a LeRobot dataset's episodes come from episode_index")
         ep = self.episodes
@@ -126,7 +183,7 @@ class Mapping(_Strict):
 
     @property
     def kind(self) -> Kind:
-        return "rosbag" if self.channels[0].topic is not None else "lerobot"
+        return _kind(self.channels[0])
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -138,6 +195,10 @@ class Mapping(_Strict):
 
     def to_dict(self) -> dict[str, Any]:
         return self.model_dump(mode="json", exclude_none=True)
+
+
+def _kind(channel: Channel) -> Kind:
+    return "rosbag" if channel.topic is not None else "lerobot" if channel.feature is not None else "table"
 
 
 def _where(loc: tuple[Any, ...], raw: Any) -> str:

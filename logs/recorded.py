@@ -1,4 +1,5 @@
-"""One episode as a reader hands it over: values on the model's clock, a skill name, its origin."""
+"""One episode as a reader hands it over: values on the model's clock, a skill name, its origin
+(and, from tables, its anomaly label and onset)."""
 
 from __future__ import annotations
 
@@ -13,4 +14,7 @@ class Recorded:
     label: str  # skill name: from a label topic or task, else the bag's or dataset's name
     origin: str  # where it was read, for messages and provenance
     start_s: float  # its first sample, on the source's clock
-    number: int  # its number in the source (bags: in reading order; LeRobot: episode_index)
+    number: int  # its number in the source (bags, tables: in reading order; LeRobot: episode_index)
+    anomaly: str | None = None  # its anomaly label (tables); None: normal
+    onset_s: float | None = None  # the anomaly's onset, s after start_s (tables)
+    length_s: float | None = None  # its own duration, before any padding (tables)

@@ -1,4 +1,4 @@
-"""A bag or a dataset, read through a mapping, as the project's ``Sequences``.
+"""A bag, a dataset or a lab's tables, read through a mapping, as the project's ``Sequences``.
 
 The provenance keeps the source, the mapping file and the whole validated mapping, so a
 checkpoint trained from logs says where its data came from and how it was mapped, and later
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from neural_asm.logs import lerobot, rosbag
+from neural_asm.logs import lerobot, rosbag, tables
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.mapping import Kind, Mapping, check_checkpoint, load_mapping, parse_mapping
 from neural_asm.logs.recorded import Recorded
@@ -28,12 +28,12 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
     episode's number in the source, so that a skipped one shifts no other."""
     path = Path(source)
     if not path.exists():
-        raise LogError(f"no bag or dataset at {path}")
-    kind = source_kind(path)
+        raise LogError(f"no bag, dataset or table at {path}")
+    kind = "table" if mapping.kind == "table" else source_kind(path)
     if kind != mapping.kind:
         raise LogError(f"{path} is a {'LeRobot dataset' if kind == 'lerobot' else 'bag source'} but the "
                        f"mapping's channels read {'features' if mapping.kind == 'lerobot' else 'topics'}")
-    reader = lerobot.read_episodes if kind == "lerobot" else rosbag.read_episodes
+    reader = {"lerobot": lerobot.read_episodes, "rosbag": rosbag.read_episodes, "table": tables.read_episodes}[kind]
     episodes: list[Recorded] = []
     warnings: list[str] = []
     for item in reader(path, mapping, skip_bad):
@@ -44,6 +44,10 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
     provenance = {"source": str(path), "format": kind, "mapping_file": mapping_file, "mapping": mapping.to_dict(),
                   "episodes": [e.origin for e in episodes], "episode_numbers": [e.number for e in episodes],
                   "warnings": warnings}
+    if kind == "table":
+        provenance["anomalies"] = [e.anomaly for e in episodes]
+        provenance["onsets_s"] = [e.onset_s for e in episodes]
+        provenance["lengths_s"] = [e.length_s for e in episodes]
     return Sequences(np.stack([e.data for e in episodes]), np.array([e.label for e in episodes]),
                      mapping.channel_names, provenance=provenance)
 

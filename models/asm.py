@@ -223,12 +223,16 @@ class NeuralASM:
         source: str = "held-out normal episodes",
         covariance: Covariance = SCORING.error_covariance,
         labels: Sequence[str] | None = None,
+        centred: bool | None = None,
     ) -> Calibration:
         """Estimate precisions on one set of normal episodes and thresholds on another; `labels`
         name the skills of the precision episodes (where calibrations centre errors, each
-        skill's mean error is its own; without them, one mean for all)."""
+        skill's mean error is its own; without them, one mean for all). `centred`: whether
+        each skill's mean error is taken out, the skill recognised as a session recognises it
+        (`Calibration.centre`); None: as the rate's default (`ScoringConfig.centres_errors`)."""
+        centred = SCORING.centres_errors(self.rate_hz) if centred is None else centred
         calibration = estimate(mode, cue_steps, self.errors(precision_sequences, mode, cue_steps), source, covariance,
-                               SCORING.spread_floor(self.rate_hz), SCORING.centres_errors(self.rate_hz), labels)
+                               SCORING.spread_floor(self.rate_hz), centred, labels)
         set_thresholds(calibration, self.errors(threshold_sequences, mode, cue_steps), fprs)
         self.calibrations[calibration.key] = calibration
         return calibration

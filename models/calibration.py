@@ -53,11 +53,17 @@ class Calibration:
             return errors.astype(np.float64)
         steps, width = errors.shape[-2:]
         flat = errors.reshape(-1, steps, width).astype(np.float64)
+        pick = self.recognised(flat)
+        return (flat - self._means_at(np.arange(steps))[pick, np.arange(steps)]).reshape(errors.shape)
+
+    def recognised(self, errors: np.ndarray) -> np.ndarray:
+        """(N, T) the skill (index into `skills`) whose mean errors explain each episode's steps
+        before each step best; -1 at the first step, before any (the skills' average is used)."""
+        steps = errors.shape[-2]
         means = self._means_at(np.arange(steps))
-        misfit = (((flat[:, None] - means[None, :-1]) / step_rows(self.error_std, steps)) ** 2).sum(-1)  # (N, S, T)
+        misfit = (((errors[:, None] - means[None, :-1]) / step_rows(self.error_std, steps)) ** 2).sum(-1)  # (N, S, T)
         before = np.cumsum(misfit, axis=2)[..., :-1]
-        pick = np.concatenate([np.full((len(flat), 1), -1), before.argmin(axis=1)], axis=1)  # (N, T)
-        return (flat - means[pick, np.arange(steps)]).reshape(errors.shape)
+        return np.concatenate([np.full((len(errors), 1), -1), before.argmin(axis=1)], axis=1)
 
     def centre_step(self, errors: np.ndarray, steps: np.ndarray, misfit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One step (B, D) of streams at `steps` (B,), less each stream's recognised skill's mean

@@ -26,6 +26,15 @@ VARIED_PAPER_EPOCHS = 40
 app = typer.Typer(cls=Group)
 
 
+class FaultTask(str, Enum):
+    """The simulated tasks (``nasm demos --task``) and the real robots' datasets."""
+
+    paper = Task.paper.value
+    varied = Task.varied.value
+    kitting = "kitting"
+    voraus = "voraus"
+
+
 class Context(str, Enum):
     observed = "observed"
     hidden = "hidden"
@@ -33,8 +42,10 @@ class Context(str, Enum):
 
 @app.command(cls=Command)
 def faults(
-    task: Task = typer.Option(Task.paper, help="paper: the 980 joint locks of the paper's fixed task; varied: "
-                              "four skills whose cube, goal, speed and obstacle vary, with nine fault families"),
+    task: FaultTask = typer.Option(FaultTask.paper, help="paper: the 980 joint locks of the paper's fixed task; varied: "
+                                   "four skills whose cube, goal, speed and obstacle vary, with nine fault families; "
+                                   "kitting: a real Baxter's labelled failures (--data: the clone's 'No.0 filtering "
+                                   "scheme' folder); voraus: voraus-AD (--data: its parquet file)"),
     context: Context = typer.Option(Context.observed, help="varied task: whether the goal is an observed channel"),
     rate: int = typer.Option(int(SIM.timing.observation_hz), help=f"{RATE_HELP} At 40 Hz: the served monitor at 40 "
                              "and 2 Hz on the joint locks and the falling object, with latency (no baselines)",
@@ -63,6 +74,12 @@ def faults(
     """Run the 980-fault sweep (or the varied-task benchmark) against baselines; write JSON, markdown and figures."""
     if task == Task.paper or not (ceiling or diagnostic or ablation):  # these three write tables only
         require_matplotlib("faults")
+    if task in (FaultTask.kitting, FaultTask.voraus):
+        if data is None:
+            typer.secho(f"--task {task.value} needs --data: the dataset you cloned or downloaded", fg="red", err=True)
+            raise typer.Exit(2)
+        _real(task.value, data, out or home_path(task.value), seeds)
+        return
     parallel = Parallel(workers, backend)
     if task == Task.varied:
         out, data = out or home_path(f"varied_{context.value}"), data or home_path("data_varied")
@@ -85,6 +102,21 @@ def faults(
     except SetMismatch as exc:
         typer.secho(str(exc), fg="red", err=True)
         raise typer.Exit(2) from exc
+
+
+def _real(task: str, data: Path, out: Path, trainings: int) -> None:
+    """A real robot's dataset: its experiment's own module does the work (experiments/kitting, experiments/voraus)."""
+    from neural_asm.logs.errors import LogError
+
+    if task == "kitting":
+        from neural_asm.experiments.kitting.cli import run_kitting as run_real
+    else:
+        from neural_asm.experiments.voraus.cli import run_voraus as run_real
+    try:
+        run_real(data, out, trainings)
+    except LogError as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
 
 
 def _paper(out: Path, data: Path, paper_epochs: int, n_normal: int | None, fast_epochs: int | None, *,

@@ -1,0 +1,1 @@
+"""The Baxter kitting benchmark: a real robot's labelled failures, scored from their onsets."""

@@ -1,0 +1,184 @@
+"""The monitors compared on the kitting segments, each reduced to an energy per step and the
+served episode thresholds (`models.calibration`): the one Neural ASM for every skill (not told
+the skill), per-skill networks, templates told the skill or picking the nearest one, the linear
+one-step predictor, an LSTM predictor trained by BPTT, and two trivial detectors.
+
+Every learned or template method is calibrated as the product calibrates a model: precisions on
+one half of the held-out normal runs (`models.calibration.estimate`), episode thresholds on the
+other half (split-conformal on their peak energies, `conformal_episode_threshold`), each peak
+taken over a segment's own steps (not the samples held to pad it to the model's length).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from torch import nn
+
+from neural_asm.experiments.kitting.config import KittingConfig
+from neural_asm.experiments.kitting.data import PERIOD_S, Segments
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.calibration import Calibration, conformal_episode_threshold, estimate
+from neural_asm.models.config import SCORING
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.one_step import LinearOneStep
+from neural_asm.models.sequence_detectors import GRUOneStep, RecurrentConfig
+from neural_asm.models.templates import PerSkillZScore
+
+RATE_HZ = 1 / PERIOD_S
+FORCE = 0  # the force norm's channel
+
+
+@dataclass(frozen=True)
+class MethodInfo:
+    name: str
+    label: str
+    is_neural_asm: bool
+    told_skill: bool
+    learned: bool  # depends on a training seed
+    trivial: bool = False
+
+
+METHODS = (
+    MethodInfo("nasm_one", "one Neural ASM for every skill, skill recognised (offline recall)", True, False, True),
+    MethodInfo("nasm_one_online", "one Neural ASM, skill recognised (online recall)", True, False, True),
+    MethodInfo("nasm_one_pooled", "one Neural ASM, one calibration for every skill (the 20 Hz default)", True, False, True),
+    MethodInfo("nasm_per_skill", "a Neural ASM per skill, told the skill", True, True, True),
+    MethodInfo("template_told", "per-skill z-score template, told the skill", False, True, False),
+    MethodInfo("template_nearest", "template picking the nearest skill itself", False, False, False),
+    MethodInfo("linear_one_step", "linear one-step predictor (ridge), told the skill", False, True, True),
+    MethodInfo("lstm", "LSTM one-step predictor (BPTT), told the skill", False, True, True),
+    MethodInfo("length", "trivial: segment length so far", False, False, False, True),
+    MethodInfo("peak_force", "trivial: peak force norm", False, False, False, True),
+)
+INFO = {m.name: m for m in METHODS}
+
+
+@dataclass
+class Scored:
+    """A method's energies (N, T) of the test segments and each segment's threshold per rate."""
+
+    energies: np.ndarray
+    thresholds: dict[float, np.ndarray]  # fpr -> (N,)
+
+
+@dataclass
+class Sets:
+    train: Segments
+    precision: Segments  # held-out normal runs: precisions
+    threshold: Segments  # held-out normal runs: thresholds
+    test: Segments
+
+
+def served_thresholds(energies: np.ndarray, lengths: np.ndarray, fprs: tuple[float, ...]) -> dict[float, float]:
+    """Episode thresholds of normal segments' peak energies over their own steps (the served rule's)."""
+    peaks = np.array([e[:n].max() for e, n in zip(energies, lengths)])
+    return {f: conformal_episode_threshold(peaks, f) for f in fprs}
+
+
+def _broadcast(thresholds: dict[float, float], n: int) -> dict[float, np.ndarray]:
+    return {f: np.full(n, t) for f, t in thresholds.items()}
+
+
+def calibrated_energies(errors: Callable[[Segments], np.ndarray], sets: Sets, fprs: tuple[float, ...],
+                        centred: bool = False) -> Scored:
+    """Energies of the test segments under the product's calibration of a predictor's errors."""
+    cal = estimate("baseline", 1, errors(sets.precision), "held-out normal runs", SCORING.error_covariance,
+                   SCORING.spread_floor(RATE_HZ), centred, sets.precision.skills)
+    thresholds = served_thresholds(cal.energy(errors(sets.threshold)), sets.threshold.lengths, fprs)
+    return Scored(cal.energy(errors(sets.test)), _broadcast(thresholds, len(sets.test)))
+
+
+def fit_network(train: Segments, config: KittingConfig, seed: int) -> NeuralASM:
+    from neural_asm.experiments.kitting.data import COLUMNS
+
+    return NeuralASM.fit(train.data, tuple(COLUMNS), config.network.with_(seed=seed), progress=False,
+                         provenance={"benchmark": "kitting", "seed": seed}, labels=train.skills, rate_hz=RATE_HZ)
+
+
+def calibrate_served(model: NeuralASM, sets: Sets, mode: str, centred: bool, fprs: tuple[float, ...]) -> Calibration:
+    """Calibrate the network as served: precisions (and each skill's mean error, when ``centred``)
+    on one half of the held-out runs, episode thresholds on the other half's own steps."""
+    cal = model.calibrate(sets.precision.data, sets.threshold.data, mode, 1, SCORING.fprs, "held-out normal runs",
+                          labels=sets.precision.skills, centred=centred)
+    energies = model.score(sets.threshold.data, mode).energy
+    cal.episode_thresholds.update(served_thresholds(energies, sets.threshold.lengths, SCORING.fprs))
+    return cal
+
+
+def score_network(model: NeuralASM, sets: Sets, mode: str, centred: bool, fprs: tuple[float, ...]) -> Scored:
+    cal = calibrate_served(model, sets, mode, centred, fprs)
+    energies = model.score(sets.test.data, mode).energy
+    return Scored(energies, _broadcast({f: cal.episode_thresholds[f] for f in fprs}, len(sets.test)))
+
+
+def score_per_skill(sets: Sets, config: KittingConfig, seed: int, skills: tuple[str, ...]) -> Scored:
+    """A network per skill, each calibrated on its skill's held-out runs; a test segment scored by its skill's."""
+    n, steps = len(sets.test), sets.test.data.shape[1]
+    energies, thresholds = np.full((n, steps), np.nan), {f: np.full(n, np.nan) for f in config.fprs}
+    for skill in skills:
+        pick = {name: getattr(sets, name).take(getattr(sets, name).skills == skill)
+                for name in ("train", "precision", "threshold")}
+        model = fit_network(pick["train"], config, seed)
+        one = Sets(pick["train"], pick["precision"], pick["threshold"], sets.test.take(sets.test.skills == skill))
+        scored = score_network(model, one, config.recall_mode, False, config.fprs)
+        rows = sets.test.skills == skill
+        energies[rows] = scored.energies
+        for f in config.fprs:
+            thresholds[f][rows] = scored.thresholds[f]
+    return Scored(energies, thresholds)
+
+
+def nearest_template(means: dict[str, np.ndarray], x: np.ndarray) -> np.ndarray:
+    """(N, T, D) each step's expectation from the skill whose template fits the steps before it
+    best (at the first step: the first observation), as the network's recognition is cued."""
+    names = sorted(means)
+    m = np.stack([means[s][: x.shape[1]] for s in names])  # (S, T, D)
+    misfit = ((x[:, None] - m[None]) ** 2).sum(-1)  # (N, S, T)
+    before = np.concatenate([misfit[..., :1], np.cumsum(misfit, axis=2)[..., :-1]], axis=2)
+    pick = before.argmin(axis=1)  # (N, T)
+    return m[pick, np.arange(x.shape[1])[None]]
+
+
+class LSTMOneStep(GRUOneStep):
+    """The published method's family: an LSTM reads x[0..t] (and the skill) and predicts x[t+1]."""
+
+    name = "lstm_one_step"
+    label = "LSTM one-step predictor (BPTT)"
+
+    def _build(self) -> nn.Module:
+        net = super()._build()
+        net.gru = nn.LSTM(self.dims + len(self.skill_names), self.config.hidden_size, batch_first=True)
+        return net
+
+
+def score_baselines(sets: Sets, config: KittingConfig, seed: int, learned_only: bool) -> dict[str, Scored]:
+    """The templates and predictors (those that depend on ``seed`` only, with ``learned_only``)."""
+    normaliser = Normaliser.fit(sets.train.data)
+    train_x = normaliser.normalise(sets.train.data)
+    out: dict[str, Scored] = {}
+
+    def by(detector) -> Callable[[Segments], np.ndarray]:
+        return lambda s: normaliser.normalise(s.data) - detector.expected(normaliser.normalise(s.data), s.skills)
+
+    if not learned_only:
+        template = PerSkillZScore().fit(train_x, sets.train.skills, [], seed)
+        out["template_told"] = calibrated_energies(by(template), sets, config.fprs)
+        out["template_nearest"] = calibrated_energies(
+            lambda s: normaliser.normalise(s.data) - nearest_template(template.means, normaliser.normalise(s.data)),
+            sets, config.fprs)
+        out["length"] = _trivial(lambda s: np.broadcast_to(np.arange(s.data.shape[1]) * PERIOD_S, s.data.shape[:2]),
+                                 sets, config.fprs)
+        out["peak_force"] = _trivial(lambda s: s.data[..., FORCE], sets, config.fprs)
+    linear = LinearOneStep().fit(train_x, sets.train.skills, [], seed)
+    out["linear_one_step"] = calibrated_energies(by(linear), sets, config.fprs)
+    lstm = LSTMOneStep(RecurrentConfig(max_epochs=config.lstm_epochs, patience=15)).fit(train_x, sets.train.skills, [], seed)
+    out["lstm"] = calibrated_energies(by(lstm), sets, config.fprs)
+    return out
+
+
+def _trivial(value: Callable[[Segments], np.ndarray], sets: Sets, fprs: tuple[float, ...]) -> Scored:
+    thresholds = served_thresholds(value(sets.threshold), sets.threshold.lengths, fprs)
+    return Scored(np.array(value(sets.test), float), _broadcast(thresholds, len(sets.test)))

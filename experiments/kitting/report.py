@@ -1,0 +1,112 @@
+"""The kitting benchmark's outputs: fault_sweep.json (the headline and everything behind it),
+fault_sweep.md (the tables), auroc_vs_delta.png, timeline.png and timeline.rrd."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from neural_asm.experiments.kitting.data import PERIOD_S
+from neural_asm.experiments.kitting.run import KittingResult
+
+COMMAND = "nasm faults --task kitting --data DIR --out OUT"
+
+
+def _f(value: Any, digits: int = 2) -> str:
+    return "–" if value is None else f"{value:.{digits}f}"
+
+
+def _range(m: dict[str, Any], *keys: str) -> str:
+    node = m["range"]
+    for k in keys:
+        node = node.get(k) if isinstance(node, dict) else None
+    return "" if not node or node[0] == node[1] else f" ({_f(node[0])}–{_f(node[1])})"
+
+
+def write_json(result: KittingResult, path: Path) -> None:
+    doc = {"headline": result.headline, **{k: v for k, v in asdict(result).items() if k != "headline"}}
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(doc, indent=1))
+    tmp.replace(path)
+
+
+def markdown(result: KittingResult) -> str:
+    h = result.headline
+    deltas = [str(d) for d in h["deltas_s"]]
+    lines = [f"# Baxter kitting: anomalies scored from their onset\n", f"`{COMMAND}`, {result.seconds:.0f} s; "
+             f"trainings per learned method: {result.config['trainings']} (mean, range); split seed "
+             f"{result.split['seed']}: {len(result.split['train'])} training, {len(result.split['calibration'])} "
+             f"calibration, {len(result.split['test'])} test runs. Segments: {result.counts}\n",
+             "## Mean AUROC over skills 3, 4, 5 against delta (s after the onset)\n",
+             "| method | told skill | " + " | ".join(f"δ={d}" for d in deltas) + " | detected 1 % | normal flagged 1 % "
+             "| delay median / p95 (ms) |", "|---|---|" + "---|" * (len(deltas) + 3)]
+    for name, m in result.methods.items():
+        lines.append(f"| {m['label']} | {'yes' if m['told_skill'] else 'no'} | "
+                     + " | ".join(_f(m["auroc"][d]) + _range(m, "auroc", d) for d in deltas)
+                     + f" | {_f(m['detected_1pct'])} | {_f(m['normal_flagged_1pct'])} | "
+                     f"{_f(m['delay_ms_median'], 0)} / {_f(m['delay_ms_p95'], 0)} |")
+    lines += ["", "## Per skill at δ = 0.5 s (served 1 % threshold)\n",
+              "| method | skill | AUROC | detected | normal flagged | balanced accuracy | normals trained |",
+              "|---|---|---|---|---|---|---|"]
+    for name, m in result.methods.items():
+        for s, row in m["per_skill"].items():
+            lines.append(f"| {name} | {s} | {_f(row['auroc']['0.5'])} | {_f(row.get('detected_1pct'))} | "
+                         f"{_f(row.get('normal_flagged_1pct'))} | {_f(row.get('balanced_accuracy'))} | {row['n_normal_train']} |")
+    lines += ["", "## Per anomaly type (skills 3, 4, 5), AUROC at δ = 0.5 s\n",
+              "| method | " + " | ".join(f"{t} (n={v['n']})" for t, v in result.methods["nasm_one"]["per_type"].items()) + " |",
+              "|---|" + "---|" * len(result.methods["nasm_one"]["per_type"])]
+    for name, m in result.methods.items():
+        lines.append(f"| {name} | " + " | ".join(_f(v["auroc_0.5"]) for v in m["per_type"].values()) + " |")
+    p = result.paired
+    lines += ["", f"## Paired: nasm_one against {p['baseline']}\n",
+              f"{p['nasm_only']} items right only for the one network, {p['baseline_only']} only for {p['baseline']}; "
+              f"exact McNemar p = {p['p_value']:.3g} ({p['items']}).", "",
+              "## Few demonstrations (skills 7-9)\n", "```", json.dumps(result.few, indent=1)[:4000], "```", "",
+              "## Whole runs of the test split\n", "```", json.dumps(result.whole_runs, indent=1), "```"]
+    return "\n".join(lines) + "\n"
+
+
+def write_figures(result: KittingResult, out: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    deltas = result.headline["deltas_s"]
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for name, m in result.methods.items():
+        ys = [m["auroc"][str(d)] for d in deltas]
+        ax.plot(deltas, [np.nan if y is None else y for y in ys], "o-" if m["is_neural_asm"] else "s--", label=name)
+    ax.set(xlabel="delta after the onset (s)", ylabel="mean AUROC, skills 3-5", title="Baxter kitting: AUROC vs delta")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "auroc_vs_delta.png", dpi=120)
+    plt.close(fig)
+    tl = result.timeline
+    t = np.arange(len(tl["energies"])) * PERIOD_S
+    fig, ax = plt.subplots(figsize=(8, 3.5))
+    ax.semilogy(t, tl["energies"], label="energy (one network)")
+    ax.axhline(tl["threshold"], color="r", ls="--", label="served 1 % threshold")
+    ax.axvline(tl["onset_step"] * PERIOD_S, color="k", label=f"onset ({tl['anomaly']})")
+    ax.set(xlabel="s", title=f"skill {tl['skill']}: {tl['origin'][:70]}")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "timeline.png", dpi=120)
+    plt.close(fig)
+    write_timeline_rrd(result, out / "timeline.rrd")
+
+
+def write_timeline_rrd(result: KittingResult, path: Path) -> None:
+    import rerun as rr
+
+    tl = result.timeline
+    rec = rr.RecordingStream("neural_asm_kitting")
+    t = np.arange(len(tl["energies"])) * PERIOD_S
+    rec.send_columns("energy", indexes=[rr.TimeColumn("time", duration=t)],
+                     columns=rr.Scalars.columns(scalars=np.asarray(tl["energies"])))
+    rec.send_columns("threshold", indexes=[rr.TimeColumn("time", duration=t)],
+                     columns=rr.Scalars.columns(scalars=np.full(len(t), tl["threshold"])))
+    rec.set_time("time", duration=tl["onset_step"] * PERIOD_S)
+    rec.log("onset", rr.TextLog(f"onset: {tl['anomaly']} (skill {tl['skill']})"))
+    rec.save(str(path))

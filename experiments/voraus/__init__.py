@@ -1,0 +1,1 @@
+"""voraus-AD: an industrial arm's pick-and-place anomalies, per category."""
