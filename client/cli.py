@@ -10,7 +10,7 @@ import typer
 
 from neural_asm.runtime.cli import Command, Group
 from neural_asm.pipelines.default_model import RATE_MODES
-from neural_asm.client.run import MODES, falling_object, fault_spec, run_client
+from neural_asm.client.run import MODES, SHOWCASE_FAULT, falling_object, fault_spec, run_client
 from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost
 from neural_asm.recordings import DEFAULT_DIR
 from neural_asm.runtime.home import home_path
@@ -47,7 +47,11 @@ def client(
                                           "recalled plan, monitored by the model calibrated for compliant control)"),
     correct: bool = typer.Option(False, "--correct", help="correct the hit with the memory's prediction error once "
                                  "the monitor flags it; needs --controller compliant"),
-    episodes: int = typer.Option(1, min=1, help="number of episodes"),
+    episodes: int | None = typer.Option(None, min=1, help="number of episodes (seeds seed, seed + 1, ...); "
+                                        "default: with no fault or falling object, the episode of --seed twice, "
+                                        f"normal and with joint {SHOWCASE_FAULT.joint} locked "
+                                        f"({SHOWCASE_FAULT.overshoot_deg:+g} deg at {SHOWCASE_FAULT.time_s:g} s), "
+                                        "verdicts side by side; else 1"),
     url: str | None = typer.Option(None, help="service URL, e.g. http://127.0.0.1:8000; default: start one "
                                                "in-process on a free port"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
@@ -67,9 +71,12 @@ def client(
     """Simulate Panda episodes, stream them to the Neural ASM service and record them."""
     try:
         fault = fault_spec(fault_joint, fault_time, fault_overshoot)
-        summaries = run_client(skill.value, seed, fault, falling_object(drop, hit_momentum), episodes, url,
+        hit = falling_object(drop, hit_momentum)
+        showcase = episodes is None and fault is None and hit is None
+        summaries = run_client(skill.value, seed, fault, hit, episodes or 1, url,
                                api_key, None if mode is None else mode.value, out, reconnect, transport.value,
-                               models_dir, controller=controller.value, correct=correct, rate=rate, realtime=realtime)
+                               models_dir, controller=controller.value, correct=correct, rate=rate, realtime=realtime,
+                               showcase=showcase)
     except (ValueError, ServiceError) as exc:  # a bad option, or the service refused the request
         raise _fail(str(exc), 2) from None
     except ServiceLost as exc:
