@@ -109,6 +109,7 @@ class RecorderProcess:
         self._stopping = threading.Event()
         self._process: BaseProcess | None = None
         self._collector: threading.Thread | None = None
+        self.dropped_records = 0  # scored steps of batches no child was alive to take
 
     @property
     def pid(self) -> int | None:
@@ -149,6 +150,17 @@ class RecorderProcess:
         for marker in recovered:
             log.warning("recovered an interrupted recording: %s", marker)
 
+    def backlog(self) -> int | None:
+        """Messages queued for the child (at most ``BACKLOG``); None where the platform cannot
+        tell (macOS) or before the child starts."""
+        inbox = getattr(self, "_inbox", None)
+        if inbox is None:
+            return None
+        try:
+            return inbox.qsize()
+        except NotImplementedError:
+            return None
+
     def _put(self, message: tuple[Any, ...]) -> None:
         """Queue a message, waiting while the child is ``BACKLOG`` behind: a backlog without
         bound would be memory without bound. A dead child's queue is replaced by the collector."""
@@ -158,6 +170,8 @@ class RecorderProcess:
                 return
             except queue.Full:
                 if not self.alive:  # nobody will read it: serve on, the collector restarts the child
+                    if message[0] == "steps":
+                        self.dropped_records += len(message[1].keys)
                     return
 
     def open(self, run_id: str, channel_names: Sequence[str], recording_id: str,

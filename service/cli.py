@@ -53,6 +53,7 @@ def serve(
     recordings_dir: Path | None = typer.Option(None, help=_help("recordings_dir")),
     record: bool | None = typer.Option(None, "--record/--no-record", help=_help("record")),
     default_fpr: float | None = typer.Option(None, help=_help("default_fpr")),
+    metrics: bool | None = typer.Option(None, "--metrics/--no-metrics", help=_help("metrics")),
     log_level: str = typer.Option("info", help="uvicorn log level"),
 ) -> None:
     """Serve the models in --models-dir over HTTP and websocket (OpenAPI docs at /docs)."""

@@ -33,6 +33,7 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(64 * 1024, ge=1024, description="larger request bodies get 413")
     recordings_dir: Path = Field(default_factory=lambda: home_path("recordings"), description="where session recordings go")
     record: bool = Field(True, description="write an .rrd and an .mcap for every session")
+    metrics: bool = Field(True, description="serve Prometheus metrics at /metrics (behind the API key when set)")
     default_fpr: float = Field(SCORING.default_fpr, gt=0, lt=1, description="per-step false-positive rate of /fault")
 
     def check_exposure(self) -> None:
