@@ -24,6 +24,7 @@ from neural_asm.models.config import SCORING
 from neural_asm.pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
 from neural_asm.pipelines.default_model import RATE_MODES, ensure_default_model, model_name
 from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.recordings.live import LiveViewer
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.config import CONTROLLERS, RATES, SIM
 from neural_asm.sim.disturbances import FallingObject, elbow_hit
@@ -129,6 +130,7 @@ def run_client(
     rate: float = SIM.timing.observation_hz,
     realtime: bool = False,
     showcase: bool = False,
+    live: LiveViewer | None = None,
 ) -> list[EpisodeSummary]:
     """Simulate ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) and stream each to the service.
 
@@ -140,8 +142,8 @@ def run_client(
     ``after_step(episode, step)`` is called after each scored step (tests use it to stop the
     service mid-episode). ``showcase`` (no fault, falling object or second episode given) streams
     the episode of ``seed`` twice, normal and with ``SHOWCASE_FAULT``, and prints both verdicts
-    side by side: what the monitor is for, on a first run. Stops after an episode the service
-    was lost in.
+    side by side: what the monitor is for, on a first run. ``live``: each episode also shown in
+    that Rerun viewer as it streams. Stops after an episode the service was lost in.
     """
     if rate not in RATES:
         raise ValueError(f"--rate must be one of {', '.join(map(str, RATES))} Hz, got {rate!r}")
@@ -182,7 +184,7 @@ def run_client(
             hook = None if after_step is None else (lambda k, i=i: after_step(i, k))
             outcome = {"controller": controller, "correction": correction, "cube_error_m": ep.cube_error_m}
             s = stream_episode(ep, i + 1, service_url, api_key, mode, out, transport, reconnect, quiet, hook,
-                               period=1.0 / rate, session=session, metadata=outcome, realtime=realtime)
+                               period=1.0 / rate, session=session, metadata=outcome, realtime=realtime, live=live)
             s.controller, s.correction, s.cube_error_m = controller, correction, ep.cube_error_m
             summaries.append(s)
             say(summary_line(s), quiet)

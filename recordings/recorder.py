@@ -19,6 +19,9 @@ collector thread notices within a second, logs it and starts a new child (which
 recovers the dead one's files); the sessions it was writing are served on, unrecorded.
 If the server dies, the orphaned child closes its files (leaving the markers) and exits.
 
+With a live view (``LiveSpec``), the child also shows every session in a Rerun viewer as its
+steps arrive (``live``): one recording per session, under the session's recording id.
+
 A session's ``.rrd`` carries no layout of its own (embedding it is most of what opening
 a file costs): the child writes it once, as
 ``episode.rbl`` in the folder, and a session's file merged with its client's file (same
@@ -48,8 +51,10 @@ import numpy as np
 from neural_asm.recordings import blueprint as bp
 from neural_asm.recordings import rerun_file
 from neural_asm.recordings.episode import EpisodeRecorder
+from neural_asm.recordings.live import GRPC_PORT, WEB_PORT, LiveViewer, open_viewer
 from neural_asm.recordings.paths import APP_ID, safe_name
 from neural_asm.recordings.records import StepRecord
+from neural_asm.recordings.rerun_writer import STEP_BATCH
 from neural_asm.recordings.recover import OPEN_MARKER, recover_interrupted, write_json, writer_identity
 
 log = logging.getLogger(__name__)
@@ -98,10 +103,23 @@ class SessionRecording:
         return self.recorder.close(self)
 
 
+@dataclass(frozen=True)
+class LiveSpec:
+    """The live view the child shows every session in (``live.open_viewer``'s arguments)."""
+
+    url: str | None = None
+    grpc_port: int = GRPC_PORT
+    web_port: int = WEB_PORT
+
+
 class RecorderProcess:
-    def __init__(self, folder: Path, step_period_s: float = 0.5) -> None:
+    def __init__(self, folder: Path, step_period_s: float = 0.5, live: LiveSpec | None = None) -> None:
+        """``live``: every session is also shown, as it is recorded, in that live view (one
+        recording per session in the viewer, under the session's recording id)."""
         self.folder = Path(folder)
         self.step_period_s = step_period_s
+        self.live = live
+        self.live_how: str | None = None  # how to open the live view, once the child has it
         self.generation = 0
         self._lock = threading.Lock()
         self._tickets = itertools.count()
@@ -130,7 +148,7 @@ class RecorderProcess:
         self.folder.mkdir(parents=True, exist_ok=True)
         self._inbox: Any = _CTX.Queue(maxsize=BACKLOG)
         self._outbox: Any = _CTX.Queue()
-        process = _CTX.Process(target=_serve, args=(self._inbox, self._outbox, self.folder),
+        process = _CTX.Process(target=_serve, args=(self._inbox, self._outbox, self.folder, self.live),
                                name="nasm-recorder", daemon=True)
         # Spawning re-imports the parent's __main__ in the child; under `nasm serve` that is every
         # command's imports (torch, the simulator), which the child never uses.
@@ -147,6 +165,9 @@ class RecorderProcess:
             process.kill()
             raise RuntimeError(f"the recorder process did not start within {timeout_s:g} s") from None
         assert kind == "ready"
+        recovered, self.live_how = recovered
+        if self.live_how:
+            log.warning("%s", self.live_how)
         for marker in recovered:
             log.warning("recovered an interrupted recording: %s", marker)
 
@@ -264,13 +285,22 @@ class RecorderProcess:
             q.close()
 
 
-def _serve(inbox: Any, outbox: Any, folder: Path) -> None:
+def _serve(inbox: Any, outbox: Any, folder: Path, live: LiveSpec | None) -> None:
     """The child: recover the folder, then open, write and close sessions' files as told."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server stops us
     rerun_file.defer_freeing()  # one sweep a second, not one per closed file
     recovered = recover_interrupted(folder)
     _write_layout(folder)
-    outbox.put(("ready", [str(p) for p in recovered]))
+    viewer = None if live is None else open_viewer(live.url, live.grpc_port, live.web_port)
+    outbox.put(("ready", ([str(p) for p in recovered], None if viewer is None else viewer.how)))
+    try:
+        _record(inbox, outbox, folder, viewer)
+    finally:
+        if viewer is not None:
+            viewer.close()
+
+
+def _record(inbox: Any, outbox: Any, folder: Path, viewer: LiveViewer | None) -> None:
     writers: dict[str, EpisodeRecorder | None] = {}
     errors: dict[str, str] = {}
     dirty: set[str] = set()  # written to since the last flush
@@ -302,16 +332,17 @@ def _serve(inbox: Any, outbox: Any, folder: Path) -> None:
                 write_json(folder / f"{key}{OPEN_MARKER}", opened)
                 writers[key] = EpisodeRecorder(key, names, folder=folder, recording_id=recording_id,
                                                metadata=metadata, step_period_s=step_period_s, layout=False,
-                                               joints=joints)
+                                               joints=joints, live=viewer, live_step_batch=STEP_BATCH)
             except Exception as exc:
                 log.exception("cannot open the recording %s; the session continues unrecorded", key)
                 writers[key], errors[key] = None, f"its recording could not be opened: {exc}"
         elif kind == "steps":
+            touched = set()
             for key, record in message[1].records():
                 writer = writers.get(key)
                 if writer is None:
                     continue
-                dirty.add(key)
+                touched.add(key)
                 try:
                     writer.log_step(record)
                 except Exception as exc:
@@ -319,6 +350,11 @@ def _serve(inbox: Any, outbox: Any, folder: Path) -> None:
                     errors[key] = f"its recording failed: {exc}"
                     _finish(folder, key, writer)
                     writers[key] = None
+            dirty |= touched
+            if viewer is not None:  # the batch's steps to the viewer at once, one send per session
+                for key in touched:
+                    if (writer := writers.get(key)) is not None:
+                        writer.send_live()
         elif kind == "close":
             _, key, ticket = message
             writer = writers.pop(key, None)

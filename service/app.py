@@ -27,6 +27,7 @@ from neural_asm.service.state import ServiceState
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
     settings.check_exposure()
+    settings.check_live()
     state = ServiceState(settings)
 
     @contextlib.asynccontextmanager

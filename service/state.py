@@ -9,7 +9,7 @@ import logging
 import time
 
 from neural_asm.models.kernels import compile_now
-from neural_asm.recordings.recorder import RecorderProcess
+from neural_asm.recordings.recorder import LiveSpec, RecorderProcess
 from neural_asm.service.metrics import Metrics
 from neural_asm.service.registry import ModelRegistry
 from neural_asm.service.runner import Runner, StepOutcome
@@ -26,7 +26,9 @@ class ServiceState:
         self.settings = settings
         self.registry = ModelRegistry(settings.models_dir, settings.default_model)
         self.sessions = SessionStore(settings.max_sessions, settings.max_sessions_per_client, settings.session_idle_s)
-        self.recorder = RecorderProcess(settings.recordings_dir) if settings.record else None
+        live = (LiveSpec(settings.live_url, settings.live_grpc_port, settings.live_web_port)
+                if settings.live or settings.live_url else None)
+        self.recorder = RecorderProcess(settings.recordings_dir, live=live) if settings.record else None
         self.runner = Runner(self.recorder)
         self.started = time.monotonic()
         self.metrics: Metrics | None = None
