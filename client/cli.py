@@ -14,6 +14,7 @@ from neural_asm.pipelines.default_model import RATE_MODES
 from neural_asm.client.run import MODES, SHOWCASE_FAULT, falling_object, fault_spec, run_client
 from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost
 from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.live import LiveViewer, open_viewer
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.cli import RATE_HELP, check_rate
@@ -74,9 +75,13 @@ def client(
                               "(the address is printed; served, it stays up after the run until Ctrl-C)"),
     live_url: str | None = typer.Option(None, help="with --live, send to this viewer instead "
                                         "(rerun+http://HOST:PORT/proxy, e.g. a `rerun --serve-grpc` elsewhere)"),
+    foxglove: int | None = typer.Option(None, min=0, max=65535, metavar="PORT", help="also serve the episodes live "
+                                        "to Foxglove on this loopback port (0: any free one): the MCAP files' topics, "
+                                        "so the shipped layout works"),
 ) -> None:
     """Simulate Panda episodes, stream them to the Neural ASM service and record them."""
     viewer: LiveViewer | None = None
+    fox: FoxgloveLive | None = None
     streamed = False
     try:
         if live_url and not live:
@@ -84,13 +89,16 @@ def client(
         if live:
             viewer = open_viewer(live_url)
             typer.echo(viewer.how)
+        if foxglove is not None:
+            fox = FoxgloveLive(foxglove)
+            typer.echo(fox.how)
         fault = fault_spec(fault_joint, fault_time, fault_overshoot)
         hit = falling_object(drop, hit_momentum)
         showcase = episodes is None and fault is None and hit is None
         summaries = run_client(skill.value, seed, fault, hit, episodes or 1, url,
                                api_key, None if mode is None else mode.value, out, reconnect, transport.value,
                                models_dir, controller=controller.value, correct=correct, rate=rate, realtime=realtime,
-                               showcase=showcase, live=viewer)
+                               showcase=showcase, live=viewer, foxglove=fox)
         streamed = True
     except (ValueError, ServiceError) as exc:  # a bad option, or the service refused the request
         raise _fail(str(exc), 2) from None
@@ -102,6 +110,8 @@ def client(
     finally:
         if viewer is not None and not (streamed and viewer.served):
             viewer.close()
+        if fox is not None:
+            fox.close()
     if json_out is not None:
         json_out.write_text(json.dumps([s.to_dict() for s in summaries], indent=1))
     if viewer is not None and viewer.served:

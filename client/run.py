@@ -24,6 +24,7 @@ from neural_asm.models.config import SCORING
 from neural_asm.pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
 from neural_asm.pipelines.default_model import RATE_MODES, ensure_default_model, model_name
 from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.live import LiveViewer
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.config import CONTROLLERS, RATES, SIM
@@ -131,6 +132,7 @@ def run_client(
     realtime: bool = False,
     showcase: bool = False,
     live: LiveViewer | None = None,
+    foxglove: FoxgloveLive | None = None,
 ) -> list[EpisodeSummary]:
     """Simulate ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) and stream each to the service.
 
@@ -143,7 +145,7 @@ def run_client(
     service mid-episode). ``showcase`` (no fault, falling object or second episode given) streams
     the episode of ``seed`` twice, normal and with ``SHOWCASE_FAULT``, and prints both verdicts
     side by side: what the monitor is for, on a first run. ``live``: each episode also shown in
-    that Rerun viewer as it streams. Stops after an episode the service was lost in.
+    that Rerun viewer as it streams, ``foxglove`` on that Foxglove server. Stops after an episode the service was lost in.
     """
     if rate not in RATES:
         raise ValueError(f"--rate must be one of {', '.join(map(str, RATES))} Hz, got {rate!r}")
@@ -184,7 +186,8 @@ def run_client(
             hook = None if after_step is None else (lambda k, i=i: after_step(i, k))
             outcome = {"controller": controller, "correction": correction, "cube_error_m": ep.cube_error_m}
             s = stream_episode(ep, i + 1, service_url, api_key, mode, out, transport, reconnect, quiet, hook,
-                               period=1.0 / rate, session=session, metadata=outcome, realtime=realtime, live=live)
+                               period=1.0 / rate, session=session, metadata=outcome, realtime=realtime, live=live,
+                               foxglove=foxglove)
             s.controller, s.correction, s.cube_error_m = controller, correction, ep.cube_error_m
             summaries.append(s)
             say(summary_line(s), quiet)

@@ -15,6 +15,8 @@ from typing import Any, Iterable, Protocol
 
 from neural_asm.recordings import blueprint as bp
 from neural_asm.recordings.live import LiveViewer
+from neural_asm.recordings.foxglove_live import FoxgloveLive
+from neural_asm.recordings.mcap_file import McapFile
 from neural_asm.recordings.mcap_writer import McapEpisode
 from neural_asm.recordings.paths import DEFAULT_DIR, run_paths
 from neural_asm.recordings.records import StepRecord, WorldRecord
@@ -52,6 +54,7 @@ class EpisodeRecorder:
         events: bool = True,
         live: LiveViewer | None = None,
         live_step_batch: int = 1,
+        foxglove: FoxgloveLive | None = None,
     ) -> None:
         """``joints``: indices of the joint-angle channels, drawn observed against expected.
         ``layout=False`` leaves the Rerun layout out of the ``.rrd`` (a file of many that
@@ -59,7 +62,8 @@ class EpisodeRecorder:
         event log to another file of the same recording (the service's, which a client's file
         is opened with), so the merged view says each event once. ``live``: the same logged to
         that viewer as it arrives (every ``live_step_batch`` steps, or at ``send_live``), with
-        its event log whatever ``events`` says (the viewer may have only this side)."""
+        its event log whatever ``events`` says (the viewer may have only this side). ``foxglove``:
+        the MCAP file's messages also sent on that Foxglove server as they are written."""
         names = tuple(channel_names)
         formats = tuple(formats)
         unknown = set(formats) - set(FORMATS)
@@ -80,14 +84,16 @@ class EpisodeRecorder:
                 self._live.append(RerunEpisode(live.episode(self.recording_id), names, step_period_s, tuple(joints),
                                                step_batch=live_step_batch))
                 self._writers.append(self._live[0])
+            run = {"run_id": run_id, "recording_id": self.recording_id, "channel_names": list(names), **(metadata or {})}
             if "mcap" in formats:
-                writer = McapEpisode(mcap, names, step_period_s)
+                writer = McapEpisode(McapFile(mcap), names, step_period_s)
                 self._writers.append(writer)
                 self.paths["mcap"] = mcap
-                writer.write_metadata(
-                    {"run_id": run_id, "recording_id": self.recording_id, "channel_names": list(names),
-                     **(metadata or {})}
-                )
+                writer.write_metadata(run)
+            if foxglove is not None:
+                writer = McapEpisode(foxglove.episode(), names, step_period_s)
+                self._writers.append(writer)
+                writer.write_metadata(run)
         except BaseException:
             self.close()
             raise

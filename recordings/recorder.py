@@ -19,8 +19,9 @@ collector thread notices within a second, logs it and starts a new child (which
 recovers the dead one's files); the sessions it was writing are served on, unrecorded.
 If the server dies, the orphaned child closes its files (leaving the markers) and exits.
 
-With a live view (``LiveSpec``), the child also shows every session in a Rerun viewer as its
-steps arrive (``live``): one recording per session, under the session's recording id.
+With live views (``LiveSpec``), the child also shows every session as its steps arrive: in a
+Rerun viewer (``live``: one recording per session, under the session's recording id) and on a
+Foxglove WebSocket server (``foxglove_live``: the MCAP files' topics).
 
 A session's ``.rrd`` carries no layout of its own (embedding it is most of what opening
 a file costs): the child writes it once, as
@@ -51,6 +52,7 @@ import numpy as np
 from neural_asm.recordings import blueprint as bp
 from neural_asm.recordings import rerun_file
 from neural_asm.recordings.episode import EpisodeRecorder
+from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.live import GRPC_PORT, WEB_PORT, LiveViewer, open_viewer
 from neural_asm.recordings.paths import APP_ID, safe_name
 from neural_asm.recordings.records import StepRecord
@@ -105,11 +107,14 @@ class SessionRecording:
 
 @dataclass(frozen=True)
 class LiveSpec:
-    """The live view the child shows every session in (``live.open_viewer``'s arguments)."""
+    """The live views the child shows every session in: a Rerun viewer (``rerun``;
+    ``live.open_viewer``'s arguments) and a Foxglove server on ``foxglove_port``."""
 
+    rerun: bool = False
     url: str | None = None
     grpc_port: int = GRPC_PORT
     web_port: int = WEB_PORT
+    foxglove_port: int | None = None
 
 
 class RecorderProcess:
@@ -291,16 +296,19 @@ def _serve(inbox: Any, outbox: Any, folder: Path, live: LiveSpec | None) -> None
     rerun_file.defer_freeing()  # one sweep a second, not one per closed file
     recovered = recover_interrupted(folder)
     _write_layout(folder)
-    viewer = None if live is None else open_viewer(live.url, live.grpc_port, live.web_port)
-    outbox.put(("ready", ([str(p) for p in recovered], None if viewer is None else viewer.how)))
+    viewer = open_viewer(live.url, live.grpc_port, live.web_port) if live is not None and live.rerun else None
+    foxglove = FoxgloveLive(live.foxglove_port) if live is not None and live.foxglove_port is not None else None
+    how = "; ".join(v.how for v in (viewer, foxglove) if v is not None)
+    outbox.put(("ready", ([str(p) for p in recovered], how)))
     try:
-        _record(inbox, outbox, folder, viewer)
+        _record(inbox, outbox, folder, viewer, foxglove)
     finally:
-        if viewer is not None:
-            viewer.close()
+        for view in (viewer, foxglove):
+            if view is not None:
+                view.close()
 
 
-def _record(inbox: Any, outbox: Any, folder: Path, viewer: LiveViewer | None) -> None:
+def _record(inbox: Any, outbox: Any, folder: Path, viewer: LiveViewer | None, foxglove: FoxgloveLive | None) -> None:
     writers: dict[str, EpisodeRecorder | None] = {}
     errors: dict[str, str] = {}
     dirty: set[str] = set()  # written to since the last flush
@@ -332,7 +340,8 @@ def _record(inbox: Any, outbox: Any, folder: Path, viewer: LiveViewer | None) ->
                 write_json(folder / f"{key}{OPEN_MARKER}", opened)
                 writers[key] = EpisodeRecorder(key, names, folder=folder, recording_id=recording_id,
                                                metadata=metadata, step_period_s=step_period_s, layout=False,
-                                               joints=joints, live=viewer, live_step_batch=STEP_BATCH)
+                                               joints=joints, live=viewer, live_step_batch=STEP_BATCH,
+                                               foxglove=foxglove)
             except Exception as exc:
                 log.exception("cannot open the recording %s; the session continues unrecorded", key)
                 writers[key], errors[key] = None, f"its recording could not be opened: {exc}"

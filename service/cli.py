@@ -58,6 +58,7 @@ def serve(
     live_url: str | None = typer.Option(None, help=_help("live_url")),
     live_grpc_port: int | None = typer.Option(None, help=_help("live_grpc_port")),
     live_web_port: int | None = typer.Option(None, help=_help("live_web_port")),
+    foxglove: int | None = typer.Option(None, metavar="PORT", help=_help("foxglove")),
     log_level: str = typer.Option("info", help="uvicorn log level"),
 ) -> None:
     """Serve the models in --models-dir over HTTP and websocket (OpenAPI docs at /docs)."""

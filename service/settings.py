@@ -42,6 +42,8 @@ class Settings(BaseSettings):
                                 "(another if taken)")
     live_web_port: int = Field(WEB_PORT, ge=1, le=65535, description="with --live, the served web viewer's port "
                                "(another if taken)")
+    foxglove: int | None = Field(None, ge=0, le=65535, description="serve every session live to Foxglove on this "
+                                 "loopback port (a Foxglove WebSocket server with the MCAP files' topics)")
     metrics: bool = Field(True, description="serve Prometheus metrics at /metrics (behind the API key when set)")
     default_fpr: float = Field(SCORING.default_fpr, gt=0, lt=1, description="per-step false-positive rate of /fault")
 
@@ -51,9 +53,9 @@ class Settings(BaseSettings):
         return None if url is None else check_viewer_url(url)
 
     def check_live(self) -> None:
-        """The live view shows what the recorder writes."""
-        if (self.live or self.live_url) and not self.record:
-            raise ValueError("--live shows sessions as the recorder writes them: drop --no-record")
+        """The live views show what the recorder writes."""
+        if (self.live or self.live_url or self.foxglove is not None) and not self.record:
+            raise ValueError("--live and --foxglove show sessions as the recorder writes them: drop --no-record")
 
     def check_exposure(self) -> None:
         """Refuse to serve beyond this machine without an API key."""

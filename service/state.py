@@ -26,8 +26,9 @@ class ServiceState:
         self.settings = settings
         self.registry = ModelRegistry(settings.models_dir, settings.default_model)
         self.sessions = SessionStore(settings.max_sessions, settings.max_sessions_per_client, settings.session_idle_s)
-        live = (LiveSpec(settings.live_url, settings.live_grpc_port, settings.live_web_port)
-                if settings.live or settings.live_url else None)
+        rerun = settings.live or settings.live_url is not None
+        live = (LiveSpec(rerun, settings.live_url, settings.live_grpc_port, settings.live_web_port, settings.foxglove)
+                if rerun or settings.foxglove is not None else None)
         self.recorder = RecorderProcess(settings.recordings_dir, live=live) if settings.record else None
         self.runner = Runner(self.recorder)
         self.started = time.monotonic()
