@@ -64,6 +64,16 @@ _CTX = mp.get_context("spawn")  # no fork: the server has threads (uvicorn, infe
 POLL_S = 1.0  # how soon a dead child (or, in the child, a dead server) is noticed
 LAYOUT_FILE = "episode.rbl"  # the layout of every session's .rrd, written beside them
 BACKLOG = 16  # messages queued for the child at most: a server faster than its recorder waits for it
+# How often the live view is sent the sessions' new steps: each send costs ~0.1-0.2 ms per session
+# and series in the SDK whatever its rows (~1 ms a session), so the more sessions have new steps,
+# the longer they gather: one session's go every LIVE_SEND_S, 64 sessions' every ~0.3 s, which
+# keeps the live view near a fifth of a core.
+LIVE_SEND_S = 0.02
+LIVE_SEND_PER_SESSION_S = 0.005
+
+
+def live_send_period(sessions: int) -> float:
+    return max(LIVE_SEND_S, sessions * LIVE_SEND_PER_SESSION_S)
 
 
 class RecorderGone(RuntimeError):
@@ -312,13 +322,21 @@ def _record(inbox: Any, outbox: Any, folder: Path, viewer: LiveViewer | None, fo
     writers: dict[str, EpisodeRecorder | None] = {}
     errors: dict[str, str] = {}
     dirty: set[str] = set()  # written to since the last flush
+    unsent: set[str] = set()  # with steps the live view has not had
+    sent = time.monotonic()  # when the live view was last sent steps
     parent = mp.parent_process()
     flushed = time.monotonic()
     while True:
         try:
-            message = inbox.get(timeout=POLL_S)
+            message = inbox.get(timeout=live_send_period(len(unsent)) if unsent else POLL_S)
         except queue.Empty:
             message = None
+        if viewer is not None and unsent and time.monotonic() - sent >= live_send_period(len(unsent)):
+            for key in unsent:  # the steps since the last send, one send per session and entity
+                if (writer := writers.get(key)) is not None:
+                    writer.send_live()
+            unsent.clear()
+            sent = time.monotonic()
         if time.monotonic() - flushed >= POLL_S:  # what a crash may lose: about a second of steps
             for key in dirty:
                 writer = writers.get(key)
@@ -360,10 +378,7 @@ def _record(inbox: Any, outbox: Any, folder: Path, viewer: LiveViewer | None, fo
                     _finish(folder, key, writer)
                     writers[key] = None
             dirty |= touched
-            if viewer is not None:  # the batch's steps to the viewer at once, one send per session
-                for key in touched:
-                    if (writer := writers.get(key)) is not None:
-                        writer.send_live()
+            unsent |= touched
         elif kind == "close":
             _, key, ticket = message
             writer = writers.pop(key, None)
