@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-import threading
+import time
 from enum import Enum
 from pathlib import Path
 
@@ -124,7 +124,8 @@ def _serve_until_interrupted(viewer: LiveViewer) -> None:
     """A served view lives as long as this process: keep it up until the user has looked."""
     typer.echo(f"{viewer.how}\nthe live view stays up until Ctrl-C")
     try:
-        threading.Event().wait()
+        while True:  # a sleep, unlike a lock's wait, is interrupted by Ctrl-C
+            time.sleep(3600)
     except KeyboardInterrupt:
         pass
     finally:

@@ -95,7 +95,9 @@ def open_viewer(url: str | None = None, grpc_port: int = GRPC_PORT, web_port: in
     if has_display() if display is None else display:
         rr.spawn(port=grpc_port, connect=False, hide_welcome_screen=True)
         return LiveViewer(proxy_url(LOOPBACK, grpc_port), f"live view in a Rerun viewer (gRPC port {grpc_port})")
-    host = rr.RecordingStream(APP_ID, recording_id="live-viewer")
+    # The server's own stream holds no data; under an application id of its own, so that it does
+    # not give the episodes' application a layout before theirs arrives (a viewer keeps the first).
+    host = rr.RecordingStream(f"{APP_ID}-server", recording_id="live-server")
     host.set_sinks(rr.GrpcServerSink(bind_ip=LOOPBACK, port=grpc_port))
     url = proxy_url(LOOPBACK, grpc_port)
     web_port = _port(web_port)
