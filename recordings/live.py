@@ -20,6 +20,7 @@ import socket
 import subprocess
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 from urllib.parse import quote
 
 import rerun as rr
@@ -43,6 +44,16 @@ def check_viewer_url(url: str) -> str:
     if not url.startswith(("rerun://", "rerun+http://", "rerun+https://")) or not url.endswith("/proxy"):
         raise ValueError(f"a live viewer's address looks like {proxy_url(LOOPBACK, GRPC_PORT)}, got {url!r}")
     return url
+
+
+def rerun_executable() -> str:
+    """The viewer binary the SDK ships. Run directly: ``python -m rerun`` runs it as a child that
+    outlives the wrapper when the wrapper is stopped."""
+    import rerun_cli
+
+    folder = Path(rerun_cli.__file__).parent
+    bundled = folder / "Rerun.app" / "Contents" / "MacOS" / "Rerun"  # macOS wheels
+    return str(bundled if bundled.exists() else folder / ("rerun.exe" if sys.platform == "win32" else "rerun"))
 
 
 def has_display() -> bool:
@@ -103,8 +114,8 @@ def open_viewer(url: str | None = None, grpc_port: int = GRPC_PORT, web_port: in
     web_port = _port(web_port)
     # The SDK's own command serves the web viewer's page on loopback (the SDK's function binds every
     # interface); the page then reads the gRPC server above.
-    web = subprocess.Popen([sys.executable, "-m", "rerun", "--serve-web", "--bind", LOOPBACK, "--web-viewer-port",
-                            str(web_port), url], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    web = subprocess.Popen([rerun_executable(), "--serve-web", "--bind", LOOPBACK, "--web-viewer-port", str(web_port),
+                            url], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     how = (f"live view served (no display here): open http://{LOOPBACK}:{web_port}/?url={quote(url, safe='')} "
            f"in a browser, or run `rerun --connect {url}`")
     return LiveViewer(url, how, served=True, _host=host, _web=web)

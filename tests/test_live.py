@@ -9,7 +9,6 @@ import json
 import signal
 import socket
 import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Iterator
@@ -24,7 +23,7 @@ from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.recordings import EpisodeRecorder
 from neural_asm.recordings import blueprint as bp
-from neural_asm.recordings.live import open_viewer, proxy_url
+from neural_asm.recordings.live import open_viewer, proxy_url, rerun_executable
 from neural_asm.recordings.readers import read_rrd_series
 from neural_asm.recordings.records import StepRecord
 
@@ -48,7 +47,7 @@ def capture(out: Path, connect_to: str | None = None) -> Iterator[str]:
     """A served viewer on loopback that saves what it receives to ``out`` (and, with
     ``connect_to``, what that server holds); yields its address, stops it on exit."""
     port = free_port()
-    cmd = [sys.executable, "-m", "rerun", "--save", str(out), "--bind", "127.0.0.1", "--port", str(port)]
+    cmd = [rerun_executable(), "--save", str(out), "--bind", "127.0.0.1", "--port", str(port)]
     proc = subprocess.Popen(cmd + ([connect_to] if connect_to else []), stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     try:
