@@ -34,7 +34,17 @@ service's). The
 same fleet unpaced (``unpaced_fleet_steps_per_s``, each step sent as soon as the last is
 answered) is the most the service takes at that rate.
 
-    python benchmarks/bench_service.py [--record] [--rate 2|40] [--steps 400] [--fleet-steps N] [--sessions 1000]
+With ``--live`` the unpaced fleet is run, in the same run and in alternating rounds, against
+a recording service without metrics, with metrics (``metrics_vs_none``: steps/s with metrics
+over without) and with metrics and the live views (``live_vs_files``: with a served Rerun view
+and a Foxglove server over files only). Then one robot streams an episode at the model's pace
+while a Foxglove client subscribed to ``/fault`` stamps each message's arrival:
+``live_lag_p50_ms``/``live_lag_p95_ms`` are from the robot's receipt of a step's answer to the
+live viewer's receipt of that step (same process, same clock). The Rerun view is fed by the
+same recorder messages, sent within ``recordings.live.LIVE_FLUSH_S``; its receipt is not timed.
+
+    python benchmarks/bench_service.py [--record] [--live] [--rate 2|40] [--steps 400] [--fleet-steps N]
+        [--sessions 1000]
 """
 
 import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
@@ -94,11 +104,11 @@ def build_model(folder: Path, rate: float) -> np.ndarray:
     return data.data
 
 
-def start_server(folder: Path, port: int, record: bool) -> subprocess.Popen:
+def start_server(folder: Path, port: int, record: bool, extra: tuple[str, ...] = ()) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "neural_asm.service.cli", "serve", "--port", str(port), "--models-dir", str(folder),
            "--recordings-dir", str(folder / "rec"), "--log-level", "warning", "--max-sessions", "128",
            "--max-sessions-per-client", "128",
-           "--record" if record else "--no-record"]
+           "--record" if record else "--no-record", *extra]
     proc = subprocess.Popen(cmd)
     wait_until_up(proc, f"http://127.0.0.1:{port}/healthz")
     return proc
@@ -361,6 +371,83 @@ def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Nam
     return result
 
 
+def live_flags() -> tuple[str, ...]:
+    """Both live views, served on free loopback ports (no display here, or a viewer would pop up)."""
+    return ("--live", "--live-grpc-port", str(free_port()), "--live-web-port", str(free_port()),
+            "--foxglove", str(free_port()))
+
+
+LIVE_SETUPS = {"none": ("--no-metrics",), "metrics": ("--metrics",), "live": ("--metrics",)}
+
+
+def fleet_with(folder: Path, episodes: np.ndarray, steps: int, setup: str) -> float:
+    port = free_port()
+    extra = LIVE_SETUPS[setup] + (live_flags() if setup == "live" else ())
+    proc = start_server(folder, port, True, extra)
+    try:
+        return warm_fleet(f"ws://127.0.0.1:{port}/stream", episodes, steps).steps_per_s
+    finally:
+        proc.terminate()
+        proc.wait(30)
+
+
+async def live_lag(url: str, foxglove_url: str, episode: np.ndarray, period_s: float) -> list[float]:
+    """One robot at its pace; ms from its receipt of each answer to a Foxglove client's receipt of
+    that step on ``/fault``."""
+    answered: dict[int, float] = {}
+    arrived: dict[int, float] = {}
+    async with websockets.connect(foxglove_url, subprotocols=["foxglove.sdk.v1"]) as fox, \
+            websockets.connect(url) as ws:
+        await ws.recv()
+        await ws.send(orjson.dumps({"type": "start", **SESSION}).decode())
+        await ws.recv()
+        channel = None
+        while channel is None:  # the session's channels, advertised once its recorder opened them
+            message = await fox.recv()
+            if isinstance(message, str) and (op := orjson.loads(message))["op"] == "advertise":
+                channel = next((c["id"] for c in op["channels"] if c["topic"] == "/fault"), None)
+        await fox.send(orjson.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": channel}]}).decode())
+        await asyncio.sleep(0.5)  # subscribed before the first step
+
+        async def listen() -> None:
+            while len(arrived) < len(episode):
+                message = await fox.recv()
+                if isinstance(message, bytes) and message[0] == 1:
+                    arrived[orjson.loads(message[13:])["step"]] = time.perf_counter()
+
+        listener = asyncio.create_task(listen())
+        start = time.perf_counter()
+        for k, x in enumerate(episode.tolist()):
+            await asyncio.sleep(max(0.0, start + k * period_s - time.perf_counter()))
+            await ws.send(orjson.dumps({"type": "step", "observation": x}).decode())
+            answered[orjson.loads(await ws.recv())["step"]] = time.perf_counter()
+        await asyncio.wait_for(listener, 30)
+    return [(arrived[k] - answered[k]) * 1e3 for k in answered]
+
+
+def measure_live(folder: Path, episodes: np.ndarray, args: argparse.Namespace, rounds: int = 3) -> dict[str, float]:
+    """Fleet steps/s without metrics, with metrics, with metrics and live views, in rounds whose
+    order rotates (a shared machine's load drifts, and a server's exit may overlap the next
+    one's start); then the lag."""
+    totals = {setup: 0.0 for setup in LIVE_SETUPS}
+    order = list(LIVE_SETUPS)
+    for r in range(rounds):
+        for setup in order[r % len(order):] + order[:r % len(order)]:
+            totals[setup] += fleet_with(folder, episodes, args.fleet_steps, setup) / rounds
+    port, flags = free_port(), live_flags()
+    proc = start_server(folder, port, True, flags)
+    try:
+        lags = asyncio.run(live_lag(f"ws://127.0.0.1:{port}/stream", f"ws://127.0.0.1:{flags[-1]}", episodes[0],
+                                    1.0 / args.rate))
+    finally:
+        proc.terminate()
+        proc.wait(30)
+    return {"fleet_steps_per_s_no_metrics": totals["none"], "fleet_steps_per_s_metrics": totals["metrics"],
+            "fleet_steps_per_s_live": totals["live"], "metrics_vs_none": totals["metrics"] / totals["none"],
+            "live_vs_files": totals["live"] / totals["metrics"], "live_lag_p50_ms": float(np.percentile(lags, 50)),
+            "live_lag_p95_ms": float(np.percentile(lags, 95)), "live_lag_steps": len(lags)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=400, help="steps per latency measurement")
@@ -370,6 +457,8 @@ def main() -> None:
                         help="the model's and the sessions' rate (Hz); at 40 the fleet is paced")
     parser.add_argument("--sessions", type=int, default=1000, help="recorded sessions for the memory growth")
     parser.add_argument("--record", action="store_true", help="let the service record every session")
+    parser.add_argument("--live", action="store_true", help="measure metrics and the live views against none, and "
+                        "the live view's lag")
     args = parser.parse_args()
     if args.fleet_steps is None:
         args.fleet_steps = 150 if args.rate == SIM.timing.observation_hz else SIM.timing.observations(args.rate)
@@ -379,7 +468,9 @@ def main() -> None:
         episodes = build_model(folder, args.rate)
         gc.collect()  # the clients run in this process: no full collection over torch's objects
         gc.freeze()  # may pause every robot at once (~150 ms on a 2-core machine)
-        if args.record:
+        if args.live:
+            result = measure_live(folder, episodes, args)
+        elif args.record:
             reference = measure(folder, episodes, False, args)
             result = measure(folder, episodes, True, args)
             paced = ("fleet_ws_p99_ms", "fleet_send_lag_p99_ms", "unpaced_fleet_steps_per_s") if "dropped_steps" in result else ()
@@ -393,7 +484,7 @@ def main() -> None:
             result["echo_fleet_steps_per_s"] = echo_fleet(episodes, args.fleet_steps)
             most = result.get("unpaced_fleet_steps_per_s", result["fleet_steps_per_s"])  # both unpaced
             result["fleet_vs_echo"] = most / result["echo_fleet_steps_per_s"]
-    result.update(record=args.record, rate_hz=args.rate, hidden_size=FAST.hidden_size,
+    result.update(record=args.record or args.live, live=args.live, rate_hz=args.rate, hidden_size=FAST.hidden_size,
                   inference_steps=FAST.inference_steps)
     print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in result.items()}))
 

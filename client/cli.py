@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from enum import Enum
 from pathlib import Path
 
@@ -10,9 +11,11 @@ import typer
 
 from neural_asm.runtime.cli import Command, Group
 from neural_asm.pipelines.default_model import RATE_MODES
-from neural_asm.client.run import MODES, falling_object, fault_spec, run_client
+from neural_asm.client.run import MODES, SHOWCASE_FAULT, falling_object, fault_spec, run_client
 from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost
 from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.recordings.foxglove_live import FoxgloveLive
+from neural_asm.recordings.live import LiveViewer, open_viewer
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.cli import RATE_HELP, check_rate
 from neural_asm.sim.config import CONTROLLERS, SIM
@@ -47,7 +50,11 @@ def client(
                                           "recalled plan, monitored by the model calibrated for compliant control)"),
     correct: bool = typer.Option(False, "--correct", help="correct the hit with the memory's prediction error once "
                                  "the monitor flags it; needs --controller compliant"),
-    episodes: int = typer.Option(1, min=1, help="number of episodes"),
+    episodes: int | None = typer.Option(None, min=1, help="number of episodes (seeds seed, seed + 1, ...); "
+                                        "default: with no fault or falling object, the episode of --seed twice, "
+                                        f"normal and with joint {SHOWCASE_FAULT.joint} locked "
+                                        f"({SHOWCASE_FAULT.overshoot_deg:+g} deg at {SHOWCASE_FAULT.time_s:g} s), "
+                                        "verdicts side by side; else 1"),
     url: str | None = typer.Option(None, help="service URL, e.g. http://127.0.0.1:8000; default: start one "
                                                "in-process on a free port"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
@@ -63,13 +70,36 @@ def client(
     transport: TransportName = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
     models_dir: Path = typer.Option(home_path("models"), help="models folder of the in-process service"),
     json_out: Path | None = typer.Option(None, "--json", help="also write the summaries as JSON here"),
+    live: bool = typer.Option(False, "--live", help="show the episodes in a Rerun viewer as they stream, laid out "
+                              "as the files: a viewer spawned where there is a display, else served on loopback "
+                              "(the address is printed; served, it stays up after the run until Ctrl-C)"),
+    live_url: str | None = typer.Option(None, help="with --live, send to this viewer instead "
+                                        "(rerun+http://HOST:PORT/proxy, e.g. a `rerun --serve-grpc` elsewhere)"),
+    foxglove: int | None = typer.Option(None, min=0, max=65535, metavar="PORT", help="also serve the episodes live "
+                                        "to Foxglove on this loopback port (0: any free one): the MCAP files' topics, "
+                                        "so the shipped layout works"),
 ) -> None:
     """Simulate Panda episodes, stream them to the Neural ASM service and record them."""
+    viewer: LiveViewer | None = None
+    fox: FoxgloveLive | None = None
+    streamed = False
     try:
+        if live_url and not live:
+            raise ValueError("--live-url needs --live")
+        if live:
+            viewer = open_viewer(live_url)
+            typer.echo(viewer.how)
+        if foxglove is not None:
+            fox = FoxgloveLive(foxglove)
+            typer.echo(fox.how)
         fault = fault_spec(fault_joint, fault_time, fault_overshoot)
-        summaries = run_client(skill.value, seed, fault, falling_object(drop, hit_momentum), episodes, url,
+        hit = falling_object(drop, hit_momentum)
+        showcase = episodes is None and fault is None and hit is None
+        summaries = run_client(skill.value, seed, fault, hit, episodes or 1, url,
                                api_key, None if mode is None else mode.value, out, reconnect, transport.value,
-                               models_dir, controller=controller.value, correct=correct, rate=rate, realtime=realtime)
+                               models_dir, controller=controller.value, correct=correct, rate=rate, realtime=realtime,
+                               showcase=showcase, live=viewer, foxglove=fox)
+        streamed = True
     except (ValueError, ServiceError) as exc:  # a bad option, or the service refused the request
         raise _fail(str(exc), 2) from None
     except ServiceLost as exc:
@@ -77,10 +107,29 @@ def client(
     except KeyboardInterrupt:
         typer.echo("interrupted; recordings closed", err=True)
         raise typer.Exit(130) from None
+    finally:
+        if viewer is not None and not (streamed and viewer.served):
+            viewer.close()
+        if fox is not None:
+            fox.close()
     if json_out is not None:
         json_out.write_text(json.dumps([s.to_dict() for s in summaries], indent=1))
+    if viewer is not None and viewer.served:
+        _serve_until_interrupted(viewer)
     if any(s.error for s in summaries):
         raise _fail("lost the service; the recordings so far are closed and readable", 3)
+
+
+def _serve_until_interrupted(viewer: LiveViewer) -> None:
+    """A served view lives as long as this process: keep it up until the user has looked."""
+    typer.echo(f"{viewer.how}\nthe live view stays up until Ctrl-C")
+    try:
+        while True:  # a sleep, unlike a lock's wait, is interrupted by Ctrl-C
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        viewer.close()
 
 
 app = typer.Typer(cls=Group, add_completion=False, pretty_exceptions_enable=False)

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from neural_asm.client.stream import stream_episode
-from neural_asm.client.summary import EpisodeSummary, closing_lines, say, summary_line
+from neural_asm.client.summary import EpisodeSummary, closing_lines, say, summary_line, verdicts_side_by_side
 from neural_asm.client.transport import TRANSPORTS, ServiceError, check_url, served_digest
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
@@ -24,6 +24,8 @@ from neural_asm.models.config import SCORING
 from neural_asm.pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
 from neural_asm.pipelines.default_model import RATE_MODES, ensure_default_model, model_name
 from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.recordings.foxglove_live import FoxgloveLive
+from neural_asm.recordings.live import LiveViewer
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.config import CONTROLLERS, RATES, SIM
 from neural_asm.sim.disturbances import FallingObject, elbow_hit
@@ -33,6 +35,8 @@ from neural_asm.sim.runner import run_episode
 from neural_asm.sim.skills import SKILLS
 
 MODES = ("offline", "online")
+# The showcase's fault: the README figure's locked joint, which the default model flags at its onset.
+SHOWCASE_FAULT = FaultSpec(joint=4, time_s=3.0, overshoot_deg=5.0)
 
 
 def fault_spec(joint: int | None, time_s: float | None, overshoot_deg: float | None) -> FaultSpec | None:
@@ -126,6 +130,9 @@ def run_client(
     correct: bool = False,
     rate: float = SIM.timing.observation_hz,
     realtime: bool = False,
+    showcase: bool = False,
+    live: LiveViewer | None = None,
+    foxglove: FoxgloveLive | None = None,
 ) -> list[EpisodeSummary]:
     """Simulate ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) and stream each to the service.
 
@@ -135,7 +142,10 @@ def run_client(
     service is started here); ``mode`` defaults to the rate's ``RATE_MODES``; ``realtime``
     sends each observation at its time in the episode instead of as fast as the service answers.
     ``after_step(episode, step)`` is called after each scored step (tests use it to stop the
-    service mid-episode). Stops after an episode the service was lost in.
+    service mid-episode). ``showcase`` (no fault, falling object or second episode given) streams
+    the episode of ``seed`` twice, normal and with ``SHOWCASE_FAULT``, and prints both verdicts
+    side by side: what the monitor is for, on a first run. ``live``: each episode also shown in
+    that Rerun viewer as it streams, ``foxglove`` on that Foxglove server. Stops after an episode the service was lost in.
     """
     if rate not in RATES:
         raise ValueError(f"--rate must be one of {', '.join(map(str, RATES))} Hz, got {rate!r}")
@@ -146,6 +156,9 @@ def run_client(
             raise ValueError(f"--{name} must be one of {', '.join(known)}, got {value!r}")
     if episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {episodes}")
+    if showcase and (fault is not None or falling_object is not None or episodes != 1):
+        raise ValueError("the showcase streams its own normal and faulty episode: give no fault, falling object "
+                         "or --episodes with it")
     if correct and controller != "compliant":
         raise ValueError("--correct needs --controller compliant: the correction drives a compliant arm's "
                          "set-point (the stiff servos hold these hits alone)")
@@ -163,19 +176,24 @@ def run_client(
             session |= {"model": monitor_path.stem, "fpr": SCORING.default_fpr}
         elif not url or rate != SIM.timing.observation_hz:  # at 2 Hz a given service's default model
             session["model"] = model_name(rate)
-        for i in range(episodes):
-            ep, correction = _simulate(skill, seed + i, fault, falling_object, rate, monitor, correct, mode)
-            say(f"episode {i + 1}/{episodes}: {skill}, seed {seed + i}, {rate:g} Hz, {controller} control"
-                + (", corrected" if correct else "") + (f", fault {fault.to_dict()}" if fault else "")
+        plans = [(seed, None), (seed, SHOWCASE_FAULT)] if showcase else [(seed + i, fault) for i in range(episodes)]
+        for i, (episode_seed, episode_fault) in enumerate(plans):
+            ep, correction = _simulate(skill, episode_seed, episode_fault, falling_object, rate, monitor, correct, mode)
+            say(f"episode {i + 1}/{len(plans)}: {skill}, seed {episode_seed}, {rate:g} Hz, {controller} control"
+                + (", corrected" if correct else "")
+                + (f", fault {episode_fault.to_dict()}" if episode_fault else "")
                 + (", falling object" if falling_object else "") + f", streaming to {service_url}", quiet)
             hook = None if after_step is None else (lambda k, i=i: after_step(i, k))
             outcome = {"controller": controller, "correction": correction, "cube_error_m": ep.cube_error_m}
             s = stream_episode(ep, i + 1, service_url, api_key, mode, out, transport, reconnect, quiet, hook,
-                               period=1.0 / rate, session=session, metadata=outcome, realtime=realtime)
+                               period=1.0 / rate, session=session, metadata=outcome, realtime=realtime, live=live,
+                               foxglove=foxglove)
             s.controller, s.correction, s.cube_error_m = controller, correction, ep.cube_error_m
             summaries.append(s)
             say(summary_line(s), quiet)
             if s.error:
                 break
+    if showcase:
+        say(verdicts_side_by_side(summaries), quiet)
     say(closing_lines(summaries), quiet)
     return summaries

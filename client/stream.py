@@ -15,6 +15,8 @@ from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost, T
 from neural_asm.client.world import world_records
 from neural_asm.models.fault import joint_channels
 from neural_asm.recordings import EpisodeRecorder, new_run_id
+from neural_asm.recordings.foxglove_live import FoxgloveLive
+from neural_asm.recordings.live import LiveViewer
 from neural_asm.recordings.records import StepRecord
 from neural_asm.sim.config import SIM
 from neural_asm.sim.episode import Episode
@@ -45,12 +47,15 @@ def stream_episode(
     session: dict[str, Any] | None = None,
     metadata: dict[str, Any] | None = None,
     realtime: bool = False,
+    live: LiveViewer | None = None,
+    foxglove: FoxgloveLive | None = None,
 ) -> EpisodeSummary:
     """Stream one episode (simulated, or recorded with no 40 Hz world trace) to the service,
     recording it; never leaves files open. ``period`` is the time between its observations;
     ``session`` adds session parameters (the model, its rate), ``metadata`` what the
     client's recording says about the run; ``realtime`` sends observation k no sooner than
-    k periods after the first (as a robot would), else each as soon as the last is answered."""
+    k periods after the first (as a robot would), else each as soon as the last is answered;
+    ``live``: also shown in that Rerun viewer as it streams; ``foxglove``: on that Foxglove server."""
     names = tuple(ep.channel_names)
     run_id = new_run_id("client")
     recording_id = run_id  # shared with the service session so both files merge
@@ -98,7 +103,8 @@ def stream_episode(
     # so the merged view says each event once.
     service_logs_events = any(k.split("#")[0] == "rrd" for k in summary.service_recordings)
     with EpisodeRecorder(run_id, names, folder=out, recording_id=recording_id, metadata=metadata,
-                         step_period_s=period, joints=joint_channels(names), events=not service_logs_events) as rec:
+                         step_period_s=period, joints=joint_channels(names), events=not service_logs_events,
+                         live=live, foxglove=foxglove) as rec:
         summary.recordings = {k: str(p) for k, p in rec.paths.items()}
         try:
             next_row = 0

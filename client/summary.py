@@ -107,6 +107,29 @@ def summary_line(s: EpisodeSummary) -> str:
     return f"summary: episode {s.episode} ({what}): " + "; ".join([_verdict(s), *_outcome(s), tail])
 
 
+def _column(s: EpisodeSummary) -> list[str]:
+    """One episode's cells of ``verdicts_side_by_side``."""
+    if s.fault:
+        f = s.fault
+        title = f"joint {f['joint']} locked ({f['overshoot_deg']:+g} deg at {f['time_s']:g} s)"
+    else:
+        title = "normal" if s.disturbance is None else "falling object"
+    flag = (f"step {s.first_flag_step} (t={s.first_flag_time_s:g} s)" if s.detected else
+            "-" if s.completed else "- (not every step scored)")
+    cube = "-" if s.cube_error_m is None else f"{'yes' if s.placed else 'NO'} ({s.cube_error_m * 1000:.1f} mm off)"
+    return [title, "YES" if s.detected else "no", flag, s.isolated_joint or "-", cube]
+
+
+def verdicts_side_by_side(summaries: list[EpisodeSummary]) -> str:
+    """The episodes' verdicts in columns: flagged or not, when, the isolated joint, the cube."""
+    rows = ["episode", "flagged", "first flag", "isolated joint", "cube placed"]
+    columns = [_column(s) for s in summaries]
+    widths = [max(len(c) for c in cells) for cells in [rows, *columns]]
+    lines = ["  ".join(cell.ljust(w) for cell, w in zip([row, *(c[i] for c in columns)], widths)).rstrip()
+             for i, row in enumerate(rows)]
+    return "\n".join(["", *lines, ""])
+
+
 def step_line(line: StepLine) -> str:
     """One aligned line per step; the isolated joint is named only on a flagged step."""
     verdict = f"FAULT  joint={line.isolated_joint or '-'}" if line.fault else "ok"

@@ -13,9 +13,14 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Iterable, Protocol
 
+from neural_asm.recordings import blueprint as bp
+from neural_asm.recordings.live import LiveViewer
+from neural_asm.recordings.foxglove_live import FoxgloveLive
+from neural_asm.recordings.mcap_file import McapFile
 from neural_asm.recordings.mcap_writer import McapEpisode
 from neural_asm.recordings.paths import DEFAULT_DIR, run_paths
 from neural_asm.recordings.records import StepRecord, WorldRecord
+from neural_asm.recordings.rerun_file import RrdFile
 from neural_asm.recordings.rerun_writer import RerunEpisode
 
 FORMATS = ("rrd", "mcap")
@@ -24,6 +29,11 @@ FORMATS = ("rrd", "mcap")
 class _Writer(Protocol):
     def write_step(self, r: StepRecord) -> None: ...
     def write_world(self, w: WorldRecord) -> None: ...
+    def send_live(self) -> None:
+        """Send the live view the steps it holds back (a batch of steps has arrived)."""
+        for w in self._live:
+            w.send_steps()
+
     def flush(self) -> None: ...
     def close(self) -> None: ...
 
@@ -42,12 +52,18 @@ class EpisodeRecorder:
         layout: bool = True,
         joints: Iterable[int] = (),
         events: bool = True,
+        live: LiveViewer | None = None,
+        live_step_batch: int = 1,
+        foxglove: FoxgloveLive | None = None,
     ) -> None:
         """``joints``: indices of the joint-angle channels, drawn observed against expected.
         ``layout=False`` leaves the Rerun layout out of the ``.rrd`` (a file of many that
         share one, e.g. a service's sessions: see ``recorder``). ``events=False`` leaves the
         event log to another file of the same recording (the service's, which a client's file
-        is opened with), so the merged view says each event once."""
+        is opened with), so the merged view says each event once. ``live``: the same logged to
+        that viewer as it arrives (every ``live_step_batch`` steps, or at ``send_live``), with
+        its event log whatever ``events`` says (the viewer may have only this side). ``foxglove``:
+        the MCAP file's messages also sent on that Foxglove server as they are written."""
         names = tuple(channel_names)
         formats = tuple(formats)
         unknown = set(formats) - set(FORMATS)
@@ -58,19 +74,26 @@ class EpisodeRecorder:
         rrd, mcap = run_paths(folder, run_id)
         self.paths: dict[str, Path] = {}
         self._writers: list[_Writer] = []
+        self._live: list[RerunEpisode] = []  # also in _writers
         try:
             if "rrd" in formats:
-                self._writers.append(RerunEpisode(rrd, names, self.recording_id, step_period_s, layout, tuple(joints),
-                                                   events))
+                stream = RrdFile(rrd, self.recording_id, bp.episode_blueprint() if layout else None)
+                self._writers.append(RerunEpisode(stream, names, step_period_s, tuple(joints), events))
                 self.paths["rrd"] = rrd
+            if live is not None:
+                self._live.append(RerunEpisode(live.episode(self.recording_id), names, step_period_s, tuple(joints),
+                                               step_batch=live_step_batch))
+                self._writers.append(self._live[0])
+            run = {"run_id": run_id, "recording_id": self.recording_id, "channel_names": list(names), **(metadata or {})}
             if "mcap" in formats:
-                writer = McapEpisode(mcap, names, step_period_s)
+                writer = McapEpisode(McapFile(mcap), names, step_period_s)
                 self._writers.append(writer)
                 self.paths["mcap"] = mcap
-                writer.write_metadata(
-                    {"run_id": run_id, "recording_id": self.recording_id, "channel_names": list(names),
-                     **(metadata or {})}
-                )
+                writer.write_metadata(run)
+            if foxglove is not None:
+                writer = McapEpisode(foxglove.episode(), names, step_period_s)
+                self._writers.append(writer)
+                writer.write_metadata(run)
         except BaseException:
             self.close()
             raise
@@ -82,6 +105,11 @@ class EpisodeRecorder:
     def log_world(self, record: WorldRecord) -> None:
         for w in self._writers:
             w.write_world(record)
+
+    def send_live(self) -> None:
+        """Send the live view the steps it holds back (a batch of steps has arrived)."""
+        for w in self._live:
+            w.send_steps()
 
     def flush(self) -> None:
         """Push what is buffered to the files, so that a crash cannot lose it."""

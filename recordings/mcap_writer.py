@@ -15,7 +15,6 @@ Timestamps are the recorder's start time plus episode time. Flushed after every 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,6 +22,7 @@ from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Scene
 
 from neural_asm.recordings import foxglove_scene
 from neural_asm.recordings import mcap_schemas as schemas
+from neural_asm.recordings.foxglove_live import FoxgloveOut
 from neural_asm.recordings.mcap_file import McapFile
 from neural_asm.recordings.records import StepRecord, WorldRecord, Workcell
 
@@ -36,12 +36,13 @@ FAULT, METADATA, TF, SCENE, WORKCELL = "/fault", "/metadata", "/tf", "/scene", "
 
 
 class McapEpisode:
-    def __init__(self, path: Path, channel_names: tuple[str, ...], step_period_s: float) -> None:
+    def __init__(self, out: McapFile | FoxgloveOut, channel_names: tuple[str, ...], step_period_s: float) -> None:
+        """Writes to ``out``: a file, or a live Foxglove server (``foxglove_live``)."""
         self.channel_names = channel_names
         self.step_period_s = step_period_s
         self.start_ns = time.time_ns()
         self.workcell: Workcell | None = None  # the one drawn on WORKCELL
-        self.out = McapFile(path)
+        self.out = out
         self.channels = {
             topic: self.out.channel(topic, schemas.channel_vector(f"neural_asm.{topic[1:].capitalize()}", doc, channel_names))
             for topic, doc in VECTOR_TOPICS.items()
@@ -49,7 +50,7 @@ class McapEpisode:
         self.channels[FAULT] = self.out.channel(FAULT, schemas.FAULT)
         self.channels[METADATA] = self.out.channel(METADATA, schemas.METADATA)
 
-    def _world_channel(self, topic: str) -> int:
+    def _world_channel(self, topic: str) -> Any:
         """A world topic's channel, registered with its first message: a file without a world
         (a service session's) carries no Foxglove schemas."""
         if topic not in self.channels:

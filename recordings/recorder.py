@@ -19,6 +19,10 @@ collector thread notices within a second, logs it and starts a new child (which
 recovers the dead one's files); the sessions it was writing are served on, unrecorded.
 If the server dies, the orphaned child closes its files (leaving the markers) and exits.
 
+With live views (``LiveSpec``), the child also shows every session as its steps arrive: in a
+Rerun viewer (``live``: one recording per session, under the session's recording id) and on a
+Foxglove WebSocket server (``foxglove_live``: the MCAP files' topics).
+
 A session's ``.rrd`` carries no layout of its own (embedding it is most of what opening
 a file costs): the child writes it once, as
 ``episode.rbl`` in the folder, and a session's file merged with its client's file (same
@@ -48,8 +52,11 @@ import numpy as np
 from neural_asm.recordings import blueprint as bp
 from neural_asm.recordings import rerun_file
 from neural_asm.recordings.episode import EpisodeRecorder
+from neural_asm.recordings.foxglove_live import FoxgloveLive
+from neural_asm.recordings.live import GRPC_PORT, WEB_PORT, LiveViewer, open_viewer
 from neural_asm.recordings.paths import APP_ID, safe_name
 from neural_asm.recordings.records import StepRecord
+from neural_asm.recordings.rerun_writer import STEP_BATCH
 from neural_asm.recordings.recover import OPEN_MARKER, recover_interrupted, write_json, writer_identity
 
 log = logging.getLogger(__name__)
@@ -57,6 +64,16 @@ _CTX = mp.get_context("spawn")  # no fork: the server has threads (uvicorn, infe
 POLL_S = 1.0  # how soon a dead child (or, in the child, a dead server) is noticed
 LAYOUT_FILE = "episode.rbl"  # the layout of every session's .rrd, written beside them
 BACKLOG = 16  # messages queued for the child at most: a server faster than its recorder waits for it
+# How often the live view is sent the sessions' new steps: each send costs ~0.1-0.2 ms per session
+# and series in the SDK whatever its rows (~1 ms a session), so the more sessions have new steps,
+# the longer they gather: one session's go every LIVE_SEND_S, 64 sessions' every ~0.3 s, which
+# keeps the live view near a fifth of a core.
+LIVE_SEND_S = 0.02
+LIVE_SEND_PER_SESSION_S = 0.005
+
+
+def live_send_period(sessions: int) -> float:
+    return max(LIVE_SEND_S, sessions * LIVE_SEND_PER_SESSION_S)
 
 
 class RecorderGone(RuntimeError):
@@ -98,10 +115,26 @@ class SessionRecording:
         return self.recorder.close(self)
 
 
+@dataclass(frozen=True)
+class LiveSpec:
+    """The live views the child shows every session in: a Rerun viewer (``rerun``;
+    ``live.open_viewer``'s arguments) and a Foxglove server on ``foxglove_port``."""
+
+    rerun: bool = False
+    url: str | None = None
+    grpc_port: int = GRPC_PORT
+    web_port: int = WEB_PORT
+    foxglove_port: int | None = None
+
+
 class RecorderProcess:
-    def __init__(self, folder: Path, step_period_s: float = 0.5) -> None:
+    def __init__(self, folder: Path, step_period_s: float = 0.5, live: LiveSpec | None = None) -> None:
+        """``live``: every session is also shown, as it is recorded, in that live view (one
+        recording per session in the viewer, under the session's recording id)."""
         self.folder = Path(folder)
         self.step_period_s = step_period_s
+        self.live = live
+        self.live_how: str | None = None  # how to open the live view, once the child has it
         self.generation = 0
         self._lock = threading.Lock()
         self._tickets = itertools.count()
@@ -109,6 +142,7 @@ class RecorderProcess:
         self._stopping = threading.Event()
         self._process: BaseProcess | None = None
         self._collector: threading.Thread | None = None
+        self.dropped_records = 0  # scored steps of batches no child was alive to take
 
     @property
     def pid(self) -> int | None:
@@ -129,7 +163,7 @@ class RecorderProcess:
         self.folder.mkdir(parents=True, exist_ok=True)
         self._inbox: Any = _CTX.Queue(maxsize=BACKLOG)
         self._outbox: Any = _CTX.Queue()
-        process = _CTX.Process(target=_serve, args=(self._inbox, self._outbox, self.folder),
+        process = _CTX.Process(target=_serve, args=(self._inbox, self._outbox, self.folder, self.live),
                                name="nasm-recorder", daemon=True)
         # Spawning re-imports the parent's __main__ in the child; under `nasm serve` that is every
         # command's imports (torch, the simulator), which the child never uses.
@@ -146,8 +180,22 @@ class RecorderProcess:
             process.kill()
             raise RuntimeError(f"the recorder process did not start within {timeout_s:g} s") from None
         assert kind == "ready"
+        recovered, self.live_how = recovered
+        if self.live_how:
+            log.warning("%s", self.live_how)
         for marker in recovered:
             log.warning("recovered an interrupted recording: %s", marker)
+
+    def backlog(self) -> int | None:
+        """Messages queued for the child (at most ``BACKLOG``); None where the platform cannot
+        tell (macOS) or before the child starts."""
+        inbox = getattr(self, "_inbox", None)
+        if inbox is None:
+            return None
+        try:
+            return inbox.qsize()
+        except NotImplementedError:
+            return None
 
     def _put(self, message: tuple[Any, ...]) -> None:
         """Queue a message, waiting while the child is ``BACKLOG`` behind: a backlog without
@@ -158,6 +206,8 @@ class RecorderProcess:
                 return
             except queue.Full:
                 if not self.alive:  # nobody will read it: serve on, the collector restarts the child
+                    if message[0] == "steps":
+                        self.dropped_records += len(message[1].keys)
                     return
 
     def open(self, run_id: str, channel_names: Sequence[str], recording_id: str,
@@ -250,23 +300,43 @@ class RecorderProcess:
             q.close()
 
 
-def _serve(inbox: Any, outbox: Any, folder: Path) -> None:
+def _serve(inbox: Any, outbox: Any, folder: Path, live: LiveSpec | None) -> None:
     """The child: recover the folder, then open, write and close sessions' files as told."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server stops us
     rerun_file.defer_freeing()  # one sweep a second, not one per closed file
     recovered = recover_interrupted(folder)
     _write_layout(folder)
-    outbox.put(("ready", [str(p) for p in recovered]))
+    viewer = open_viewer(live.url, live.grpc_port, live.web_port) if live is not None and live.rerun else None
+    foxglove = FoxgloveLive(live.foxglove_port) if live is not None and live.foxglove_port is not None else None
+    how = "; ".join(v.how for v in (viewer, foxglove) if v is not None)
+    outbox.put(("ready", ([str(p) for p in recovered], how)))
+    try:
+        _record(inbox, outbox, folder, viewer, foxglove)
+    finally:
+        for view in (viewer, foxglove):
+            if view is not None:
+                view.close()
+
+
+def _record(inbox: Any, outbox: Any, folder: Path, viewer: LiveViewer | None, foxglove: FoxgloveLive | None) -> None:
     writers: dict[str, EpisodeRecorder | None] = {}
     errors: dict[str, str] = {}
     dirty: set[str] = set()  # written to since the last flush
+    unsent: set[str] = set()  # with steps the live view has not had
+    sent = time.monotonic()  # when the live view was last sent steps
     parent = mp.parent_process()
     flushed = time.monotonic()
     while True:
         try:
-            message = inbox.get(timeout=POLL_S)
+            message = inbox.get(timeout=live_send_period(len(unsent)) if unsent else POLL_S)
         except queue.Empty:
             message = None
+        if viewer is not None and unsent and time.monotonic() - sent >= live_send_period(len(unsent)):
+            for key in unsent:  # the steps since the last send, one send per session and entity
+                if (writer := writers.get(key)) is not None:
+                    writer.send_live()
+            unsent.clear()
+            sent = time.monotonic()
         if time.monotonic() - flushed >= POLL_S:  # what a crash may lose: about a second of steps
             for key in dirty:
                 writer = writers.get(key)
@@ -288,16 +358,18 @@ def _serve(inbox: Any, outbox: Any, folder: Path) -> None:
                 write_json(folder / f"{key}{OPEN_MARKER}", opened)
                 writers[key] = EpisodeRecorder(key, names, folder=folder, recording_id=recording_id,
                                                metadata=metadata, step_period_s=step_period_s, layout=False,
-                                               joints=joints)
+                                               joints=joints, live=viewer, live_step_batch=STEP_BATCH,
+                                               foxglove=foxglove)
             except Exception as exc:
                 log.exception("cannot open the recording %s; the session continues unrecorded", key)
                 writers[key], errors[key] = None, f"its recording could not be opened: {exc}"
         elif kind == "steps":
+            touched = set()
             for key, record in message[1].records():
                 writer = writers.get(key)
                 if writer is None:
                     continue
-                dirty.add(key)
+                touched.add(key)
                 try:
                     writer.log_step(record)
                 except Exception as exc:
@@ -305,6 +377,8 @@ def _serve(inbox: Any, outbox: Any, folder: Path) -> None:
                     errors[key] = f"its recording failed: {exc}"
                     _finish(folder, key, writer)
                     writers[key] = None
+            dirty |= touched
+            unsent |= touched
         elif kind == "close":
             _, key, ticket = message
             writer = writers.pop(key, None)

@@ -1,4 +1,4 @@
-"""A Rerun stream saved to an ``.rrd`` file, and freed when the file is closed.
+"""A Rerun stream saved to an ``.rrd`` file (or sent live to a viewer), and freed when closed.
 
 rerun-sdk 0.41 frees no stream when Python drops it: the bindings keep every stream,
 with its batcher and sink threads, in a global list that only ``rr.init`` sweeps. And
@@ -18,7 +18,9 @@ file itself. A process that opens and closes many files
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
+from typing import Any, Iterator
 
 import rerun as rr
 import rerun.blueprint as rrb
@@ -36,13 +38,8 @@ class RrdFile:
         if blueprint is None:
             bindings.save(path=str(path), default_blueprint=None, recording=self.rec.to_native(), write_footer=True)
             return
-        layout = _layout_stream(blueprint)
-        try:
-            bindings.save(path=str(path), default_blueprint=layout.memory_recording().storage,
-                          recording=self.rec.to_native(), write_footer=True)
-        finally:
-            layout.reset_time()
-            layout.disconnect()  # drops the memory sink, and with it the cycle
+        with _layout_storage(blueprint) as layout:
+            bindings.save(path=str(path), default_blueprint=layout, recording=self.rec.to_native(), write_footer=True)
 
     def close(self) -> None:
         """Finish the file and free the stream; ``rec`` is gone afterwards."""
@@ -52,6 +49,28 @@ class RrdFile:
         del self.rec  # Python's last reference: the sweep frees only streams nobody holds
         if not _deferred:
             free_dropped_streams()
+
+
+class LiveStream(RrdFile):
+    """``rec`` sends to the viewer at ``url`` (its gRPC proxy) what it logs, within
+    ``flush_s``, with ``blueprint`` as the default layout; freed like a file when closed."""
+
+    def __init__(self, url: str, recording_id: str, blueprint: rrb.Blueprint, flush_s: float) -> None:
+        self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id,
+                                      batcher_config=rr.ChunkBatcherConfig(flush_tick=flush_s))
+        with _layout_storage(blueprint) as layout:
+            bindings.set_sinks([rr.GrpcSink(url)], default_blueprint=layout, recording=self.rec.to_native())
+
+
+@contextlib.contextmanager
+def _layout_storage(blueprint: rrb.Blueprint) -> Iterator[Any]:
+    """The layout's stored form for a sink, its stream disconnected afterwards (the cycle)."""
+    layout = _layout_stream(blueprint)
+    try:
+        yield layout.memory_recording().storage
+    finally:
+        layout.reset_time()
+        layout.disconnect()  # drops the memory sink, and with it the cycle
 
 
 def _layout_stream(blueprint: rrb.Blueprint) -> rr.RecordingStream:

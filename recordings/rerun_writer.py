@@ -18,8 +18,6 @@ from __future__ import annotations
 
 from collections import defaultdict
 from functools import lru_cache
-from pathlib import Path
-
 import numpy as np
 import rerun as rr
 
@@ -51,14 +49,15 @@ def _series_styles(channel_names: tuple[str, ...], joint_names: tuple[str, ...])
 class RerunEpisode:
     def __init__(
         self,
-        path: Path,
+        stream: RrdFile,
         channel_names: tuple[str, ...],
-        recording_id: str,
         step_period_s: float,
-        layout: bool = True,
         joints: tuple[int, ...] = (),
         events: bool = True,
+        step_batch: int = STEP_BATCH,
     ) -> None:
+        """Logs to ``stream`` (a file, or a live viewer's stream); steps are sent every
+        ``step_batch`` steps or when ``send_steps`` is called."""
         self.channel_names = channel_names
         self.events = events  # log fault events as text (False: another file of the recording does)
         self.joints = list(joints)
@@ -71,7 +70,8 @@ class RerunEpisode:
         self.marked = False  # the faulty-joint marker is drawn
         self.workcell: Workcell | None = None  # the one drawn
         self.peak_errors = np.zeros(len(channel_names))
-        self.rrd = RrdFile(path, recording_id, bp.episode_blueprint() if layout else None)
+        self.step_batch = step_batch
+        self.rrd = stream
         joint_names = tuple(channel_names[i] for i in self.joints)
         for entity, series in _series_styles(channel_names, joint_names).items():
             self.rrd.rec.log(entity, series, static=True)
@@ -84,11 +84,13 @@ class RerunEpisode:
         self.pending.append(r)
         if r.fault is not None:
             self._log_event(r, r.step * self.step_period_s if r.time_s is None else r.time_s)
-        if len(self.pending) >= STEP_BATCH:
+        if len(self.pending) >= self.step_batch:
             self.send_steps()
 
     def send_steps(self) -> None:
-        """Send the buffered steps, one column batch per entity, and flush them to the file."""
+        """Send the buffered steps, one column batch per entity."""
+        if not self.pending:
+            return
         rows: dict[str, tuple[list[float], list[np.ndarray]]] = defaultdict(lambda: ([], []))
 
         def add(path: str, time_s: float, values: np.ndarray | list[float]) -> None:
@@ -111,6 +113,12 @@ class RerunEpisode:
                     add(bp.MARGIN, t, [r.margin, 0.0])
             if r.fault is not None:
                 add(bp.FLAG, t, [float(r.fault)])
+        if len(self.pending) == 1:  # a live step: one log call per entity costs a tenth of a column send
+            self.pending = []
+            self._set_time(t)
+            for path, (_, values) in rows.items():
+                self.rrd.rec.log(path, rr.Scalars(values[0]))
+            return
         self.pending = []
         indexes: dict[tuple[float, ...], list[rr.TimeColumn]] = {}  # entities with the same steps share them
         for path, (times, values) in rows.items():

@@ -18,7 +18,8 @@ from fastapi import FastAPI
 from neural_asm.runtime.version import __version__
 from neural_asm.service import errors
 from neural_asm.service.limits import BodyLimit
-from neural_asm.service.routers import health, inference, models, sessions, stream
+from neural_asm.service.metrics import CountHttpErrors
+from neural_asm.service.routers import health, inference, metrics, models, sessions, stream
 from neural_asm.service.settings import Settings
 from neural_asm.service.state import ServiceState
 
@@ -26,6 +27,7 @@ from neural_asm.service.state import ServiceState
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
     settings.check_exposure()
+    settings.check_live()
     state = ServiceState(settings)
 
     @contextlib.asynccontextmanager
@@ -50,6 +52,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (health, models, sessions, inference, stream):
         app.include_router(module.router)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    if state.metrics is not None:
+        app.include_router(metrics.router)
+        app.add_middleware(CountHttpErrors, metrics=state.metrics)  # outermost: counts the body limit's 413 too
     if not settings.api_key:
         _openapi_without_key(app)
     return app

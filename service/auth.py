@@ -1,7 +1,8 @@
 """API-key check: the ``X-API-Key`` header, required whenever a key is configured.
 
 A key is mandatory when the service binds beyond loopback (``Settings.check_exposure``).
-``/healthz`` stays open so that orchestrators can probe liveness without secrets.
+``/healthz`` stays open so that orchestrators can probe liveness without secrets; ``/metrics``
+takes the key as a bearer token too, the one way Prometheus can send it.
 """
 
 import hashlib
@@ -9,7 +10,7 @@ import secrets
 from collections.abc import Mapping
 
 from fastapi import HTTPException, Request, Security, status
-from fastapi.security import APIKeyHeader
+from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
 HEADER = "X-API-Key"
 _header = APIKeyHeader(name=HEADER, auto_error=False, description="required when the server has a key")
@@ -24,6 +25,17 @@ def key_ok(expected: str | None, given: str | None) -> bool:
 def require_api_key(request: Request, key: str | None = Security(_header)) -> None:
     if not key_ok(request.app.state.service.settings.api_key, key):
         raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"missing or wrong {HEADER} header")
+
+
+_bearer = HTTPBearer(auto_error=False, description="the API key, as Prometheus sends it (GET /metrics only)")
+
+
+def require_scrape_key(request: Request, key: str | None = Security(_header),
+                       bearer: HTTPAuthorizationCredentials | None = Security(_bearer)) -> None:
+    """The API key as ``X-API-Key`` or as a bearer token: a scraper can send only the latter."""
+    expected = request.app.state.service.settings.api_key
+    if not (key_ok(expected, key) or (bearer is not None and key_ok(expected, bearer.credentials))):
+        raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"missing or wrong {HEADER} header (or bearer token)")
 
 
 def client_of(expected: str | None, headers: Mapping[str, str], address: str | None) -> str:

@@ -53,6 +53,12 @@ def serve(
     recordings_dir: Path | None = typer.Option(None, help=_help("recordings_dir")),
     record: bool | None = typer.Option(None, "--record/--no-record", help=_help("record")),
     default_fpr: float | None = typer.Option(None, help=_help("default_fpr")),
+    metrics: bool | None = typer.Option(None, "--metrics/--no-metrics", help=_help("metrics")),
+    live: bool | None = typer.Option(None, "--live/--no-live", help=_help("live")),
+    live_url: str | None = typer.Option(None, help=_help("live_url")),
+    live_grpc_port: int | None = typer.Option(None, help=_help("live_grpc_port")),
+    live_web_port: int | None = typer.Option(None, help=_help("live_web_port")),
+    foxglove: int | None = typer.Option(None, metavar="PORT", help=_help("foxglove")),
     log_level: str = typer.Option("info", help="uvicorn log level"),
 ) -> None:
     """Serve the models in --models-dir over HTTP and websocket (OpenAPI docs at /docs)."""

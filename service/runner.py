@@ -111,6 +111,7 @@ class Runner:
         self._writes_out = 0  # hand-overs with the worker, not yet done
         self._handover: asyncio.TimerHandle | None = None
         self._loop: asyncio.AbstractEventLoop | None = None  # the loop the records were computed on
+        self.dropped_records = 0  # answered steps whose records never reached the recorder
 
     def start(self) -> None:
         """Start the worker; again after ``stop`` when an app is started anew."""
@@ -209,6 +210,8 @@ class Runner:
             recording = job.session.recording
             if recording is not None and recording.generation == live:
                 self._unhanded.append(_Record(recording.key, job.x, outcome))
+            elif recording is not None:  # its recorder died: a new one lacks the session's files
+                self.dropped_records += 1
         self._loop = jobs[0].future.get_loop()
         self._schedule_hand_over()
 
@@ -248,6 +251,7 @@ class Runner:
             self.recorder.write(batch)  # type: ignore[union-attr]
         except Exception:  # a recorder in trouble costs these steps' records, never the service
             log.exception("recording a batch of %d steps failed", len(batch.keys))
+            self.dropped_records += len(batch.keys)
 
 
 def step_batch(records: list[_Record]) -> StepBatch:

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from neural_asm.models.config import SCORING
 from neural_asm.runtime.home import home_path
+from neural_asm.recordings.live import GRPC_PORT, WEB_PORT, check_viewer_url
 from neural_asm.runtime.net import is_loopback
 
 
@@ -35,7 +36,28 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(64 * 1024, ge=1024, description="larger request bodies get 413")
     recordings_dir: Path = Field(default_factory=lambda: home_path("recordings"), description="where session recordings go")
     record: bool = Field(True, description="write an .rrd and an .mcap for every session")
+    live: bool = Field(False, description="show every session in a Rerun viewer as it is scored: spawned where "
+                       "there is a display, else served on loopback (gRPC and web viewer; the address is logged)")
+    live_url: str | None = Field(None, description="with --live, send sessions to this viewer instead "
+                                 "(rerun+http://HOST:PORT/proxy)")
+    live_grpc_port: int = Field(GRPC_PORT, ge=1, le=65535, description="with --live, the served viewer's gRPC port "
+                                "(another if taken)")
+    live_web_port: int = Field(WEB_PORT, ge=1, le=65535, description="with --live, the served web viewer's port "
+                               "(another if taken)")
+    foxglove: int | None = Field(None, ge=0, le=65535, description="serve every session live to Foxglove on this "
+                                 "loopback port (a Foxglove WebSocket server with the MCAP files' topics)")
+    metrics: bool = Field(True, description="serve Prometheus metrics at /metrics (behind the API key when set)")
     default_fpr: float = Field(SCORING.default_fpr, gt=0, lt=1, description="per-step false-positive rate of /fault")
+
+    @field_validator("live_url")
+    @classmethod
+    def _viewer_url(cls, url: str | None) -> str | None:
+        return None if url is None else check_viewer_url(url)
+
+    def check_live(self) -> None:
+        """The live views show what the recorder writes."""
+        if (self.live or self.live_url or self.foxglove is not None) and not self.record:
+            raise ValueError("--live and --foxglove show sessions as the recorder writes them: drop --no-record")
 
     def check_exposure(self) -> None:
         """Refuse to serve beyond this machine without an API key."""

@@ -9,7 +9,8 @@ import logging
 import time
 
 from neural_asm.models.kernels import compile_now
-from neural_asm.recordings.recorder import RecorderProcess
+from neural_asm.recordings.recorder import LiveSpec, RecorderProcess
+from neural_asm.service.metrics import Metrics
 from neural_asm.service.registry import ModelRegistry
 from neural_asm.service.runner import Runner, StepOutcome
 from neural_asm.service.schemas import Observation, SessionCreate
@@ -25,9 +26,16 @@ class ServiceState:
         self.settings = settings
         self.registry = ModelRegistry(settings.models_dir, settings.default_model)
         self.sessions = SessionStore(settings.max_sessions, settings.max_sessions_per_client, settings.session_idle_s)
-        self.recorder = RecorderProcess(settings.recordings_dir) if settings.record else None
+        rerun = settings.live or settings.live_url is not None
+        live = (LiveSpec(rerun, settings.live_url, settings.live_grpc_port, settings.live_web_port, settings.foxglove)
+                if rerun or settings.foxglove is not None else None)
+        self.recorder = RecorderProcess(settings.recordings_dir, live=live) if settings.record else None
         self.runner = Runner(self.recorder)
         self.started = time.monotonic()
+        self.metrics: Metrics | None = None
+        if settings.metrics:
+            self.metrics = Metrics()
+            self.metrics.watch(self)
 
     async def startup(self) -> None:
         """Recover what a crash left (in the recorder), start the runner, load the models."""
@@ -53,6 +61,8 @@ class ServiceState:
         except Exception:  # the cap was reached while the session was being opened
             await self._finish(session)
             raise
+        if self.metrics is not None:
+            self.metrics.session_opened(session.model_name)
         return session
 
     async def close(self, session_id: str, wait: bool = True) -> Session:
@@ -83,8 +93,11 @@ class ServiceState:
             report(exc)
 
     async def step(self, session_id: str, observation: Observation) -> tuple[Session, StepOutcome]:
+        started = time.perf_counter()
         session = self.sessions.get(session_id)
         outcome = await self.runner.step(session, session.observation(observation))
+        if self.metrics is not None:
+            self.metrics.step(session.model_name, outcome.decision.fault, started)
         return session, outcome
 
     async def expire_idle_forever(self) -> None:

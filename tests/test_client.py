@@ -7,11 +7,13 @@ simulated episodes to ``service.embedded`` over the websocket and records them.
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
@@ -20,6 +22,8 @@ from neural_asm.service.embedded import start_embedded
 from neural_asm.service.settings import Settings
 from neural_asm.sim.channels import JOINT_NAMES
 from neural_asm.client import run_client
+from neural_asm.client.cli import app as client_cli
+from neural_asm.client.run import SHOWCASE_FAULT
 from neural_asm.client.summary import summary_line
 from neural_asm.sim.faults import FaultSpec
 from neural_asm.sim.skills import SKILLS
@@ -112,3 +116,33 @@ def test_service_going_away_mid_episode_leaves_readable_recordings(model_dir, tm
     assert [m["energy"] for m in faults] == s.energies
     _, values = read_rrd_series(s.recordings["rrd"], "/fault/energy")
     np.testing.assert_array_equal(values[:, 0], s.energies)
+
+
+def test_the_command_without_options_streams_an_episode_normal_then_locked_and_prints_both_verdicts(server, tmp_path):
+    summaries_json = tmp_path / "summaries.json"
+    result = CliRunner().invoke(client_cli, ["--url", server.url, "--out", str(tmp_path), "--json", str(summaries_json)])
+    assert result.exit_code == 0, result.output
+    normal, locked = json.loads(summaries_json.read_text())
+    assert normal["seed"] == locked["seed"] and normal["fault"] is None
+    assert locked["fault"] == SHOWCASE_FAULT.to_dict() and normal["completed"] and locked["completed"]
+
+    table = {line.split("  ")[0]: line.split()[-1] for line in result.output.splitlines()
+             if line.startswith("isolated joint ")}
+    rows = re.search(r"^flagged +(\S+) +(\S+)$", result.output, re.M)
+    assert rows is not None and rows.groups() == tuple("YES" if s["detected"] else "no" for s in (normal, locked))
+    assert table["isolated joint"] == (locked["isolated_joint"] or "-")
+    if locked["detected"]:
+        assert f"step {locked['first_flag_step']} (t={locked['first_flag_time_s']:g} s)" in result.output
+    assert all(s["recordings"]["rrd"] in result.output for s in (normal, locked))  # the command opening both
+
+
+def test_an_explicit_episode_count_or_fault_is_what_runs(server, tmp_path):
+    for options, faults in ((["--episodes", "1"], [None]),
+                            (["--fault-joint", "2", "--fault-time", "3", "--fault-overshoot", "15"],
+                             [{"joint": 2, "time_s": 3.0, "overshoot_deg": 15.0}])):
+        out = tmp_path / "summaries.json"
+        result = CliRunner().invoke(client_cli, ["--url", server.url, "--out", str(tmp_path), "--json", str(out),
+                                                 *options])
+        assert result.exit_code == 0, result.output
+        assert [s["fault"] for s in json.loads(out.read_text())] == faults
+        assert "first flag" not in result.output  # no side-by-side table

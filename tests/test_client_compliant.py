@@ -78,7 +78,8 @@ def test_cli_passes_the_demo_options_on(monkeypatch, tmp_path):
     assert result.exit_code == 0, result.output
     hit = seen["args"][3]
     assert (hit.mass_kg * hit.speed_m_s, hit.target_link, hit.release_s) == (30.0, 4, SIM.hit.release_s)
-    assert seen["kwargs"] == {"controller": "compliant", "correct": True, "rate": 2, "realtime": False}
+    assert seen["kwargs"] == {"controller": "compliant", "correct": True, "rate": 2, "realtime": False,
+                              "showcase": False, "live": None, "foxglove": None}
 
 
 def test_falling_object_defaults_to_the_demo_hit():

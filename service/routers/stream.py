@@ -83,11 +83,17 @@ async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session
     return session
 
 
+def _count_error(state: ServiceState, status_code: int) -> None:
+    if state.metrics is not None:
+        state.metrics.ws_error(status_code)
+
+
 @router.websocket("/stream")
 async def stream(ws: WebSocket) -> None:
     state: ServiceState = ws.app.state.service
     await ws.accept()  # closing before accepting would be an HTTP 403, with no code or reason
     if not key_ok(state.settings.api_key, ws.headers.get(HEADER)):
+        _count_error(state, 401)
         await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=f"missing or wrong {HEADER} header")
         return
     await ws.send_json(metadata(state))
@@ -103,10 +109,12 @@ async def stream(ws: WebSocket) -> None:
             except ValidationError as exc:
                 raw = list(exc.errors())
                 code, detail = (400, json_problem(raw)) if undecodable(raw) else (422, describe(raw)[0])
+                _count_error(state, code)
                 await ws.send_json({"type": "error", "status": code, "detail": detail})
             except ServiceError as exc:
                 if session is not None and session.id not in state.sessions:
                     session = None  # expired meanwhile
+                _count_error(state, exc.status)
                 await ws.send_json({"type": "error", "status": exc.status, "detail": exc.detail})
     except WebSocketDisconnect:
         pass
