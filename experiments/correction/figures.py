@@ -12,7 +12,7 @@ COLOURS = {("stiff", "none"): "tab:grey", ("stiff", "corrected"): "tab:green",
            ("compliant", "none"): "tab:red", ("compliant", "corrected"): "tab:blue"}
 
 
-def write_figure(result: Result, path: Path) -> None:
+def write_figure(result: Result, path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -46,3 +46,4 @@ def write_figure(result: Result, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+    return path

@@ -21,6 +21,8 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -50,6 +52,23 @@ class Result:
     model: dict = field(default_factory=dict)
     examples: dict = field(default_factory=dict)  # (controller, correction) -> an Episode, for the figure
     seconds: float = 0.0
+
+    stem: ClassVar[str] = "correction"
+
+    def to_json(self) -> dict:
+        from neural_asm.experiments.correction.report import document
+
+        return document(self)
+
+    def markdown(self) -> str:
+        from neural_asm.experiments.correction.report import markdown
+
+        return markdown(self)
+
+    def files(self, out: Path) -> list[Path]:
+        from neural_asm.experiments.correction.figures import write_figure
+
+        return [write_figure(self, out / "correction.png")]
 
 
 def fit_model(config: CorrectionConfig, progress: bool = False, rate: float | None = None,

@@ -9,21 +9,22 @@ demonstration std.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 from tqdm.auto import tqdm
 
+from neural_asm.experiments.fault_sweep.config import PaperSweepConfig
 from neural_asm.experiments.fault_sweep.data import Benchmark, load_benchmark
 from neural_asm.experiments.fault_sweep.methods import baseline_methods
 from neural_asm.experiments.methods import Method, neural_asm_methods
+from neural_asm.experiments.writer import save_checkpoints
 from neural_asm.experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
 from neural_asm.pipelines.default_model import provenance_of, train_calibrated
-from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import FAITHFUL, FAST, TPCConfig
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.runtime.parallel import Parallel
 
 
 @dataclass
@@ -34,6 +35,26 @@ class SweepResult:
     bench: Benchmark
     normaliser: Normaliser
     errors: dict  # method -> Errors
+    models: dict[str, NeuralASM] = field(default_factory=dict)  # the trained networks, saved with the report
+
+    stem: ClassVar[str] = "fault_sweep"
+
+    def to_json(self) -> dict:
+        from neural_asm.experiments.fault_sweep.report import document
+
+        return document(self)
+
+    def markdown(self) -> str:
+        from neural_asm.experiments.fault_sweep.report import markdown
+
+        return markdown(self)
+
+    def files(self, out: Path) -> list[Path]:
+        """episodes.csv (every episode's outcome by method), the PNGs and the checkpoints."""
+        from neural_asm.experiments.fault_sweep.figures import write_figures
+        from neural_asm.experiments.fault_sweep.report import write_csv
+
+        return [write_csv(self, out / "episodes.csv"), *write_figures(self, out), *save_checkpoints(self.models, out)]
 
 
 def method_errors(method: Method, bench: Benchmark, norm: Normaliser) -> tuple[Errors, dict | None]:
@@ -82,17 +103,19 @@ def train_models(bench: Benchmark, configs: dict[str, TPCConfig], provenance: di
     }
 
 
-def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, n_normal: int | None = None,
-              fast_epochs: int | None = None, *, parallel: Parallel = Parallel()) -> SweepResult:
-    bench = load_benchmark(data_dir, n_normal, parallel=parallel)
+def run_sweep(config: PaperSweepConfig) -> SweepResult:
+    """Train the default and the paper-configured network, score every method every way on the
+    same episodes."""
+    data_dir = config.data_dir()
+    bench = load_benchmark(data_dir, config.n_normal, parallel=config.parallel)
     configs = {
-        "nasm": FAST if fast_epochs is None else FAST.with_(epochs=fast_epochs),
-        "nasm_paper": FAITHFUL.with_(epochs=paper_epochs),
+        "nasm": FAST if config.fast_epochs is None else FAST.with_(epochs=config.fast_epochs),
+        "nasm_paper": FAITHFUL.with_(epochs=config.paper_epochs),
     }
     trained = train_models(bench, configs, provenance_of(bench.normal, data_dir))
-    for label, model in trained.items():
-        checkpoint.save(model, out_dir / "models" / f"{label}.safetensors")
     norm = trained["nasm"].normaliser
     methods = [m for label, model in trained.items() for m in neural_asm_methods(model, label, label)]
     methods += baseline_methods(norm.normalise(bench.normal.demos.data), bench.normal.demos.labels)
-    return score_methods(bench, methods, norm)
+    result = score_methods(bench, methods, norm)
+    result.models = trained
+    return result
