@@ -16,7 +16,7 @@ from neural_asm.experiments.varied.methods import train_neural_asm
 from neural_asm.experiments.varied.pairs import PAIR
 from neural_asm.experiments.varied.score import headline, score_all
 from neural_asm.models.config import FAST, PRECISE
-from neural_asm.models.detectors import ConditionalTemplate, CueTemplate, PerSkillZScore
+from neural_asm.rivals.templates import ConditionalTemplate, CueTemplate, PerSkillZScore
 from neural_asm.runtime.parallel import Parallel, parallel_map
 from neural_asm.sim.episode import Episode
 from neural_asm.sim.varied import VARIED_SKILLS

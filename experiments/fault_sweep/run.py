@@ -2,7 +2,7 @@
 
 Methods: the Neural ASM in its default (fast) configuration and in the paper's
 (faithful) one, each in offline recall cued from the first observation (the paper's
-setting) and online recall; the baselines of methods.py. Every method is scored with
+setting) and online recall; the rivals of the paper's line-up (`rivals.registry`). Every method is scored with
 raw and with precision-weighted errors; z-score baselines also with the paper's
 demonstration std.
 """
@@ -17,14 +17,14 @@ from tqdm.auto import tqdm
 
 from neural_asm.experiments.fault_sweep.config import PaperSweepConfig
 from neural_asm.experiments.fault_sweep.data import Benchmark, load_benchmark
-from neural_asm.experiments.fault_sweep.methods import baseline_methods
-from neural_asm.experiments.methods import Method, neural_asm_methods
+from neural_asm.experiments.methods import Method, neural_asm_methods, rival_methods
 from neural_asm.experiments.writer import save_checkpoints
 from neural_asm.experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
 from neural_asm.pipelines.default_model import provenance_of, train_calibrated
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import FAITHFUL, FAST, TPCConfig
 from neural_asm.models.normaliser import Normaliser
+from neural_asm.rivals.registry import line_up
 
 
 @dataclass
@@ -115,7 +115,7 @@ def run_sweep(config: PaperSweepConfig) -> SweepResult:
     trained = train_models(bench, configs, provenance_of(bench.normal, data_dir))
     norm = trained["nasm"].normaliser
     methods = [m for label, model in trained.items() for m in neural_asm_methods(model, label, label)]
-    methods += baseline_methods(norm.normalise(bench.normal.demos.data), bench.normal.demos.labels)
+    methods += rival_methods(line_up("paper"), norm.normalise(bench.normal.demos.data), bench.normal.demos.labels, [])
     result = score_methods(bench, methods, norm)
     result.models = trained
     return result

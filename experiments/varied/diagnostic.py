@@ -26,10 +26,9 @@ from neural_asm.experiments.varied.methods import train_neural_asm
 from neural_asm.experiments.varied.outcomes import ALPHA
 from neural_asm.experiments.varied.score import held_out_error, score_all
 from neural_asm.models.asm import NeuralASM, channel_precision, context_index
-from neural_asm.models.baselines import LinearOneStep as RidgeOneStep
 from neural_asm.models.config import ROBUST, TPCConfig
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.one_step import ONE_STEP_LAGS, ONE_STEP_RIDGES, delay_embed
+from neural_asm.models.one_step import ONE_STEP_LAGS, ONE_STEP_RIDGES, RidgeOneStep, delay_embed
 from neural_asm.models.tpc import TemporalPC
 
 BPTT = BPTTConfig()

@@ -1,7 +1,7 @@
 """`nasm faults --task varied`: the varied-task benchmark in one call.
 
 Trains the default and the paper-configured Neural ASM on the varied demonstrations, fits every
-baseline of `models.detectors` on the same demonstrations, scores all on the same episodes
+rival of `rivals.registry`'s varied line-up on the same demonstrations, scores all on the same episodes
 (experiments/varied/score.py), with one more rival, the best pair of baselines flagging when
 either does, chosen on validation faults (experiments/varied/pairs.py), and writes the results.
 The featured Neural ASM, the one a varied-task service ships, is the default network in the
