@@ -117,7 +117,7 @@ def derive(experiment: Experiment, command: str) -> Callable[..., None]:
 
 def click_command(experiment: Experiment, command: str) -> TyperCommand:
     """`experiment`'s command as a click command, for a command line that hands it its arguments."""
-    single = typer.Typer()
+    single = typer.Typer(add_completion=False)
     single.command(cls=ExperimentCommand)(derive(experiment, command))
     return typer.main.get_command(single)  # type: ignore[return-value]
 

@@ -7,7 +7,7 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Callable, ClassVar, Protocol
 
 
 class Report(Protocol):
@@ -20,6 +20,20 @@ class Report(Protocol):
     def markdown(self) -> str: ...
 
     def files(self, out: Path) -> list[Path]: ...  # figures and the like, written into `out`
+
+
+class Reported:
+    """A result whose JSON document and table are made by functions of its report module
+    (`document`, `table`: that module reads the result's type only to annotate)."""
+
+    document: ClassVar[Callable[[Any], dict[str, Any]]]
+    table: ClassVar[Callable[[Any], str]]
+
+    def to_json(self) -> dict[str, Any]:
+        return type(self).document(self)
+
+    def markdown(self) -> str:
+        return type(self).table(self)
 
 
 @dataclass(frozen=True)

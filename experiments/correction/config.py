@@ -18,6 +18,9 @@ from neural_asm.pipelines.default_model import RATE_MODES
 from neural_asm.sim.config import CONTROLLERS, RATES, SIM, CorrectionGains, ElbowHit
 
 
+CORRECTIONS: tuple[str, ...] = ("none", "corrected")  # every hit without and with the memory's correction
+
+
 @dataclass(frozen=True)
 class CorrectionConfig:
     """A box hits the arm carrying the cube, under stiff and compliant control, with and without the

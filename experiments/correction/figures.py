@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from neural_asm.experiments.correction.metrics import deviation_deg
-from neural_asm.experiments.correction.pipeline import CORRECTIONS, Result
+from neural_asm.experiments.correction.config import CORRECTIONS
+from neural_asm.experiments.correction.pipeline import Result
 from neural_asm.experiments.correction.report import summarise
 
 COLOURS = {("stiff", "none"): "tab:grey", ("stiff", "corrected"): "tab:green",

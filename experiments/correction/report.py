@@ -6,9 +6,14 @@ from dataclasses import asdict
 
 import numpy as np
 
+from typing import TYPE_CHECKING
+
+from neural_asm.experiments.correction.config import CORRECTIONS
 from neural_asm.experiments.correction.metrics import first_hit_step
-from neural_asm.experiments.correction.pipeline import CORRECTIONS, Result
 from neural_asm.experiments.formatting import pct
+
+if TYPE_CHECKING:
+    from neural_asm.experiments.correction.pipeline import Result
 from neural_asm.sim.config import SIM
 
 

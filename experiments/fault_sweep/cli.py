@@ -55,7 +55,7 @@ def faults(
 
 def _real_command(task: str) -> TyperCommand:
     """A real robot's dataset: --data, --out and --seeds, handed to its experiment's module."""
-    single = typer.Typer()
+    single = typer.Typer(add_completion=False)
 
     @single.command(cls=Command)
     def real(data: Path = typer.Option(..., help="the dataset you cloned or downloaded"),

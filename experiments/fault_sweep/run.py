@@ -18,7 +18,8 @@ from tqdm.auto import tqdm
 from neural_asm.experiments.fault_sweep.config import PaperSweepConfig
 from neural_asm.experiments.fault_sweep.data import Benchmark, load_benchmark
 from neural_asm.experiments.methods import Method, neural_asm_methods, rival_methods
-from neural_asm.experiments.writer import save_checkpoints
+from neural_asm.experiments.fault_sweep import report
+from neural_asm.experiments.writer import Reported, save_checkpoints
 from neural_asm.experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
 from neural_asm.pipelines.default_model import provenance_of, train_calibrated
 from neural_asm.models.asm import NeuralASM
@@ -28,7 +29,7 @@ from neural_asm.rivals.registry import line_up
 
 
 @dataclass
-class SweepResult:
+class SweepResult(Reported):
     summary: dict  # method -> weighting -> metrics
     outcomes: dict  # (method, weighting) -> per-episode arrays
     ceilings: dict
@@ -38,23 +39,15 @@ class SweepResult:
     models: dict[str, NeuralASM] = field(default_factory=dict)  # the trained networks, saved with the report
 
     stem: ClassVar[str] = "fault_sweep"
-
-    def to_json(self) -> dict:
-        from neural_asm.experiments.fault_sweep.report import document
-
-        return document(self)
-
-    def markdown(self) -> str:
-        from neural_asm.experiments.fault_sweep.report import markdown
-
-        return markdown(self)
+    document = staticmethod(report.document)
+    table = staticmethod(report.markdown)
 
     def files(self, out: Path) -> list[Path]:
         """episodes.csv (every episode's outcome by method), the PNGs and the checkpoints."""
-        from neural_asm.experiments.fault_sweep.figures import write_figures
-        from neural_asm.experiments.fault_sweep.report import write_csv
+        from neural_asm.experiments.fault_sweep.figures import write_figures  # matplotlib: only when drawing
 
-        return [write_csv(self, out / "episodes.csv"), *write_figures(self, out), *save_checkpoints(self.models, out)]
+        return [report.write_csv(self, out / "episodes.csv"), *write_figures(self, out),
+                *save_checkpoints(self.models, out)]
 
 
 def method_errors(method: Method, bench: Benchmark, norm: Normaliser) -> tuple[Errors, dict | None]:
@@ -87,11 +80,7 @@ def score_methods(bench: Benchmark, methods: list[Method], norm: Normaliser) -> 
             metrics, outcome = evaluate(weigh(errors, weighting, spread), names, bench.fault_step, bench.fault_joint)
             summary[method.name][weighting] = {"family": method.family, **metrics}
             outcomes[(method.name, weighting)] = outcome
-    normal = bench.normal
-    ceiling = ceilings(norm.normalise(bench.faults.data), norm.normalise(bench.twins.data),
-                       norm.normalise(normal.precision.data), bench.faults.labels, normal.precision.labels,
-                       names, bench.fault_step, bench.fault_joint)
-    return SweepResult(summary, outcomes, ceiling, bench, norm, all_errors)
+    return SweepResult(summary, outcomes, ceilings(bench, norm), bench, norm, all_errors)
 
 
 def train_models(bench: Benchmark, configs: dict[str, TPCConfig], provenance: dict) -> dict[str, NeuralASM]:

@@ -32,7 +32,8 @@ from neural_asm.experiments.methods import Method, neural_asm_methods
 from neural_asm.experiments.varied.methods import baseline_methods, train_neural_asm
 from neural_asm.experiments.varied.outcomes import ALPHA
 from neural_asm.experiments.varied.score import headline, score_all
-from neural_asm.experiments.writer import save_checkpoints
+from neural_asm.experiments.varied import report
+from neural_asm.experiments.writer import Reported, save_checkpoints
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import FAITHFUL, PRECISE
 
@@ -48,7 +49,7 @@ def featured_mode(validation: dict[str, float | None]) -> str:
 
 
 @dataclass
-class VariedResult:
+class VariedResult(Reported):
     bench: VariedBenchmark
     summaries: dict
     outcomes: dict
@@ -58,21 +59,11 @@ class VariedResult:
     models: dict[str, NeuralASM] | None = None  # saved with the report
 
     stem: ClassVar[str] = "fault_sweep"
-
-    def to_json(self) -> dict:
-        from neural_asm.experiments.varied.report import document
-
-        return document(self)
-
-    def markdown(self) -> str:
-        from neural_asm.experiments.varied.report import markdown
-
-        return markdown(self)
+    document = staticmethod(report.document)
+    table = staticmethod(report.markdown)
 
     def files(self, out: Path) -> list[Path]:
-        from neural_asm.experiments.varied.report import write_figures
-
-        return [*write_figures(self, out), *save_checkpoints(self.models or {}, out)]
+        return [*report.write_figures(self, out), *save_checkpoints(self.models or {}, out)]
 
 
 def run_varied(config: VariedConfig, alpha: float = ALPHA) -> VariedResult:
