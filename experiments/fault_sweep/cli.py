@@ -16,12 +16,12 @@ from typer.core import TyperCommand
 from neural_asm.experiments.catalogue import EXPERIMENTS
 from neural_asm.experiments.cli import click_command
 from neural_asm.experiments.plotting import require_matplotlib
-from neural_asm.runtime.cli import Command, Group
+from neural_asm.runtime.cli import Command
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.cli import Task
 
-app = typer.Typer(cls=Group)
-# The alias parses --task only and hands every other argument, --help too, to the task's command.
+# The alias parses --task only and hands every other argument, --help too, to the task's command
+# (the `nasm` command line registers it with these settings).
 PASS_ON = {"allow_extra_args": True, "ignore_unknown_options": True, "help_option_names": []}
 
 
@@ -34,7 +34,6 @@ class FaultTask(str, Enum):
     voraus = "voraus"
 
 
-@app.command(cls=Command, context_settings=PASS_ON)
 def faults(
     ctx: typer.Context,
     task: FaultTask = typer.Option(FaultTask.paper, help="paper: the 980 joint locks of the paper's fixed task; varied: "
