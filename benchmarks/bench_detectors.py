@@ -4,7 +4,7 @@
 task (trajectories linear and non-linear in the context, a random speed per episode, noise);
 200 held-out episodes measure the one-step mean squared error (steps 1..T-1, normalised).
 Times are printed in seconds and as a ratio to a reference measured in the same run (100
-ridge fits of ``models.baselines.LinearOneStep`` on the same demonstrations), because these
+ridge fits of ``models.one_step.RidgeOneStep`` on the same demonstrations), because these
 machines are shared and noisy. One JSON object is the last line.
 
     python benchmarks/bench_detectors.py [--seed 0]
@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from neural_asm.models.baselines import LinearOneStep as RidgeOneStep
-from neural_asm.models.detectors import all_detectors
+from neural_asm.models.one_step import RidgeOneStep
+from neural_asm.rivals.registry import line_up
 
 SKILLS, CONTEXT, STEPS, CHANNELS = ("pick", "place", "push", "stack"), 4, 15, 30
 
@@ -58,7 +58,7 @@ def main() -> None:
         RidgeOneStep.fit(demos)
     reference = time.perf_counter() - start
     results = {}
-    for det in all_detectors():
+    for det in line_up("varied"):
         start = time.perf_counter()
         det.fit(demos, skills, list(range(CONTEXT)), seed=args.seed)
         fit = time.perf_counter() - start

@@ -32,7 +32,8 @@ import numpy as np
 import torch
 
 from neural_asm.models.asm import NeuralASM
-from neural_asm.models.baselines import LinearOneStep, StepStatistics
+from neural_asm.models.one_step import RidgeOneStep
+from neural_asm.rivals.statistics import StepStatistics
 from neural_asm.models.config import FAITHFUL, FAST, RATE_DEFAULTS
 from neural_asm.models.kernels import compile_now
 from neural_asm.models.recall import Recaller
@@ -202,7 +203,7 @@ def main() -> None:
     recall_gradient, online_gradient = recall_mse(gradient_models), online_mse(gradient_models)
     recall_faithful = faithful.normaliser.normalise(faithful.recall(test.data[:, :1], steps))
     skill_mean = StepStatistics.fit(xtr, train.labels).expected(xte)
-    linear = LinearOneStep.fit(xtr)
+    linear = RidgeOneStep.fit(xtr)
     result = {
         "train_seconds": round(train_seconds, 2),
         "train_seconds_gradient_descent": round(train_seconds_gradient, 2),

@@ -40,9 +40,11 @@ from neural_asm.experiments.varied.pairs import validation_scores
 from neural_asm.experiments.varied.score import energies
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import PRECISE
-from neural_asm.models.detector_base import DetectorBase, episode_folds
+from neural_asm.models.one_step import episode_folds
+from neural_asm.rivals.base import DetectorBase
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.one_step import ONE_STEP_RIDGES, TemplateResidualOneStep, delay_embed, fit_one_step
+from neural_asm.models.one_step import ONE_STEP_RIDGES, delay_embed, fit_one_step
+from neural_asm.rivals.one_step import TemplateResidualOneStep
 from neural_asm.models.plan import PlanMemory
 from neural_asm.models.recall import offline_recall
 

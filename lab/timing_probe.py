@@ -52,7 +52,8 @@ from neural_asm.experiments.varied.data import VariedBenchmark, ensure_varied_se
 from neural_asm.experiments.varied.outcomes import outcomes, summary
 from neural_asm.experiments.varied.score import energies
 from neural_asm.models.config import SCORING
-from neural_asm.models.detector_base import DetectorBase, episode_folds
+from neural_asm.models.one_step import episode_folds
+from neural_asm.rivals.base import DetectorBase
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.one_step import fit_one_step
 from neural_asm.models.sequences import Sequences

@@ -1,16 +1,11 @@
-"""Linear one-step predictors: of the observation itself, or of a conditional template's residual.
+"""Ridge one-step regression over past steps: the departure pathway of plan recall (models/plan.py)
+and, in `neural_asm.rivals`, the linear one-step rivals.
 
-- ``LinearOneStep``: x[t+1] ridge-regressed on [x[t], ..., x[t-L+1], 1]
-  (``models.baselines.LinearOneStep`` on delay-embedded sequences).
-- ``TemplateResidualOneStep``: the conditional template plus a ridge prediction of its
-  residual r[t+1] from r[t], ..., r[t-L+1]; the template absorbs what the context explains,
-  the one-step model what the episode has shown so far (e.g. a speed or offset the context
-  does not give).
-
-Both choose, by 5-fold cross-validation over whole demonstrations, the ridge strength, how
-many past steps L they read (one step knows where the arm is, two also how fast it moves:
-on the varied task two steps halve the held-out joint error), and whether one model serves
-every skill or each skill has its own.
+- ``RidgeOneStep``: x[t+1] ridge-regressed on [x[t], 1].
+- ``fit_one_step``: per skill or pooled models on delay-embedded sequences ([x[t], ..., x[t-L+1]]),
+  the ridge strength, how many past steps L they read and the pooling chosen by 5-fold
+  cross-validation over whole demonstrations (one step knows where the arm is, two also how fast
+  it moves: on the varied task two steps halve the held-out joint error).
 """
 
 from __future__ import annotations
@@ -18,13 +13,42 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from neural_asm.models.baselines import LinearOneStep as RidgeOneStep
-from neural_asm.models.detector_base import DetectorBase, episode_folds
-from neural_asm.models.templates import ConditionalTemplate, StepRidgeTemplate
+from sklearn.model_selection import StratifiedKFold
 
 ONE_STEP_RIDGES = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
 ONE_STEP_LAGS = (1, 2, 3)
+POOLINGS = (False, True)  # one model for every skill, or one per skill
+
+
+@dataclass(frozen=True)
+class RidgeOneStep:
+    weights: np.ndarray  # (D + 1, D): x[t+1] = [x[t], 1] @ weights
+
+    @classmethod
+    def fit(cls, sequences: np.ndarray, ridge: float = 1e-2) -> "RidgeOneStep":
+        x = sequences[:, :-1].reshape(-1, sequences.shape[-1])
+        y = sequences[:, 1:].reshape(-1, sequences.shape[-1])
+        a = np.hstack([x, np.ones((len(x), 1))])
+        reg = ridge * np.eye(a.shape[1])
+        reg[-1, -1] = 0.0  # do not shrink the bias
+        return cls(np.linalg.solve(a.T @ a + reg, a.T @ y))
+
+    def step(self, x: np.ndarray) -> np.ndarray:
+        return np.concatenate([x, np.ones(x.shape[:-1] + (1,))], axis=-1) @ self.weights
+
+    def rollout(self, cue: np.ndarray, horizon: int) -> np.ndarray:
+        """Offline roll-out from the last cue observation (N, T_n, D) -> (N, horizon, D)."""
+        out = list(np.moveaxis(cue, 1, 0))
+        while len(out) < horizon:
+            out.append(self.step(out[-1]))
+        return np.stack(out, axis=1)
+
+
+def episode_folds(skills: np.ndarray, seed: int, n_folds: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Train/test indices of whole episodes, every skill in every fold."""
+    smallest = np.unique(skills, return_counts=True)[1].min()
+    folds = StratifiedKFold(min(n_folds, smallest), shuffle=True, random_state=seed)
+    return list(folds.split(np.zeros(len(skills)), skills))
 
 
 def delay_embed(x: np.ndarray, lags: int) -> np.ndarray:
@@ -63,61 +87,21 @@ def _next_step_predictions(models: dict[str, RidgeOneStep], x: np.ndarray, skill
     return out
 
 
-def fit_one_step(x: np.ndarray, skills: np.ndarray, seed: int, lag_choices: tuple[int, ...] = ONE_STEP_LAGS) -> OneStep:
-    """Per-skill one-step models; past steps, ridge and pooling chosen by held-out one-step error."""
-    folds = episode_folds(skills, seed)
-    width = x.shape[2]
-    best, choice = np.inf, (lag_choices[0], ONE_STEP_RIDGES[0], False)
-    for lags in lag_choices:
-        embedded = delay_embed(x, lags)
-        for per_skill in (False, True):
-            for ridge in ONE_STEP_RIDGES:
-                error = 0.0
-                for train, test in folds:
-                    models = _fit_models(embedded[train], skills[train], ridge, per_skill)
-                    predicted = _next_step_predictions(models, embedded[test], skills[test])[..., :width]
-                    error += ((predicted - x[test, 1:]) ** 2).sum()
-                if error < best:
-                    best, choice = error, (lags, ridge, per_skill)
-    lags, ridge, per_skill = choice
+def fit_one_step(x: np.ndarray, skills: np.ndarray, seed: int, lag_choices: tuple[int, ...] = ONE_STEP_LAGS,
+                 ridges: tuple[float, ...] = ONE_STEP_RIDGES, poolings: tuple[bool, ...] = POOLINGS) -> OneStep:
+    """Per-skill one-step models; past steps, ridge and pooling chosen by held-out one-step error
+    (no cross-validation where there is one choice)."""
+    choices = [(lags, ridge, per_skill) for lags in lag_choices for per_skill in poolings for ridge in ridges]
+    if len(choices) > 1:
+        choices = [min(choices, key=lambda choice: _held_out_error(x, skills, seed, *choice))]
+    lags, ridge, per_skill = choices[0]
     return OneStep(_fit_models(delay_embed(x, lags), skills, ridge, per_skill), lags)
 
 
-class LinearOneStep(DetectorBase):
-    name = "linear_one_step"
-    label = "linear one-step predictor (ridge)"
-
-    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
-        self.one_step = fit_one_step(x, skills, seed)
-
-    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
-        return np.concatenate([x[:, :1], self.one_step.predict(x, skills)], axis=1)
-
-
-class TemplateResidualOneStep(DetectorBase):
-    name = "template_residual_one_step"
-    label = "conditional template + one-step residual predictor"
-
-    def __init__(self, residual_weight: float = 1.0, template: type[ConditionalTemplate | StepRidgeTemplate]
-                 = ConditionalTemplate) -> None:
-        """``residual_weight`` scales the residual's prediction: 1 is the baseline, 0 the template
-        alone (lab/plan_probe.py measures what lies between). With ``template=
-        StepRidgeTemplate`` it is plan recall without the network, the rival
-        `step_ridge_template_residual`."""
-        super().__init__()
-        self.residual_weight, self.template_class = residual_weight, template
-        if template is StepRidgeTemplate:
-            self.name = "step_ridge_template_residual"
-            self.label = "one-ridge conditional template + one-step residual predictor"
-
-    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
-        self.template = self.template_class().fit(x, skills, self.context_channels, seed)
-        residuals = self.template.cross_fitted_residuals(x, skills, seed)
-        self.one_step = fit_one_step(residuals, skills, seed)
-
-    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
-        template = self.template.expected(x, skills)
-        residuals = x - template
-        correction = np.zeros_like(x)
-        correction[:, 1:] = self.one_step.predict(residuals, skills)
-        return template + self.residual_weight * correction
+def _held_out_error(x: np.ndarray, skills: np.ndarray, seed: int, lags: int, ridge: float, per_skill: bool) -> float:
+    embedded, error = delay_embed(x, lags), 0.0
+    for train, test in episode_folds(skills, seed):
+        models = _fit_models(embedded[train], skills[train], ridge, per_skill)
+        predicted = _next_step_predictions(models, embedded[test], skills[test])[..., : x.shape[2]]
+        error += ((predicted - x[test, 1:]) ** 2).sum()
+    return error

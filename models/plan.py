@@ -32,8 +32,7 @@ import numpy as np
 from sklearn.linear_model import LogisticRegression
 from sklearn.preprocessing import StandardScaler
 
-from neural_asm.models.detector_base import episode_folds
-from neural_asm.models.one_step import fit_one_step
+from neural_asm.models.one_step import episode_folds, fit_one_step
 from neural_asm.models.recall import Recaller
 from neural_asm.models.step_maps import apply_maps, input_features, ridge_maps, step_codes, with_one
 from neural_asm.models.tpc import TemporalPC

@@ -1,5 +1,5 @@
 """Linear maps per skill over step-coded features: what plan recall (models/plan.py) and the
-template it is compared with (models/templates.py: StepRidgeTemplate) are made of.
+template it is compared with (rivals/templates.py: StepRidgeTemplate) are made of.
 
 A step's one-hot e_t, and its outer product with the episode's context c, give each step its own
 linear function of the context; one ridge regression per skill over every step fits them all

@@ -15,9 +15,10 @@ import typer
 from neural_asm.runtime.cli import Command, Group
 from neural_asm.client.cli import client
 from neural_asm.client.replay import replay
-from neural_asm.experiments.contextual.cli import contextual
-from neural_asm.experiments.correction.cli import correction
-from neural_asm.experiments.fault_sweep.cli import faults
+from neural_asm.experiments.catalogue import EXPERIMENTS
+from neural_asm.experiments.cli import ExperimentCommand, derive
+from neural_asm.experiments.cli import app as experiments_app
+from neural_asm.experiments.fault_sweep.cli import PASS_ON, faults
 from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, evaluate, read_logs
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
@@ -156,9 +157,13 @@ def info(model_path: Path | None = typer.Argument(None, help="checkpoint (.safet
     typer.echo(json.dumps(summary, indent=2, default=str))
 
 
-for command in (demos, faults, correction, contextual, serve, client, view, replay, evaluate, calibrate):  # each package owns its commands
+app.command(cls=Command, context_settings=PASS_ON)(faults)
+for command in (demos, serve, client, view, replay, evaluate, calibrate):  # each package owns its commands
     app.command(cls=Command)(command)
+for alias in ("correction", "contextual"):  # short for `nasm experiments run NAME`
+    app.command(alias, cls=ExperimentCommand)(derive(EXPERIMENTS[alias], alias))
 app.add_typer(recordings_app, name="recordings")
+app.add_typer(experiments_app, name="experiments")
 
 if __name__ == "__main__":
     app()

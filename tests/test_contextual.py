@@ -18,7 +18,7 @@ from neural_asm.experiments.contextual.metrics import pead
 from neural_asm.experiments.contextual.protocol import run_protocol
 from neural_asm.experiments.contextual.report import PLANNING, expressed, expressed_per_seed, separates_every_seed
 from neural_asm.models.config import PRESETS
-from neural_asm.models.rnn import SensorimotorRNN, SensoryToMotorRNN
+from neural_asm.rivals.rnn import SensorimotorRNN, SensoryToMotorRNN
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 

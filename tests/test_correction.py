@@ -200,15 +200,12 @@ def test_detection_counts_only_steps_that_can_see_the_hit():
 
 @pytest.mark.slow
 def test_a_small_run_writes_the_results_contract(tmp_path):
-    from neural_asm.experiments.correction.figures import write_figure
     from neural_asm.experiments.correction.pipeline import fit_model, run_correction
-    from neural_asm.experiments.correction.report import write_json, write_markdown
+    from neural_asm.experiments.writer import write_report
 
     config = CORRECTION.with_(n_seeds=1, momenta=(40.0,), monitor=MonitorSeeds(per_split=3), epochs=40)
     result = run_correction(fit_model(config), config, progress=False)
-    write_json(result, tmp_path / "correction.json")
-    write_markdown(result, tmp_path / "correction.md")
-    write_figure(result, tmp_path / "correction.png")
+    write_report(result, tmp_path)
     results = json.loads((tmp_path / "correction.json").read_text())["results"]
     assert [(r["controller"], r["momentum"]) for r in results] == [("stiff", 40.0), ("compliant", 40.0)]
     for r in results:
@@ -229,12 +226,12 @@ def test_test_seeds_may_not_overlap_the_selection_or_monitor_seeds(first):
 @pytest.mark.slow
 def test_a_small_run_at_40_hz_over_two_trainings_gives_each_training_and_their_mean(tmp_path):
     from neural_asm.experiments.correction.pipeline import run_trainings
-    from neural_asm.experiments.correction.report import write_json
+    from neural_asm.experiments.writer import write_report
 
     config = CORRECTION.with_(n_seeds=1, momenta=(40.0,), monitor=MonitorSeeds(per_split=3), epochs=10, rate=40.0,
                               trainings=2, controllers=("compliant",))
     result = run_trainings(config, progress=False)
-    write_json(result, tmp_path / "correction.json")
+    write_report(result, tmp_path)
     payload = json.loads((tmp_path / "correction.json").read_text())
     assert payload["rate_hz"] == 40.0 and payload["model"]["rate_hz"] == 40.0
     assert payload["config"]["monitor_mode"] == "online"  # the 40 Hz default's, with no mode given

@@ -1,23 +1,15 @@
-"""Baseline detectors on small synthetic tasks whose truth is known."""
+"""The rivals on small synthetic tasks whose truth is known."""
 
 import numpy as np
 import pytest
 
-from neural_asm.models.detectors import (
-    LSTMVAE,
-    ConditionalTemplate,
-    CueNearestDemos,
-    CueTemplate,
-    Detector,
-    GRUOneStep,
-    LinearOneStep,
-    NearestDemos,
-    PerSkillZScore,
-    RecurrentConfig,
-    TemplateResidualOneStep,
-    all_detectors,
-)
-from neural_asm.models.one_step import delay_embed, fit_one_step
+from neural_asm.models.one_step import RidgeOneStep, delay_embed, fit_one_step
+from neural_asm.rivals.base import Detector, Spread
+from neural_asm.rivals.one_step import LinearOneStep, TemplateResidualOneStep
+from neural_asm.rivals.registry import line_up
+from neural_asm.rivals.sequence import LSTMVAE, GRUOneStep, RecurrentConfig
+from neural_asm.rivals.statistics import StepStatistics
+from neural_asm.rivals.templates import ConditionalTemplate, CueNearestDemos, CueTemplate, NearestDemos, PerSkillZScore
 
 T, D, C = 10, 8, 2
 CONTEXT = list(range(C))
@@ -54,7 +46,7 @@ def fitted(detector, demos, skills):
 
 def small_detectors():
     """Every detector class, the recurrent ones at a size that trains in seconds."""
-    return [d for d in all_detectors() if not hasattr(d, "config")] + [GRUOneStep(SMALL_RNN), LSTMVAE(SMALL_RNN)]
+    return [d for d in line_up("varied") if not hasattr(d, "config")] + [GRUOneStep(SMALL_RNN), LSTMVAE(SMALL_RNN)]
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +65,7 @@ def mse(x, expected):
 
 
 def test_all_detectors_are_distinct_and_follow_the_protocol():
-    found = all_detectors()
+    found = line_up("varied")
     assert len({d.name for d in found}) == len(found) == 10
     assert all(isinstance(d, Detector) and d.label for d in found)
 
@@ -200,3 +192,23 @@ def test_the_whole_cue_tells_the_templates_the_start_posture():
     whole_cue = [fitted(d, demos, skills) for d in (CueTemplate(), CueNearestDemos())]
     for narrow, wide in zip(context_only, whole_cue):
         assert mse(test, wide.expected(test, test_skills)) < 0.5 * mse(test, narrow.expected(test, test_skills))
+
+
+def test_the_paper_line_up_is_the_paper_sweeps_z_scores_and_one_step_predictor():
+    """Built from the registry, the paper sweep's rivals expect (and spread) exactly what its
+    per-step statistics and its one ridge one-step model (one past step, ridge 0.01, pooled) do."""
+    rng = np.random.default_rng(0)
+    skills = np.repeat(["a", "b"], 6)
+    demos = rng.standard_normal((12, T, D)) + np.where(skills == "a", 2.0, -2.0)[:, None, None]
+    x = rng.standard_normal((5, T, D)) + 2.0
+    told = np.array(["a", "b", "a", "a", "b"])
+    rivals = {r.name: r.fit(demos, skills, []) for r in line_up("paper")}
+    assert list(rivals) == ["zscore_pooled", "zscore_per_skill", "classic_asm", "linear_one_step"]
+    pooled, library = StepStatistics.fit(demos), StepStatistics.fit(demos, skills)
+    np.testing.assert_array_equal(rivals["zscore_pooled"].expected(x, told), pooled.expected(x))
+    np.testing.assert_array_equal(rivals["classic_asm"].spread(x, told), library.spread(x))
+    by_skill = np.searchsorted(["a", "b"], told)
+    np.testing.assert_array_equal(rivals["zscore_per_skill"].spread(x, told), library.stds[by_skill])
+    one_step = RidgeOneStep.fit(demos)
+    np.testing.assert_allclose(rivals["linear_one_step"].expected(x, told)[:, 1:], one_step.step(x[:, :-1]))
+    assert all(isinstance(r, Spread) for name, r in rivals.items() if name != "linear_one_step")

@@ -7,13 +7,12 @@ import numpy as np
 import pytest
 
 from neural_asm.experiments.fault_sweep.data import make_benchmark
-from neural_asm.experiments.fault_sweep.figures import write_figures
-from neural_asm.experiments.fault_sweep.methods import baseline_methods
 from neural_asm.experiments.fault_sweep.metrics import FPRS, MAIN_FPR
-from neural_asm.experiments.fault_sweep.report import write_csv, write_json, write_markdown
 from neural_asm.experiments.fault_sweep.run import score_methods, train_models
-from neural_asm.experiments.methods import neural_asm_methods
+from neural_asm.experiments.methods import neural_asm_methods, rival_methods
+from neural_asm.experiments.writer import write_report
 from neural_asm.models.config import FAST
+from neural_asm.rivals.registry import line_up
 from neural_asm.sim.config import SIM
 from neural_asm.sim.dataset import Job, run_jobs
 from neural_asm.sim.faults import FaultSpec
@@ -44,8 +43,8 @@ def sweep():
                             {"demos": demos, "normal": normal, "faults": faults, "twins": twins}.items()})
     model = train_models(bench, {"nasm": FAST.with_(hidden_size=96, epochs=250)}, {"test": True})["nasm"]
     norm = model.normaliser
-    methods = neural_asm_methods(model, "nasm", "Neural ASM") + baseline_methods(norm.normalise(bench.normal.demos.data),
-                                                                  bench.normal.demos.labels)
+    methods = neural_asm_methods(model, "nasm", "Neural ASM") + rival_methods(
+        line_up("paper"), norm.normalise(bench.normal.demos.data), bench.normal.demos.labels, [])
     return score_methods(bench, methods, norm), model
 
 
@@ -111,10 +110,8 @@ def test_intervals_bracket_their_estimates(sweep):
 
 def test_outputs_hold_every_method_and_fault(sweep, tmp_path):
     result, _ = sweep
-    write_json(result, tmp_path / "fault_sweep.json")
-    write_markdown(result, tmp_path / "fault_sweep.md")
-    write_csv(result, tmp_path / "episodes.csv")
-    write_figures(result, tmp_path)
+    written = write_report(result, tmp_path)
+    assert tmp_path / "episodes.csv" in written and all(p.exists() for p in written)
     doc = json.loads((tmp_path / "fault_sweep.json").read_text())
     assert set(doc["methods"]) == set(result.summary)
     for by_weighting in doc["methods"].values():

@@ -96,8 +96,8 @@ def test_a_plan_memory_of_the_wrong_shape_is_refused(model):
 def test_without_states_plan_recall_is_the_one_ridge_template_with_its_residual_predictor(rng):
     """The benchmark's rival `step_ridge_template_residual` is plan recall's linear special case:
     the same expectations, told the skill where plan recall recognises it."""
-    from neural_asm.models.one_step import TemplateResidualOneStep
-    from neural_asm.models.templates import StepRidgeTemplate
+    from neural_asm.rivals.one_step import TemplateResidualOneStep
+    from neural_asm.rivals.templates import StepRidgeTemplate
 
     steps, maps = 10, rng.normal(size=(10, 2, 3))
     c = rng.uniform(-1, 1, (30, 2))

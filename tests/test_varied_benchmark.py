@@ -16,7 +16,7 @@ from neural_asm.experiments.varied.methods import train_neural_asm
 from neural_asm.experiments.varied.pairs import PAIR
 from neural_asm.experiments.varied.score import headline, score_all
 from neural_asm.models.config import FAST, PRECISE
-from neural_asm.models.detectors import ConditionalTemplate, CueTemplate, PerSkillZScore
+from neural_asm.rivals.templates import ConditionalTemplate, CueTemplate, PerSkillZScore
 from neural_asm.runtime.parallel import Parallel, parallel_map
 from neural_asm.sim.episode import Episode
 from neural_asm.sim.varied import VARIED_SKILLS
@@ -111,12 +111,10 @@ def test_headline_follows_the_contract(bench, tmp_path):
     assert c["n"] == failed.sum() and set(bench.consequence) <= {"consequential", "deviating", "invisible", "unattributed"}
     if failed.any():
         assert c["detection"] == pytest.approx(detected[failed].mean()) and 0.0 <= c["auroc"] <= 1.0
-    from neural_asm.experiments.varied.report import write_json, write_markdown
     from neural_asm.experiments.varied.run import VariedResult
+    from neural_asm.experiments.writer import write_report
 
-    result = VariedResult(bench, summaries, outcomes, h, {})
-    write_json(result, tmp_path / "fault_sweep.json", 1.0)
-    write_markdown(result, tmp_path / "fault_sweep.md")
+    write_report(VariedResult(bench, summaries, outcomes, h, {}), tmp_path)
     facts = json.loads((tmp_path / "fault_sweep.json").read_text())["benchmark"]
     assert sum(facts["consequences"].values()) == len(bench.faults)
     table = (tmp_path / "fault_sweep.md").read_text()

@@ -14,9 +14,11 @@ import neural_asm.service.app, neural_asm.client.cli, neural_asm.recordings.reco
 from typer.testing import CliRunner
 from neural_asm.cli import app
 assert not any(m.startswith("matplotlib") for m in sys.modules if sys.modules[m] is not None)
-for args in (["faults"], ["faults", "--task", "varied"], ["contextual", "--quick"], ["correction", "--seeds", "1"]):
+for name, args in (("faults", ["faults"]), ("faults", ["faults", "--task", "varied"]),
+                   ("contextual", ["contextual", "--quick"]), ("correction", ["correction", "--seeds", "1"]),
+                   ("experiments run rate", ["experiments", "run", "rate"])):
     result = CliRunner().invoke(app, args)
-    print(args[0], result.exit_code, " ".join(result.output.split()))
+    print(name, "|", result.exit_code, "|", " ".join(result.output.split()))
 """
 
 
@@ -24,8 +26,8 @@ def test_commands_load_and_figure_commands_name_matplotlib():
     run = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
     lines = run.stdout.splitlines()
-    assert len(lines) == 4, run.stdout
+    assert len(lines) == 5, run.stdout
     for line in lines:
-        command, code, message = line.split(" ", 2)
+        command, code, message = line.split(" | ", 2)
         assert code == "1", line
         assert f"nasm {command} writes figures with matplotlib" in message and "pip install" in message, line

@@ -5,6 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
+from neural_asm.experiments.options import Simulates, option
+from neural_asm.models.config import PRESETS
+
 CONDITIONS: tuple[str, ...] = ("plan_and_execute", "plan_only", "execute_only")
 MODELS: tuple[str, ...] = ("neural_asm", "s_to_m", "sm_to_sm")
 # How reports and figures name the conditions and the models.
@@ -80,3 +83,27 @@ CONTEXTUAL = ContextualConfig()
 DEFAULT_PRESET = "robust"
 # A reduced protocol for tests and --quick: one seed, few epochs, a short sweep.
 QUICK = CONTEXTUAL.with_(seeds=1, skill_seeds=1, epochs=300, inference_sweep=(1, 5, 20, 100))
+
+
+@dataclass(frozen=True)
+class ContextualRun(Simulates):
+    """Neural ASM vs S-to-M and SM-to-SM RNNs on plan & execute / plan only / execute only: PEAD
+    (panels E, F), recall error vs inference iterations (G), energy vs number of skills
+    (Appendix 3) and the dataset (Appendix 2)."""
+
+    seeds: int | None = option(None, "participants (seeds); default 6, 1 with --quick", min=1)
+    epochs: int | None = option(None, "learning epochs of every model; default 1200, 300 with --quick", min=1)
+    preset: str = option(DEFAULT_PRESET, f"tPC hyper-parameters, shared by the RNNs (but for the training "
+                         f"noise): {', '.join(PRESETS)}")
+    quick: bool = option(False, "reduced protocol: 1 seed, 300 epochs, short K sweep")
+
+    def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            raise ValueError(f"preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
+
+    @property
+    def protocol(self) -> ContextualConfig:
+        """The protocol this run follows: QUICK or CONTEXTUAL with the seeds and epochs given."""
+        cfg = QUICK if self.quick else CONTEXTUAL
+        cfg = cfg.with_(**{k: v for k, v in (("seeds", self.seeds), ("epochs", self.epochs)) if v is not None})
+        return cfg.with_(skill_seeds=min(cfg.skill_seeds, cfg.seeds))

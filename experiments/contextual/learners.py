@@ -15,7 +15,7 @@ from neural_asm.models.config import TPCConfig
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.recall import offline_recall
 from neural_asm.models.sequences import Sequences
-from neural_asm.models.rnn import SensorimotorRNN, SensoryToMotorRNN, roll_out, train_rnn
+from neural_asm.rivals.rnn import SensorimotorRNN, SensoryToMotorRNN, roll_out, train_rnn
 from neural_asm.models.tpc import TemporalPC
 
 

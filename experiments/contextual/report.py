@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import Any
 
 from neural_asm.experiments.contextual.config import CONDITIONS, LABELS, MODELS
@@ -112,9 +110,3 @@ def markdown(summary: dict[str, Any]) -> str:
     lines += [f"- [{'x' if ok else ' '}] {text}" for text, ok in claims(summary)]
     return "\n".join(lines) + "\n"
 
-
-def write(summary: dict[str, Any], out: Path) -> tuple[Path, Path]:
-    json_path, md_path = out / "contextual.json", out / "contextual.md"
-    json_path.write_text(json.dumps(summary, indent=1))
-    md_path.write_text(markdown(summary))
-    return json_path, md_path

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
+from neural_asm.experiments.options import option
 from neural_asm.models.config import SCORING
 from neural_asm.models.recall import RECALL_MODES
 from neural_asm.pipelines.compliant import SERVED_MONITOR, MonitorSeeds
@@ -17,10 +18,17 @@ from neural_asm.pipelines.default_model import RATE_MODES
 from neural_asm.sim.config import CONTROLLERS, RATES, SIM, CorrectionGains, ElbowHit
 
 
+CORRECTIONS: tuple[str, ...] = ("none", "corrected")  # every hit without and with the memory's correction
+
+
 @dataclass(frozen=True)
 class CorrectionConfig:
-    n_seeds: int = 24  # test seeds per hit, skills alternating
-    test_seed: int = SIM.seeds.held_out + 1000  # first test seed
+    """A box hits the arm carrying the cube, under stiff and compliant control, with and without the
+    memory's correction."""
+
+    n_seeds: int = option(24, "test seeds per hit (skills alternate)", flag="seeds", min=1)
+    test_seed: int = option(SIM.seeds.held_out + 1000, "first test seed (a fresh block: any range clear of the "
+                            "selection and monitor seeds)", flag="first-seed")
     selection_seeds: tuple[int, int] = (SIM.seeds.held_out, SIM.seeds.held_out + 40)  # gains chosen here
     monitor: MonitorSeeds = MonitorSeeds(per_split=20)  # normal runs calibrating the monitor, per controller
     hit: ElbowHit = SIM.hit  # the box on the elbow during the carry; momentum = mass x speed
@@ -34,11 +42,14 @@ class CorrectionConfig:
     controllers: tuple[str, ...] = CONTROLLERS
     gains: CorrectionGains = SIM.correction
     gated: bool = True  # the correction engages once the monitor has flagged (False: from the start)
-    epochs: int | None = None  # None: the rate's default network's
+    epochs: int | None = option(None, "override the default network's epochs")
     # The monitor's observation rate (Hz): at 40 a network trained at 40 Hz monitors every tick
     # of the plan the 2 Hz network recalls (`pipelines.compliant.planner_of`).
-    rate: float = SIM.timing.observation_hz
-    trainings: int = 1  # networks trained per rate, training seeds 0, 1, ...
+    rate: float = option(SIM.timing.observation_hz, "the monitor's observations per second: 2 (the paper's skill "
+                         "layer) or 40 (every control tick: a network trained at 40 Hz monitors and gates the "
+                         "correction at every tick; the 2 Hz network plans)")
+    trainings: int = option(1, "trainings (seeds 0, 1, ...): recovery rates are their mean, each training's in "
+                            "per_training", min=1)
 
     def __post_init__(self) -> None:
         if self.rate not in RATES:

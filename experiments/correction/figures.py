@@ -5,14 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from neural_asm.experiments.correction.metrics import deviation_deg
-from neural_asm.experiments.correction.pipeline import CORRECTIONS, Result
+from neural_asm.experiments.correction.config import CORRECTIONS
+from neural_asm.experiments.correction.pipeline import Result
 from neural_asm.experiments.correction.report import summarise
 
 COLOURS = {("stiff", "none"): "tab:grey", ("stiff", "corrected"): "tab:green",
            ("compliant", "none"): "tab:red", ("compliant", "corrected"): "tab:blue"}
 
 
-def write_figure(result: Result, path: Path) -> None:
+def write_figure(result: Result, path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -46,3 +47,4 @@ def write_figure(result: Result, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+    return path

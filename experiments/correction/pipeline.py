@@ -21,11 +21,15 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
-from neural_asm.experiments.correction.config import CorrectionConfig
+from neural_asm.experiments.correction import report
+from neural_asm.experiments.correction.config import CORRECTIONS, CorrectionConfig
 from neural_asm.experiments.correction.metrics import detection, run_metrics
+from neural_asm.experiments.writer import Reported
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import RATE_DEFAULTS
 from neural_asm.models.fault import threshold_for
@@ -38,11 +42,10 @@ from neural_asm.sim.episode import Episode
 from neural_asm.sim.runner import SimulationError, run_episode
 from neural_asm.sim.skills import SKILLS
 
-CORRECTIONS: tuple[str, ...] = ("none", "corrected")
 
 
 @dataclass
-class Result:
+class Result(Reported):
     config: CorrectionConfig
     runs: list[dict] = field(default_factory=list)  # one per (seed, controller, correction, momentum)
     twins: list[dict] = field(default_factory=list)  # undisturbed runs, recalled plans and demonstrations
@@ -50,6 +53,15 @@ class Result:
     model: dict = field(default_factory=dict)
     examples: dict = field(default_factory=dict)  # (controller, correction) -> an Episode, for the figure
     seconds: float = 0.0
+
+    stem: ClassVar[str] = "correction"
+    document = staticmethod(report.document)
+    table = staticmethod(report.markdown)
+
+    def files(self, out: Path) -> list[Path]:
+        from neural_asm.experiments.correction.figures import write_figure  # it imports this module
+
+        return [write_figure(self, out / "correction.png")]
 
 
 def fit_model(config: CorrectionConfig, progress: bool = False, rate: float | None = None,

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 
+from typing import TYPE_CHECKING
+
+from neural_asm.experiments.correction.config import CORRECTIONS
 from neural_asm.experiments.correction.metrics import first_hit_step
-from neural_asm.experiments.correction.pipeline import CORRECTIONS, Result
+from neural_asm.experiments.formatting import pct
+
+if TYPE_CHECKING:
+    from neural_asm.experiments.correction.pipeline import Result
 from neural_asm.sim.config import SIM
 
 
@@ -72,8 +76,8 @@ def undisturbed(result: Result) -> list[dict]:
     return rows
 
 
-def write_json(result: Result, path: Path) -> None:
-    payload = {
+def document(result: Result) -> dict:
+    return {
         "rate_hz": result.config.rate,
         "results": summarise(result),
         "undisturbed": undisturbed(result),
@@ -88,11 +92,10 @@ def write_json(result: Result, path: Path) -> None:
         "twins": result.twins,
         "seconds": result.seconds,
     }
-    path.write_text(json.dumps(payload, indent=2, default=float))
 
 
 def _pct(x: float) -> str:
-    return "-" if np.isnan(x) else f"{100 * x:.0f} %"
+    return pct(x, 0, " %")
 
 
 def table(result: Result) -> str:
@@ -112,7 +115,7 @@ def table(result: Result) -> str:
     return "\n".join(lines)
 
 
-def write_markdown(result: Result, path: Path) -> None:
+def markdown(result: Result) -> str:
     cfg, g = result.config, result.config.gains
     seeds = cfg.test_seeds
     undist = "\n".join(
@@ -123,7 +126,7 @@ def write_markdown(result: Result, path: Path) -> None:
                   if g.yield_s is not None else "never letting go")
     trainings = (f"; recovery rates are the means of {cfg.trainings} trainings (training seeds 0..{cfg.trainings - 1}), "
                  "each training's in correction.json" if cfg.trainings > 1 else "")
-    path.write_text(f"""# Reactive correction: a box falls on the arm carrying the cube
+    return f"""# Reactive correction: a box falls on the arm carrying the cube
 
 Monitor at {cfg.rate:g} Hz ({cfg.monitor_mode} recall){trainings}.
 
@@ -148,4 +151,4 @@ Without a hit (cube within 1 cm of its target; monitor alarms on undisturbed rec
 {undist}
 
 Runtime: {result.seconds:.0f} s.
-""")
+"""

@@ -143,10 +143,12 @@ def worked_examples(result: SweepResult, w: Weighted, out: Path) -> None:
         _save(fig, out / f"example_joint{joint}.png")
 
 
-def write_figures(result: SweepResult, out: Path) -> None:
+def write_figures(result: SweepResult, out: Path) -> list[Path]:
     best = weigh(result.errors[BEST[0]], BEST[1])  # whitening fits a matrix per step: once
     detection_vs_fpr(result, out)
     energy_distribution(result, best, out)
     confusion(result, out)
     breakdown(result, out)
     worked_examples(result, best, out)
+    return [out / f"{name}.png" for name in ("detection_vs_fpr", "energy_distribution", "isolation_confusion",
+                                               "breakdown")] + sorted(out.glob("example_joint*.png"))

@@ -14,9 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
+from neural_asm.experiments.fault_sweep.data import Benchmark
 from neural_asm.experiments.twins import VISIBLE_K, visible_from, whitened_deviation
 from neural_asm.models.calibration import Thresholds, estimate
 from neural_asm.models.config import SCORING
+from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.fault import isolated_joint, joint_channels
 from neural_asm.models.scoring import energy
 
@@ -139,10 +141,8 @@ def evaluate(w: Weighted, channel_names: tuple[str, ...], fault_step: np.ndarray
     return summary, outcome
 
 
-def ceilings(faults: np.ndarray, twins: np.ndarray, normal: np.ndarray, fault_skills: np.ndarray,
-             normal_skills: np.ndarray, channel_names: tuple[str, ...], fault_step: np.ndarray,
-             fault_joint: np.ndarray, k: float = VISIBLE_K) -> dict:
-    """What an oracle that knows each fault's no-fault twin could reach (normalised inputs).
+def ceilings(bench: Benchmark, norm: Normaliser, k: float = VISIBLE_K) -> dict:
+    """What an oracle that knows each fault's no-fault twin could reach (in `norm`'s units).
 
     Deviation from the twin is whitened by normal variation (per-skill, per-step std of
     held-out normal episodes, `experiments.twins`). A fault is *visible* when some channel deviates by more
@@ -151,11 +151,13 @@ def ceilings(faults: np.ndarray, twins: np.ndarray, normal: np.ndarray, fault_sk
     that step, by more than k standard deviations: a 0-degree overshoot changes nothing
     at its own step, so about 1/7 of the grid cannot be isolated there.
     """
-    dev = whitened_deviation(faults, twins, fault_skills, normal, normal_skills)
+    precision, fault_step = bench.normal.precision, bench.fault_step
+    dev = whitened_deviation(norm.normalise(bench.faults.data), norm.normalise(bench.twins.data), bench.faults.labels,
+                             norm.normalise(precision.data), precision.labels)
     rows = np.arange(len(dev))
     visible = visible_from(dev, fault_step, k)
-    at = dev[rows, fault_step][:, np.array(joint_channels(channel_names))]
-    isolable = (at.argmax(axis=1) + 1 == fault_joint) & (at.max(axis=1) > k)
+    at = dev[rows, fault_step][:, np.array(joint_channels(bench.normal.channel_names))]
+    isolable = (at.argmax(axis=1) + 1 == bench.fault_joint) & (at.max(axis=1) > k)
     return {
         "oracle_detection_rate": float(visible.mean()),
         "invisible_faults": int((~visible).sum()),

@@ -8,22 +8,25 @@ locks and falling objects (`experiments.fault_sweep.served`), in both recall mod
 
 from __future__ import annotations
 
-import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 from tqdm.auto import tqdm
 
+from neural_asm.experiments.fault_sweep.config import RateConfig
 from neural_asm.experiments.fault_sweep.data import SETS
 from neural_asm.experiments.fault_sweep.served import Onsets, evaluate, subsampled
+from neural_asm.experiments.formatting import pct
 from neural_asm.experiments.twins import VISIBLE_K
-from neural_asm.models import checkpoint
+from neural_asm.experiments.writer import save_checkpoints
+from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import RATE_DEFAULTS, TPCConfig
 from neural_asm.models.recall import NETWORK_MODES
 from neural_asm.pipelines.default_model import model_name, provenance_of, train_calibrated
 from neural_asm.pipelines.episodes import NormalSets, as_sequences, paper_sets, split_normal
-from neural_asm.runtime.parallel import Parallel
 from neural_asm.sim.config import SIM
 
 HIT_SETS = ("hits", "hit_twins")
@@ -32,6 +35,45 @@ KINDS = ("lock", "falling_object")  # the headline's fault kinds
 # one cue and drifts from the episode (held-out offline error 1.3 normalised units against 0.2
 # online), so a 40 Hz session monitors in online recall; both modes are in `rates`.
 HEADLINE_MODE = "online"
+# The headline's numbers: the `rate` network's (training 0) in HEADLINE_MODE.
+HEADLINE_KEYS = ("detection", "latency", "normal_episodes_flagged", "normal_episodes_flagged_resplits",
+                 "isolation_at_detection", "threshold", "fpr", "mode")
+
+
+@dataclass
+class RateResult:
+    """fault_sweep.json of a rate sweep: the headline, its spread over trainings, every rate and mode."""
+
+    rate_hz: float
+    headline: dict  # HEADLINE_KEYS of the `rate` network's training 0 in HEADLINE_MODE
+    trainings: int
+    across_trainings: dict
+    episodes: dict
+    rates: dict  # "40" / "2" -> that rate's trainings, config and spread
+    seconds: float
+    models: dict[str, NeuralASM]  # each rate's training 0, saved as the service would host it
+
+    stem: ClassVar[str] = "fault_sweep"
+
+    def to_json(self) -> dict:
+        return {
+            "rate_hz": self.rate_hz, **self.headline, "trainings": self.trainings,
+            "across_trainings": self.across_trainings, "episodes": self.episodes,
+            "onset": "first 40 Hz tick at which the observations differ from the same seed's twin",
+            "visible_onset": (f"first 40 Hz tick at which some channel departs from the twin by more than "
+                              f"{VISIBLE_K:g} normal standard deviations (per skill, tick and channel over the "
+                              "precision split; neural_asm.experiments.twins): latency.<kind>.from_visible counts "
+                              "from it"),
+            "rates": self.rates, "seconds": self.seconds,
+        }
+
+    def markdown(self) -> str:
+        return markdown(self.to_json())
+
+    def files(self, out: Path) -> list[Path]:
+        from neural_asm.experiments.fault_sweep.rate_figures import write_latency_figure
+
+        return [write_latency_figure(self.to_json(), out / "latency.png"), *save_checkpoints(self.models, out)]
 
 
 def at_rate(normal: NormalSets, rate_hz: float) -> NormalSets:
@@ -39,19 +81,19 @@ def at_rate(normal: NormalSets, rate_hz: float) -> NormalSets:
                                               (normal.demos, normal.precision, normal.calibration, normal.normal_test)))
 
 
-def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | None = None, epochs: int | None = None,
-                   trainings: int = 1, *, parallel: Parallel = Parallel()) -> dict:
-    """Train, calibrate, save and score the default network at `rate` and at 2 Hz, `trainings`
-    times each (seeds 0, 1, ...); training 0 is saved and gives the headline (`detection`,
-    `latency`, ...: the `rate` network's in `HEADLINE_MODE`), `across_trainings` the spread."""
+def run_rate_sweep(config: RateConfig) -> RateResult:
+    """Train, calibrate and score the default network at `rate` and at 2 Hz, `trainings` times
+    each (seeds 0, 1, ...); training 0 is kept and gives the headline (`detection`, `latency`,
+    ...: the `rate` network's in `HEADLINE_MODE`), `across_trainings` the spread."""
     start = time.perf_counter()
-    sets = paper_sets(data_dir, SETS + HIT_SETS, n_normal, parallel, rate)
+    rate, epochs, trainings, data_dir = config.rate, config.epochs, config.trainings, config.data_dir(config.rate)
+    sets = paper_sets(data_dir, SETS + HIT_SETS, config.n_normal, config.parallel, rate)
     normal = split_normal(sets["demos"], sets["normal"])
     locks = Onsets.against(as_sequences(sets["faults"]), np.array([e.fault.joint for e in sets["faults"]]),
                            as_sequences(sets["twins"]), normal.precision)
     momenta = np.array([round(e.disturbance.mass_kg * e.disturbance.speed_m_s, 6) for e in sets["hits"]])
     hits = Onsets.against(as_sequences(sets["hits"]), momenta, as_sequences(sets["hit_twins"]), normal.precision)
-    by_rate = {}
+    by_rate, models = {}, {}
     rates = list(dict.fromkeys((rate, SIM.timing.observation_hz)))
     with tqdm(total=len(rates) * trainings, desc="trainings") as bar:
         for hz in rates:
@@ -65,7 +107,7 @@ def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | N
                                          config.with_(seed=seed), provenance=provenance_of(split, data_dir))
                 trained = time.perf_counter() - began
                 if seed == 0:
-                    checkpoint.save(model, out_dir / "models" / f"{model_name(hz)}.safetensors")
+                    models[model_name(hz)] = model
                 held_out = model.errors(split.precision.data, HEADLINE_MODE, 1)[:, 1:]
                 runs.append({"seed": seed, "train_and_calibrate_seconds": round(trained, 1),
                              "online_mse_held_out": float((held_out ** 2).mean()),
@@ -76,23 +118,13 @@ def run_rate_sweep(data_dir: Path, out_dir: Path, rate: float, n_normal: int | N
                                   "across_trainings": {mode: spread([r["modes"][mode] for r in runs])
                                                        for mode in NETWORK_MODES}}
     headline = by_rate[f"{rate:g}"]["modes"][HEADLINE_MODE]
-    return {
-        "rate_hz": rate,
-        **{key: headline[key] for key in ("detection", "latency", "normal_episodes_flagged",
-                                          "normal_episodes_flagged_resplits", "isolation_at_detection",
-                                          "threshold", "fpr", "mode")},
-        "trainings": trainings,
-        "across_trainings": by_rate[f"{rate:g}"]["across_trainings"][HEADLINE_MODE],
-        "episodes": {"demonstrations": len(normal.demos), "normal_precision": len(normal.precision),
-                     "normal_calibration": len(normal.calibration), "normal_test": len(normal.normal_test),
-                     "lock": len(locks.onset_s), "falling_object": len(hits.onset_s)},
-        "onset": "first 40 Hz tick at which the observations differ from the same seed's twin",
-        "visible_onset": (f"first 40 Hz tick at which some channel departs from the twin by more than {VISIBLE_K:g} "
-                          "normal standard deviations (per skill, tick and channel over the precision split; "
-                          "neural_asm.experiments.twins): latency.<kind>.from_visible counts from it"),
-        "rates": by_rate,
-        "seconds": round(time.perf_counter() - start, 1),
-    }
+    return RateResult(
+        rate_hz=rate, headline={key: headline[key] for key in HEADLINE_KEYS}, trainings=trainings,
+        across_trainings=by_rate[f"{rate:g}"]["across_trainings"][HEADLINE_MODE],
+        episodes={"demonstrations": len(normal.demos), "normal_precision": len(normal.precision),
+                  "normal_calibration": len(normal.calibration), "normal_test": len(normal.normal_test),
+                  "lock": len(locks.onset_s), "falling_object": len(hits.onset_s)},
+        rates=by_rate, seconds=round(time.perf_counter() - start, 1), models=models)
 
 
 # What `across_trainings` summarises (mean, min, max over trainings), by path in `evaluate`'s result.
@@ -127,8 +159,8 @@ def spread(results: list[dict]) -> dict[str, dict[str, float | None]]:
     return out
 
 
-def pct(x: float) -> str:
-    return f"{100 * x:.1f} %"
+def percent(x: float) -> str:
+    return pct(x, unit=" %")
 
 
 def ms(x: float | None) -> str:
@@ -160,13 +192,13 @@ def markdown(result: dict) -> str:
              "|---|---|---|---|---|---|---|---|---|"]
     for hz, entry in result["rates"].items():
         for mode, m in entry["across_trainings"].items():
-            lines.append(f"| {hz} Hz | {mode} | {spread_cell(m['normal_episodes_flagged'], pct)} "
-                         f"| {spread_cell(m['normal_episodes_flagged_resplits'], pct)} "
-                         f"| {spread_cell(m['lock'], pct)} | {spread_cell(m['falling_object'], pct)} "
+            lines.append(f"| {hz} Hz | {mode} | {spread_cell(m['normal_episodes_flagged'], percent)} "
+                         f"| {spread_cell(m['normal_episodes_flagged_resplits'], percent)} "
+                         f"| {spread_cell(m['lock'], percent)} | {spread_cell(m['falling_object'], percent)} "
                          f"| {spread_cell(m['lock_latency_median_ms'], ms)} / {spread_cell(m['lock_latency_p95_ms'], ms)} "
                          f"| {spread_cell(m['falling_object_latency_median_ms'], ms)} / "
                          f"{spread_cell(m['falling_object_latency_p95_ms'], ms)} "
-                         f"| {spread_cell(m['isolation_at_detection'], pct)} |")
+                         f"| {spread_cell(m['isolation_at_detection'], percent)} |")
     return "\n".join(lines + [""] + from_visible_lines(result) + [""] + quiet_lines(result)) + "\n"
 
 
@@ -204,8 +236,3 @@ def quiet_lines(result: dict) -> list[str]:
             lines.append(f"| {hz} Hz | {mode} | {spread_cell(m['lock_quiet_100ms'], count)} "
                          f"| {spread_cell(m['falling_object_quiet_100ms'], count)} |")
     return lines
-
-
-def write(result: dict, out_dir: Path) -> None:
-    (out_dir / "fault_sweep.json").write_text(json.dumps(result, indent=2))
-    (out_dir / "fault_sweep.md").write_text(markdown(result))

@@ -1,13 +1,16 @@
-"""fault_sweep.json, fault_sweep.md and episodes.csv from a sweep."""
+"""fault_sweep.json's document, fault_sweep.md's table and episodes.csv from a sweep."""
 
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from neural_asm.experiments.fault_sweep.metrics import FPRS, MAIN_FPR
-from neural_asm.experiments.fault_sweep.run import SweepResult
+from neural_asm.experiments.formatting import pct
+
+if TYPE_CHECKING:
+    from neural_asm.experiments.fault_sweep.run import SweepResult
 
 PAPER = {
     "neural_asm": {"detection_rate": "82-83 % (1-5 % FPR)", "isolation": "79.5 %"},
@@ -15,9 +18,9 @@ PAPER = {
 }
 
 
-def write_json(result: SweepResult, path: Path) -> None:
+def document(result: SweepResult) -> dict:
     ceiling = {k: v for k, v in result.ceilings.items() if k != "visible"}
-    doc = {
+    return {
         "episodes": {
             "faults": len(result.bench.faults),
             "demonstrations": len(result.bench.normal.demos),
@@ -30,18 +33,12 @@ def write_json(result: SweepResult, path: Path) -> None:
         "paper": PAPER,
         "methods": result.summary,
     }
-    path.write_text(json.dumps(doc, indent=2))
-
-
-def pct(x: float | None) -> str:
-    return "-" if x is None else f"{100 * x:.1f}"
-
 
 def with_interval(value: float, interval: list[float]) -> str:
     return f"{pct(value)} [{pct(interval[0])}-{pct(interval[1])}]"
 
 
-def write_markdown(result: SweepResult, path: Path) -> None:
+def markdown(result: SweepResult) -> str:
     key = f"{MAIN_FPR:.2f}"
     lines = [
         "| method | errors | detection @1/3/5 % FPR | measured FPR @1 % [95 % interval] "
@@ -75,10 +72,10 @@ def write_markdown(result: SweepResult, path: Path) -> None:
         "",
         "Paper: Neural ASM detects 82-83 % at 1-5 % FPR, isolates 79.5 %; z-score baseline 74-82 %, 41 %.",
     ]
-    path.write_text("\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"
 
 
-def write_csv(result: SweepResult, path: Path) -> None:
+def write_csv(result: SweepResult, path: Path) -> Path:
     b = result.bench
     keys = list(result.outcomes)
     with path.open("w", newline="") as f:
@@ -96,3 +93,4 @@ def write_csv(result: SweepResult, path: Path) -> None:
                 row += [int(o["first_detection_step"][i]), int(o["isolated_at_fault_step"][i]),
                         int(o["isolated_at_detection"][i]), round(float(o["peak_energy"][i]), 4)]
             writer.writerow(row)
+    return path

@@ -2,38 +2,52 @@
 
 Methods: the Neural ASM in its default (fast) configuration and in the paper's
 (faithful) one, each in offline recall cued from the first observation (the paper's
-setting) and online recall; the baselines of methods.py. Every method is scored with
+setting) and online recall; the rivals of the paper's line-up (`rivals.registry`). Every method is scored with
 raw and with precision-weighted errors; z-score baselines also with the paper's
 demonstration std.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 from tqdm.auto import tqdm
 
+from neural_asm.experiments.fault_sweep.config import PaperSweepConfig
 from neural_asm.experiments.fault_sweep.data import Benchmark, load_benchmark
-from neural_asm.experiments.fault_sweep.methods import baseline_methods
-from neural_asm.experiments.methods import Method, neural_asm_methods
+from neural_asm.experiments.methods import Method, neural_asm_methods, rival_methods
+from neural_asm.experiments.fault_sweep import report
+from neural_asm.experiments.writer import Reported, save_checkpoints
 from neural_asm.experiments.fault_sweep.metrics import WEIGHTINGS, Errors, ceilings, evaluate, weigh
 from neural_asm.pipelines.default_model import provenance_of, train_calibrated
-from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import FAITHFUL, FAST, TPCConfig
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.runtime.parallel import Parallel
+from neural_asm.rivals.registry import line_up
 
 
 @dataclass
-class SweepResult:
+class SweepResult(Reported):
     summary: dict  # method -> weighting -> metrics
     outcomes: dict  # (method, weighting) -> per-episode arrays
     ceilings: dict
     bench: Benchmark
     normaliser: Normaliser
     errors: dict  # method -> Errors
+    models: dict[str, NeuralASM] = field(default_factory=dict)  # the trained networks, saved with the report
+
+    stem: ClassVar[str] = "fault_sweep"
+    document = staticmethod(report.document)
+    table = staticmethod(report.markdown)
+
+    def files(self, out: Path) -> list[Path]:
+        """episodes.csv (every episode's outcome by method), the PNGs and the checkpoints."""
+        from neural_asm.experiments.fault_sweep.figures import write_figures  # matplotlib: only when drawing
+
+        return [report.write_csv(self, out / "episodes.csv"), *write_figures(self, out),
+                *save_checkpoints(self.models, out)]
 
 
 def method_errors(method: Method, bench: Benchmark, norm: Normaliser) -> tuple[Errors, dict | None]:
@@ -66,11 +80,7 @@ def score_methods(bench: Benchmark, methods: list[Method], norm: Normaliser) -> 
             metrics, outcome = evaluate(weigh(errors, weighting, spread), names, bench.fault_step, bench.fault_joint)
             summary[method.name][weighting] = {"family": method.family, **metrics}
             outcomes[(method.name, weighting)] = outcome
-    normal = bench.normal
-    ceiling = ceilings(norm.normalise(bench.faults.data), norm.normalise(bench.twins.data),
-                       norm.normalise(normal.precision.data), bench.faults.labels, normal.precision.labels,
-                       names, bench.fault_step, bench.fault_joint)
-    return SweepResult(summary, outcomes, ceiling, bench, norm, all_errors)
+    return SweepResult(summary, outcomes, ceilings(bench, norm), bench, norm, all_errors)
 
 
 def train_models(bench: Benchmark, configs: dict[str, TPCConfig], provenance: dict) -> dict[str, NeuralASM]:
@@ -82,17 +92,19 @@ def train_models(bench: Benchmark, configs: dict[str, TPCConfig], provenance: di
     }
 
 
-def run_sweep(data_dir: Path, out_dir: Path, paper_epochs: int = FAITHFUL.epochs, n_normal: int | None = None,
-              fast_epochs: int | None = None, *, parallel: Parallel = Parallel()) -> SweepResult:
-    bench = load_benchmark(data_dir, n_normal, parallel=parallel)
+def run_sweep(config: PaperSweepConfig) -> SweepResult:
+    """Train the default and the paper-configured network, score every method every way on the
+    same episodes."""
+    data_dir = config.data_dir()
+    bench = load_benchmark(data_dir, config.n_normal, parallel=config.parallel)
     configs = {
-        "nasm": FAST if fast_epochs is None else FAST.with_(epochs=fast_epochs),
-        "nasm_paper": FAITHFUL.with_(epochs=paper_epochs),
+        "nasm": FAST if config.fast_epochs is None else FAST.with_(epochs=config.fast_epochs),
+        "nasm_paper": FAITHFUL.with_(epochs=config.paper_epochs),
     }
     trained = train_models(bench, configs, provenance_of(bench.normal, data_dir))
-    for label, model in trained.items():
-        checkpoint.save(model, out_dir / "models" / f"{label}.safetensors")
     norm = trained["nasm"].normaliser
     methods = [m for label, model in trained.items() for m in neural_asm_methods(model, label, label)]
-    methods += baseline_methods(norm.normalise(bench.normal.demos.data), bench.normal.demos.labels)
-    return score_methods(bench, methods, norm)
+    methods += rival_methods(line_up("paper"), norm.normalise(bench.normal.demos.data), bench.normal.demos.labels, [])
+    result = score_methods(bench, methods, norm)
+    result.models = trained
+    return result

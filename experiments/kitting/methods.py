@@ -23,9 +23,9 @@ from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration, conformal_episode_threshold, estimate
 from neural_asm.models.config import SCORING
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.one_step import LinearOneStep
-from neural_asm.models.sequence_detectors import GRUOneStep, RecurrentConfig
-from neural_asm.models.templates import PerSkillZScore
+from neural_asm.rivals.one_step import LinearOneStep
+from neural_asm.rivals.sequence import GRUOneStep, RecurrentConfig
+from neural_asm.rivals.templates import PerSkillZScore
 
 RATE_HZ = 1 / PERIOD_S
 FORCE = 0  # the force norm's channel

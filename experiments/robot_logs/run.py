@@ -2,33 +2,29 @@
 simulator's own files? The paper's benchmark (20 demonstrations, held-out normal episodes,
 the 980 joint-lock faults) is written as bags (``write.py``: mixed topic rates, stamps moved
 by up to ``--jitter-s``), read back through the bag mapping (resampled to 2 Hz), and the
-default Neural ASM is trained, calibrated and scored on those exactly as ``nasm faults``
+default Neural ASM is trained, calibrated and scored on those exactly as the paper sweep
 does on the native episodes; both results are printed side by side.
 
-    python -m experiments.robot_logs.run --out runs/robot_logs
+    nasm experiments run robot_logs
 """
 
 from __future__ import annotations
 
-import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
-
 import dataclasses
-import json
 import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
-
-import typer
+from typing import ClassVar
 
 from neural_asm.experiments.fault_sweep.data import SETS, make_benchmark
 from neural_asm.experiments.methods import neural_asm_methods
 from neural_asm.experiments.fault_sweep.run import score_methods, train_models
+from neural_asm.experiments.robot_logs.config import RobotLogsConfig
 from neural_asm.experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
 from neural_asm.logs.sources import load_log_sequences
 from neural_asm.models.config import FAST
-from neural_asm.pipelines.episodes import SetMismatch, paper_sets
-from neural_asm.runtime.parallel import Parallel
-from neural_asm.runtime.home import home_path
+from neural_asm.pipelines.episodes import paper_sets
 from neural_asm.sim.episode import Episode
 
 ROWS = (("detected @1 % FPR", "detection_rate", "0.01"), ("detected @5 % FPR", "detection_rate", "0.05"),
@@ -70,36 +66,35 @@ def markdown(results: dict[str, dict], jitter_s: float) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(
-    data: Path = typer.Option(home_path("data"), help="native episode sets, simulated when missing"),
-    out: Path = typer.Option(home_path("robot_logs"), help="bags, mapping and results"),
-    jitter_s: float = typer.Option(0.002, help="largest shift of a bag time stamp (s)"),
-    epochs: int | None = typer.Option(None, help="override the default model's epochs"),
-    n_normal: int | None = typer.Option(None, min=60, help="held-out normal episodes: simulated when the data "
-                                        "folder has none (default 400); a set already there must hold this many"),
-    workers: int = typer.Option(2, min=1, help="simulation processes"),
-) -> None:
-    """Train from native files and from bags; score both on the 980 faults; write results.{json,md}."""
+@dataclass(frozen=True)
+class RobotLogsResult:
+    jitter_s: float
+    epochs: int
+    results: dict[str, dict]  # source (native, bags) -> method -> whitened metrics
+    seconds: float
+
+    stem: ClassVar[str] = "results"
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def markdown(self) -> str:
+        return markdown(self.results, self.jitter_s)
+
+    def files(self, out: Path) -> list[Path]:
+        return []
+
+
+def run_robot_logs(config: RobotLogsConfig) -> RobotLogsResult:
+    """Train from native files and from bags; score both on the 980 faults."""
     start = time.perf_counter()
-    try:
-        native = paper_sets(data, SETS, n_normal, Parallel(workers))
-    except SetMismatch as exc:
-        typer.secho(str(exc), fg="red", err=True)
-        raise typer.Exit(2) from exc
-    sources = {"native": native, "bags": through_bags(native, out / "bags", jitter_s)}
-    config = FAST if epochs is None else FAST.with_(epochs=epochs)
+    native = paper_sets(config.data_dir(), SETS, config.n_normal, config.parallel)
+    sources = {"native": native, "bags": through_bags(native, config.bag_dir, config.jitter_s)}
+    tpc = FAST if config.epochs is None else FAST.with_(epochs=config.epochs)
     results: dict[str, dict] = {}
     for name, sets in sources.items():
         bench = make_benchmark(sets)
-        model = train_models(bench, {"nasm": config}, {"source": name})["nasm"]
+        model = train_models(bench, {"nasm": tpc}, {"source": name})["nasm"]
         scored = score_methods(bench, neural_asm_methods(model, "nasm", "Neural ASM"), model.normaliser)
         results[name] = {m: w["whitened"] for m, w in scored.summary.items()}
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "results.json").write_text(json.dumps({"jitter_s": jitter_s, "epochs": config.epochs, "results": results,
-                                                  "seconds": time.perf_counter() - start}, indent=1))
-    (out / "results.md").write_text(markdown(results, jitter_s))
-    typer.echo((out / "results.md").read_text())
-
-
-if __name__ == "__main__":
-    typer.run(main)
+    return RobotLogsResult(config.jitter_s, tpc.epochs, results, time.perf_counter() - start)

@@ -12,18 +12,18 @@ mean and range over the trainings.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 
-from neural_asm.experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from neural_asm.experiments.varied.config import AblationConfig
+from neural_asm.experiments.varied.data import VariedBenchmark, benchmark_of
 from neural_asm.experiments.methods import neural_asm_methods
 from neural_asm.experiments.varied.methods import train_neural_asm
 from neural_asm.experiments.varied.outcomes import ALPHA
 from neural_asm.experiments.varied.score import score_all
+from neural_asm.experiments.writer import Document
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import FAST, PATHWAYS, PRECISE, ROBUST, TPCConfig
-from neural_asm.runtime.parallel import Parallel
 from neural_asm.sim.varied import channel_groups
 
 VARIANTS: dict[str, tuple[str, TPCConfig]] = {
@@ -64,16 +64,14 @@ VARIANTS: dict[str, tuple[str, TPCConfig]] = {
 }
 
 
-def run_ablation(data_dir: Path, context: str, epochs: int | None = None, *, names: tuple[str, ...] = (),
-                 seeds: tuple[int, ...] = (0,), parallel: Parallel = Parallel(), alpha: float = ALPHA) -> list[dict]:
+def run_ablation(config: AblationConfig) -> Document:
     """The variants of `VARIANTS` named (all if none), each trained once per seed, on the
-    benchmark's episodes (simulated when missing)."""
-    unknown = sorted(set(names) - set(VARIANTS))
-    if unknown:
-        raise ValueError(f"unknown ablation variant(s) {unknown}; known: {sorted(VARIANTS)}")
-    variants = {name: (label, config if epochs is None else config.with_(epochs=epochs))
-                for name, (label, config) in VARIANTS.items() if not names or name in names}
-    return ablate(load_varied_benchmark(data_dir, context, parallel), variants, alpha, seeds=seeds)
+    benchmark's episodes (simulated when missing): ablation.json's rows and ablation.md."""
+    epochs = config.epochs
+    variants = {name: (label, tpc if epochs is None else tpc.with_(epochs=epochs))
+                for name, (label, tpc) in VARIANTS.items() if not config.variants or name in config.variants}
+    rows = ablate(benchmark_of(config), variants, seeds=tuple(range(config.trainings)))
+    return Document("ablation", rows, ablation_markdown(rows, config.context))
 
 
 def ablate(bench: VariedBenchmark, variants: dict[str, tuple[str, TPCConfig]], alpha: float = ALPHA,

@@ -32,15 +32,18 @@ benchmark reports for every method) is the floor that no expectation of the epis
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from neural_asm.experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from neural_asm.experiments.varied.config import CeilingConfig
+from neural_asm.experiments.varied.data import VariedBenchmark, benchmark_of
 from neural_asm.experiments.varied.outcomes import ALPHA, outcomes, summary
 from neural_asm.experiments.varied.score import SETS, held_out_error
+from neural_asm.experiments.writer import Document
 from neural_asm.models.calibration import error_precision, error_spread
 from neural_asm.models.config import SCORING
 from neural_asm.models.normaliser import Normaliser
@@ -217,9 +220,12 @@ def ceiling(bench: VariedBenchmark, parallel: Parallel = Parallel(), alpha: floa
     return result
 
 
-def run_ceiling(data_dir: Path, context: str, *, parallel: Parallel = Parallel()) -> dict:
-    """``ceiling`` of the varied benchmark in ``data_dir`` (simulated there when missing)."""
-    return ceiling(load_varied_benchmark(data_dir, context, parallel), parallel, cache=data_dir)
+def run_ceiling(config: CeilingConfig) -> Document:
+    """``ceiling`` of the config's varied benchmark (simulated when missing): ceiling.json and ceiling.md."""
+    start = time.perf_counter()
+    result = ceiling(benchmark_of(config), config.parallel, cache=config.data_dir)
+    result["seconds"] = round(time.perf_counter() - start, 1)
+    return Document("ceiling", result, ceiling_markdown(result))
 
 
 def ceiling_markdown(result: dict) -> str:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +29,9 @@ from neural_asm.runtime.parallel import Parallel
 from neural_asm.sim.episode import Episode
 from neural_asm.sim.varied import channel_names, check_context, context_columns
 from neural_asm.sim.varied_sets import VARIED_KINDS, generate, jobs_for
+
+if TYPE_CHECKING:
+    from neural_asm.experiments.varied.config import VariedSets
 
 SPLIT = (150, 300)  # precision, calibration; the rest of the normal set is the test split
 
@@ -110,9 +114,15 @@ def make_benchmark(sets: dict[str, list[Episode]], context: str, dropped: dict |
         ood_success=np.array([e.success for e in sets["ood"]]), dropped=dict(dropped or {}), validation=validation)
 
 
-def load_varied_benchmark(data_dir: Path, context: str, parallel: Parallel = Parallel()) -> VariedBenchmark:
+def load_varied_benchmark(data_dir: Path, context: str, parallel: Parallel = Parallel(),
+                          split: tuple[int, int] = SPLIT) -> VariedBenchmark:
     """The benchmark in one context variant, its episode sets simulated into `data_dir` where
     missing; an unknown context is refused before any simulation starts."""
     check_context(context)
     sets, dropped = ensure_varied_sets(Path(data_dir), parallel)
-    return make_benchmark(sets, context, dropped)
+    return make_benchmark(sets, context, dropped, split)
+
+
+def benchmark_of(config: VariedSets) -> VariedBenchmark:
+    """The benchmark an experiment's config names."""
+    return load_varied_benchmark(config.data_dir, config.context, config.parallel, config.split)

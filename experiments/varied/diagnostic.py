@@ -15,23 +15,21 @@ rule is the bottleneck; if it cannot, the model's form is.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 
 from neural_asm.experiments.varied.bptt import BPTTConfig, train_bptt
-from neural_asm.experiments.varied.data import VariedBenchmark, load_varied_benchmark
+from neural_asm.experiments.varied.config import DiagnosticConfig
+from neural_asm.experiments.varied.data import VariedBenchmark, benchmark_of
 from neural_asm.experiments.methods import Method
 from neural_asm.experiments.varied.methods import train_neural_asm
 from neural_asm.experiments.varied.outcomes import ALPHA
 from neural_asm.experiments.varied.score import held_out_error, score_all
 from neural_asm.models.asm import NeuralASM, channel_precision, context_index
-from neural_asm.models.baselines import LinearOneStep as RidgeOneStep
 from neural_asm.models.config import ROBUST, TPCConfig
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.one_step import ONE_STEP_LAGS, ONE_STEP_RIDGES, delay_embed
+from neural_asm.models.one_step import ONE_STEP_LAGS, ONE_STEP_RIDGES, RidgeOneStep, delay_embed
 from neural_asm.models.tpc import TemporalPC
-from neural_asm.runtime.parallel import Parallel
 
 BPTT = BPTTConfig()
 LABEL = "diagnostic (beyond the paper): the default network trained by BPTT through its online recall"
@@ -142,12 +140,15 @@ def headline_diagnostics(bench: VariedBenchmark, norm: Normaliser, config: TPCCo
             "best_linear_not_told_the_skill": {k: pooled[k] for k in ("lags", "ridge", "held_out_mse_per_group")}}
 
 
-def run_diagnostic(data_dir: Path, context: str, seeds: tuple[int, ...] = (0, 1, 2), bptt: BPTTConfig = BPTT,
-                   hebbian: TPCConfig = ROBUST, parallel: Parallel = Parallel(),
-                   alpha: float = ALPHA) -> dict:
+def run_diagnostic(config: DiagnosticConfig, bptt: BPTTConfig = BPTT, hebbian: TPCConfig = ROBUST,
+                   alpha: float = ALPHA) -> Document:
     """Hebbian and BPTT trainings of the default network (one per seed) and the best linear
-    predictor, all measured on one context variant's episodes (simulated when missing)."""
-    bench = load_varied_benchmark(data_dir, context, parallel)
+    predictor, all measured on one context variant's episodes (simulated when missing):
+    diagnostic.json and diagnostic.md."""
+    from neural_asm.experiments.varied.diagnostic_report import diagnostic_markdown, per_group_markdown
+
+    began = time.perf_counter()
+    bench, context, seeds = benchmark_of(config), config.context, tuple(range(config.trainings))
     norm = Normaliser.fit(bench.demos.data)
     result: dict = {"context": context, "seeds": list(seeds), "bptt_config": vars(bptt),
                     "hebbian_config": hebbian.to_dict(), "visible_faults": int(bench.visible.sum()),
@@ -172,5 +173,6 @@ def run_diagnostic(data_dir: Path, context: str, seeds: tuple[int, ...] = (0, 1,
             print(f"{context} {kind} seed {seed}: held-out {row['held_out_mse']:.4f} joints "
                   f"{row['held_out_mse_per_group']['joints']:.4f} detection {row['detection']:.3f} "
                   f"({row['seconds']:.0f} s)", flush=True)
-    return result
+    result["seconds"]["total"] = round(time.perf_counter() - began, 1)
+    return Document("diagnostic", result, diagnostic_markdown([result]) + "\n" + per_group_markdown([result]))
 

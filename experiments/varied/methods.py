@@ -1,7 +1,7 @@
 """The monitors compared on the varied task, each reduced to what it expects of every step.
 
 Every method works in the Neural ASM's normalised units and is scored by the same code
-(experiments/varied/score.py). Baselines come from `models.detectors`: they may use each
+(experiments/varied/score.py). The rivals are `rivals.registry`'s varied line-up: they may use each
 episode's true skill label and the context channels of its first step (generous to them);
 the Neural ASM is told neither: it recognises the skill and reads the context from the
 observations it is cued with.
@@ -9,14 +9,12 @@ observations it is cued with.
 
 from __future__ import annotations
 
-from tqdm.auto import tqdm
-
-from neural_asm.experiments.methods import Method
+from neural_asm.experiments.methods import Method, rival_methods
 from neural_asm.experiments.varied.data import VariedBenchmark
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import TPCConfig
-from neural_asm.models.detectors import all_detectors
 from neural_asm.models.normaliser import Normaliser
+from neural_asm.rivals.registry import line_up
 
 
 def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool = True) -> NeuralASM:
@@ -34,9 +32,5 @@ def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool =
 
 
 def baseline_methods(bench: VariedBenchmark, norm: Normaliser, seed: int = 0) -> list[Method]:
-    demos = norm.normalise(bench.demos.data)
-    methods = []
-    for detector in tqdm(all_detectors(), desc="fitting baselines"):
-        detector.fit(demos, bench.demos.labels, bench.context_channels.tolist(), seed=seed)
-        methods.append(Method(detector.name, detector.label, False, detector.expected))
-    return methods
+    return rival_methods(line_up("varied"), norm.normalise(bench.demos.data), bench.demos.labels,
+                         bench.context_channels.tolist(), seed)

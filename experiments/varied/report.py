@@ -5,13 +5,16 @@ error) is printed as "-"."""
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from neural_asm.experiments.varied.run import VariedResult
+from neural_asm.experiments.formatting import num as _num
+from neural_asm.experiments.formatting import pct as _pct
+
+if TYPE_CHECKING:
+    from neural_asm.experiments.varied.run import VariedResult
 
 
 def _facts(result: VariedResult) -> dict:
@@ -25,23 +28,12 @@ def _facts(result: VariedResult) -> dict:
             "dropped_by_simulation": b.dropped}
 
 
-def write_json(result: VariedResult, path: Path, seconds: float) -> None:
-    data = {"headline": result.headline, "benchmark": _facts(result), "configs": result.configs,
-            "seconds": round(seconds, 1), "methods": result.summaries}
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data, indent=2))
-    os.replace(tmp, path)
+def document(result: VariedResult) -> dict:
+    return {"headline": result.headline, "benchmark": _facts(result), "configs": result.configs,
+            "seconds": result.seconds, "methods": result.summaries}
 
 
-def _pct(v: float | None) -> str:
-    return "-" if v is None else f"{100 * v:.1f}"
-
-
-def _num(v: float | None, digits: int = 3) -> str:
-    return "-" if v is None else f"{v:.{digits}f}"
-
-
-def write_markdown(result: VariedResult, path: Path) -> None:
+def markdown(result: VariedResult) -> str:
     h = result.headline
     lines = [f"# Varied task, {result.bench.context} context", "",
              f"The served episode threshold at {100 * h['episode_fa_target']:.0f} % (calibration split); detection of "
@@ -95,7 +87,7 @@ def write_markdown(result: VariedResult, path: Path) -> None:
     for name in order:
         err = result.summaries[name]["held_out_mse_per_group"] or {}
         lines.append(f"| {result.summaries[name]['label']} | " + " | ".join(_num(err.get(g)) for g in groups) + " |")
-    path.write_text("\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"
 
 
 def _pair_lines(h: dict) -> list[str]:

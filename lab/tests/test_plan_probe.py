@@ -3,7 +3,7 @@
 import numpy as np
 
 from lab.plan_probe import PlanOneStep, plan_features
-from neural_asm.models.one_step import TemplateResidualOneStep
+from neural_asm.rivals.one_step import TemplateResidualOneStep
 
 
 MAPS = np.random.default_rng(7).normal(size=(8, 3, 3))

@@ -4,8 +4,8 @@ import numpy as np
 
 from lab.timing_probe import GRID, TOLD, InferredSpeedPlan, ToldPlan, only, plan_context
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.one_step import TemplateResidualOneStep
-from neural_asm.models.templates import StepRidgeTemplate
+from neural_asm.rivals.one_step import TemplateResidualOneStep
+from neural_asm.rivals.templates import StepRidgeTemplate
 
 STEPS = 12
 

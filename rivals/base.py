@@ -1,4 +1,4 @@
-"""What every baseline detector shares: its interface, input checks and cross-validation folds.
+"""What every rival shares: the one `Detector` protocol and its input checks.
 
 A detector sees normalised sequences x (N, T, D) and the true skill of each (baselines may
 use it: generous to them). Some channels are context (e.g. a perceived cube pose or a place
@@ -13,7 +13,6 @@ from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-from sklearn.model_selection import StratifiedKFold
 
 from neural_asm.models.sequences import checked_array
 
@@ -30,6 +29,13 @@ class Detector(Protocol):
     def expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray: ...
 
 
+@runtime_checkable
+class Spread(Protocol):
+    """A z-score rival: also the demonstrations' per-step std of what it expects (N, T, D)."""
+
+    def spread(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray: ...
+
+
 def check_skills(skills: np.ndarray, n: int) -> np.ndarray:
     arr = np.asarray(skills)
     if arr.shape != (n,):
@@ -43,7 +49,10 @@ class DetectorBase:
     name = ""
     label = ""
 
-    def __init__(self) -> None:
+    def __init__(self, name: str | None = None) -> None:
+        """`name` renames this instance: a benchmark's own name for the rival (its results' keys)."""
+        if name is not None:
+            self.name = name
         self.skill_names: list[str] = []
         self.context_channels: np.ndarray = np.zeros(0, dtype=int)
         self.steps = 0
@@ -90,9 +99,3 @@ class DetectorBase:
     def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
-
-def episode_folds(skills: np.ndarray, seed: int, n_folds: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Train/test indices of whole episodes, every skill in every fold."""
-    smallest = np.unique(skills, return_counts=True)[1].min()
-    folds = StratifiedKFold(min(n_folds, smallest), shuffle=True, random_state=seed)
-    return list(folds.split(np.zeros(len(skills)), skills))

@@ -21,7 +21,8 @@ from sklearn.linear_model import RidgeCV
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 
-from neural_asm.models.detector_base import DetectorBase, episode_folds
+from neural_asm.models.one_step import episode_folds
+from neural_asm.rivals.base import DetectorBase
 from neural_asm.models.step_maps import apply_maps, input_features, ridge_maps, step_codes
 
 RIDGE_ALPHAS = np.logspace(-3, 4, 15)
@@ -34,9 +35,14 @@ class PerSkillZScore(DetectorBase):
 
     def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
         self.means = {s: x[skills == s].mean(axis=0) for s in self.skill_names}
+        self.stds = {s: x[skills == s].std(axis=0) for s in self.skill_names}
 
     def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
         return np.stack([self.means[s][: x.shape[1]] for s in skills])
+
+    def spread(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        """The true skill's per-step std of the demonstrations (N, T, D): the z-score denominator."""
+        return np.stack([self.stds[s][: x.shape[1]] for s in skills])
 
 
 class _SkillRegression:

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from neural_asm.models.detector_base import DetectorBase
+from neural_asm.rivals.base import DetectorBase
 
 Tensor = torch.Tensor
 
