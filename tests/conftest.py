@@ -93,3 +93,14 @@ def servable_model(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Pa
         return folder
 
     return make
+
+
+# Slow modules that build their cases when imported (schemathesis loads the OpenAPI schema of an
+# app it trains a model for): not even collected when the slow tests are deselected.
+BUILT_AT_IMPORT = {"test_service_fuzz.py"}
+
+
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
+    if collection_path.name in BUILT_AT_IMPORT and config.getoption("markexpr") == "not slow":
+        return True
+    return None

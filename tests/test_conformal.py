@@ -16,6 +16,7 @@ from neural_asm.models.conformal import (
 )
 
 
+@pytest.mark.slow  # many calibration draws
 def test_episode_threshold_keeps_the_guarantee_over_calibration_draws(rng):
     # n=100, alpha=0.1: rank ceil(101*0.9)=91, so the exact flag rate is 1-91/101=0.0990,
     # inside [alpha - 1/(n+1), alpha]. The flag rate of each threshold is exact (normal tail).
@@ -68,6 +69,7 @@ def _episodes(rng, n, sigma):
     return sigma**2 * rng.chisquare(3, (n, len(sigma)))
 
 
+@pytest.mark.slow  # many calibration draws
 def test_time_varying_threshold_keeps_the_episode_guarantee(rng):
     sigma = np.linspace(0.2, 3.0, 12)
     alpha, n_cal, draws = 0.1, 100, 2000
@@ -134,6 +136,7 @@ def test_mcnemar_exact():
         mcnemar_exact(3, -1)
 
 
+@pytest.mark.slow  # many calibration draws
 def test_the_served_episode_threshold_is_the_conformal_rank(rng):
     # 150 calibration episodes at 1 %: rank ceil(151 * 0.99) = 150, the highest peak (np.quantile's
     # "higher" method gives the 149th, which flags 2/151 of normal episodes on average, not 1/151).

@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 SCRIPT = """
@@ -22,6 +24,7 @@ for name, args in (("faults", ["faults"]), ("faults", ["faults", "--task", "vari
 """
 
 
+@pytest.mark.slow  # a fresh interpreter per command
 def test_commands_load_and_figure_commands_name_matplotlib():
     run = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
