@@ -23,6 +23,7 @@ Counting (`count_whole_runs`):
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -80,11 +81,10 @@ def replay_runs(runs: list[Path], model: NeuralASM, folder: Path, mode: str) -> 
     folders) to it with ``nasm replay``; the answers, phase by phase. Files go under ``folder``:
     the served model, the replayed runs (links), the mapping, the replay's recordings and summaries."""
     source = folder / "runs"
-    source.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(source, ignore_errors=True)  # links of an earlier run's split
+    source.mkdir(parents=True)
     for run in runs:
-        link = source / run.name
-        if not link.exists():
-            link.symlink_to(run.resolve(), target_is_directory=True)
+        (source / run.name).symlink_to(run.resolve(), target_is_directory=True)
     checkpoint.save(model, folder / "models" / f"{MODEL_NAME}.safetensors")
     mapping = folder / "whole_runs.yaml"
     mapping.write_text(yaml.safe_dump(WHOLE_RUNS_DOC, sort_keys=False))
