@@ -4,8 +4,10 @@ and summary), fed with episodes read from logs instead of simulated.
 
 Before anything is streamed, the logs are checked against the model the service will score
 them with (``/models``: its channels, and for a model trained from logs the units and clock of
-its mapping), exactly as ``nasm score`` checks them against a checkpoint: a mapping at another
-step period would otherwise give false alarms, not an error.
+its mapping), as ``nasm score`` checks them against a checkpoint: a mapping at another step period
+would otherwise give false alarms, not an error. The steps the mapping resamples an episode to
+may differ from the training mapping's (a session lasts as long as its episode), and a table
+episode padded to them is streamed without its padding.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from neural_asm.client.summary import EpisodeSummary, summary_line
 from neural_asm.client.transport import ServiceError, ServiceLost, TRANSPORTS, served_models
 from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
 from neural_asm.logs.errors import LogError
-from neural_asm.logs.sources import check_model, episode_position
+from neural_asm.logs.sources import check_model, episode_position, own_steps
 from neural_asm.models.recall import RECALL_MODES
 from neural_asm.models.sequences import Sequences
 from neural_asm.recordings import DEFAULT_DIR
@@ -29,10 +31,11 @@ from neural_asm.sim.episode import Episode
 
 
 def as_episode(seqs: Sequences, i: int) -> Episode:
-    """Episode ``i`` of logged sequences as the client's Episode; logs carry no 40 Hz world
-    trace (arm links, cube) for the 3D view, so those traces are empty."""
+    """Episode ``i`` of logged sequences as the client's Episode, its own steps only (not the samples
+    held to pad a short table episode); logs carry no 40 Hz world trace (arm links, cube) for the 3D
+    view, so those traces are empty."""
     none3, none7 = np.zeros((0, 3)), np.zeros((0, 7))
-    return Episode(observations=seqs.data[i], skill=str(seqs.labels[i]), seed=i, fault=None, disturbance=None,
+    return Episode(observations=seqs.data[i, : own_steps(seqs, i)], skill=str(seqs.labels[i]), seed=i, fault=None, disturbance=None,
                    success=False, cube_error_m=float("nan"), plan=none7, t_hi=np.zeros(0), qpos_hi=none7,
                    command_hi=none7, ee_hi=none3, cube_hi=none3, box_hi=none3, channel_names=seqs.channel_names)
 
@@ -83,7 +86,7 @@ def replay(
     summaries = []
     try:
         served = served_model(url, api_key, model)
-        check_model(seqs, tuple(served.get("channel_names", [])), served.get("provenance") or {})
+        check_model(seqs, tuple(served.get("channel_names", [])), served.get("provenance") or {}, same_length=False)
         picks = [episode_position(seqs, n) for n in episode] if episode else list(range(len(seqs.data)))
         for i in picks:
             s = replay_episode(seqs, i, url, api_key, mode, out, transport, reconnect, model=served["name"])

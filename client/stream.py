@@ -130,7 +130,7 @@ def stream_episode(
                 line = StepLine(step=k, time_s=t_k, energy=float(result["energy"]),
                                 threshold=float(result["threshold"]), fault=bool(result["fault"]),
                                 isolated_joint=result.get("isolated_joint"),
-                                inference_ms=float(result.get("inference_ms", float("nan"))))
+                                inference_ms=float(result.get("inference_ms", float("nan"))), skill=result.get("skill"))
                 rec.log_step(StepRecord(
                     step=k, observation=ep.observations[k], expected=_vector(result, "expected", names),
                     prediction=_vector(result, "prediction", names), errors=_vector(result, "errors", names),

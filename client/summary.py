@@ -17,6 +17,7 @@ class StepLine:
     fault: bool
     isolated_joint: str | None
     inference_ms: float
+    skill: str | None = None  # recognised by the service at this step
 
 
 @dataclass

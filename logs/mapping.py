@@ -102,10 +102,19 @@ class Table(_Strict):
     time_unit: Literal["s", "ms", "us", "ns"] = "s"
     episode_column: str | None = Field(None, description="one table holds many episodes, told apart "
                                        "by this column (their rows contiguous); default: one per file")
+    phases: str | None = Field(None, min_length=1, description="a label pickle beside each table listing which "
+                               "skill ran when, [(tag, (start, end)), ...]: one episode per phase with a tag > 0 "
+                               "(its skill the tag unless skill says otherwise); rows outside them are not read")
     skill: Value | None = Field(None, description="default: the file's name")
     label: Value | None = Field(None, description="the anomaly label (default: none, a normal episode)")
     normal: list[str] = Field(["normal"], description="labels that mean a normal episode")
     onset: Value | None = None
+
+    @model_validator(mode="after")
+    def _one_split(self) -> "Table":
+        if self.phases is not None and self.episode_column is not None:
+            raise ValueError("give episode_column or phases, not both: each cuts a table into episodes")
+        return self
 
 
 class Channel(_Strict):
@@ -243,8 +252,10 @@ def load_mapping(path: str | Path) -> Mapping:
     return parse_mapping(raw, str(path))
 
 
-def check_checkpoint(mapping: Mapping, channel_names: Sequence[str], provenance: dict[str, Any]) -> None:
-    """Refuse data mapped otherwise than the checkpoint's training data (channels, units, clock)."""
+def check_checkpoint(mapping: Mapping, channel_names: Sequence[str], provenance: dict[str, Any],
+                     same_length: bool = True) -> None:
+    """Refuse data mapped otherwise than the checkpoint's training data (channels, units, clock and,
+    with ``same_length``, the steps an episode is resampled to: a streamed session has no fixed length)."""
     mine, theirs = mapping.channel_names, tuple(channel_names)
     if mine != theirs:
         missing = [n for n in theirs if n not in mine]
@@ -256,7 +267,8 @@ def check_checkpoint(mapping: Mapping, channel_names: Sequence[str], provenance:
     if not trained:
         return
     before = parse_mapping(trained, "the checkpoint's mapping")
-    if (before.timing.period_s, before.timing.steps) != (mapping.timing.period_s, mapping.timing.steps):
+    steps = mapping.timing.steps if same_length else before.timing.steps
+    if (before.timing.period_s, before.timing.steps) != (mapping.timing.period_s, steps):
         raise LogError(f"the mapping resamples to {mapping.timing.steps} steps of {mapping.timing.period_s} s; "
                        f"the model was trained on {before.timing.steps} steps of {before.timing.period_s} s")
     for old, new in zip(before.channels, mapping.channels):

@@ -48,6 +48,7 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
         provenance["anomalies"] = [e.anomaly for e in episodes]
         provenance["onsets_s"] = [e.onset_s for e in episodes]
         provenance["lengths_s"] = [e.length_s for e in episodes]
+        provenance["starts_s"] = [e.start_s for e in episodes]
     return Sequences(np.stack([e.data for e in episodes]), np.array([e.label for e in episodes]),
                      mapping.channel_names, provenance=provenance)
 
@@ -70,7 +71,20 @@ def episode_position(seqs: Sequences, number: int) -> int:
                    + (f": {skipped[0]}" if skipped else f" (it has episodes {have})"))
 
 
-def check_model(seqs: Sequences, channel_names: tuple[str, ...], provenance: dict) -> None:
-    """Refuse logged sequences mapped otherwise than the model's training data (no-op for other sources)."""
+def own_steps(seqs: Sequences, i: int) -> int:
+    """How many of episode ``i``'s steps are its own: a table episode shorter than the mapping's
+    steps is padded by holding its last sample (``timing.shorter = "hold"``), other episodes are whole."""
+    lengths = seqs.provenance.get("lengths_s")
+    steps = seqs.data.shape[1]
+    if not lengths or lengths[i] is None:
+        return steps
+    period = float(seqs.provenance["mapping"]["timing"]["period_s"])
+    return min(int(round(lengths[i] / period)) + 1, steps)
+
+
+def check_model(seqs: Sequences, channel_names: tuple[str, ...], provenance: dict, same_length: bool = True) -> None:
+    """Refuse logged sequences mapped otherwise than the model's training data (no-op for other
+    sources); ``same_length=False`` for data streamed to a session, whose length is its own."""
     if "mapping" in seqs.provenance:
-        check_checkpoint(parse_mapping(seqs.provenance["mapping"], "the mapping"), channel_names, provenance)
+        check_checkpoint(parse_mapping(seqs.provenance["mapping"], "the mapping"), channel_names, provenance,
+                         same_length)

@@ -5,7 +5,8 @@ contiguous). Files are read in blocks (Parquet by row groups' batches, CSV by py
 reader, text line by line) and each block goes straight into its episode's resampler
 (``logs.resample``), so a table larger than memory is read in bounded memory. Each episode's
 skill, anomaly label and onset come from a column, the folder's name or a sidecar label pickle
-(``logs.label_pickle``), as the mapping's ``[table]`` says.
+(``logs.label_pickle``), as the mapping's ``[table]`` says. A whole run kept as one table with a
+sidecar saying which skill ran when (``phases``) is read as one episode per tagged phase.
 
 Bad input (a malformed row, a mapped column missing, time going backwards, NaN or inf, an empty
 file, a label pickle holding anything but a label) is a LogError naming the file, or with
@@ -25,7 +26,7 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from neural_asm.logs.errors import LogError
-from neural_asm.logs.label_pickle import read_anomaly
+from neural_asm.logs.label_pickle import Phase, read_anomaly, read_phases
 from neural_asm.logs.mapping import TIME_UNITS, Mapping, Table, Value
 from neural_asm.logs.recorded import Recorded
 from neural_asm.logs.resample import EpisodeResampler, Group
@@ -142,6 +143,7 @@ class _Episode:
     resampler: EpisodeResampler
     first: dict[str, Any] = field(default_factory=dict)  # skill/label columns at the first row
     onset_t: float | None = None
+    skill: str | None = None  # a tagged phase's tag
     last_t: float = -np.inf
     last_values: np.ndarray | None = None
 
@@ -177,6 +179,7 @@ class TableEpisodes:
         scale = TIME_UNITS[self.table.time_unit]
         wanted = list(dict.fromkeys([t_col, *channels, *label_cols]))
         ep_col = self.table.episode_column
+        phases = self._phases(path)
         open_: _Episode | None = None
         seen: set[Any] = set()
         rows_read = 0
@@ -194,10 +197,12 @@ class TableEpisodes:
                 r = int(np.flatnonzero(bad)[0])
                 cols = [c for j, c in enumerate(channels) if not np.isfinite(values[r, j])] or [t_col]
                 raise LogError(f"{path}: NaN, inf or an empty cell in column {cols} at data row {rows_read + r + 1}")
-            keys = block[ep_col] if ep_col else None
+            keys = block[ep_col] if ep_col else None if phases is None else phase_keys(t, phases)
             starts = [0] if keys is None else [0, *np.flatnonzero(keys[1:] != keys[:-1]) + 1]
             for a, b in zip(starts, [*starts[1:], len(t)]):
                 key = None if keys is None else keys[a]
+                if phases is not None and key < 0:  # between tagged phases
+                    continue
                 if open_ is None or key != open_.key:
                     if open_ is not None:
                         yield self._finish(open_, path)
@@ -205,12 +210,22 @@ class TableEpisodes:
                         raise LogError(f"{path}: the rows of episode {_cell_text(key)} are not contiguous")
                     seen.add(key)
                     open_ = self._open(path, key)
+                    open_.skill = None if phases is None else str(phases[key].tag)
                     open_.first = {c: block[c][a] for c in label_cols}
                 self._add(open_, t[a:b], values[a:b], block, a, b)
             rows_read += len(t)
         if open_ is None:
-            raise LogError(f"{path}: no data rows")
+            raise LogError(f"{path}: no data rows" + ("" if phases is None else " in a tagged phase"))
         yield self._finish(open_, path)
+
+    def _phases(self, path: Path) -> list[Phase] | None:
+        """The tagged phases (tag > 0) of the sidecar beside ``path``, in time order; None without ``phases``."""
+        if self.table.phases is None:
+            return None
+        sidecar = path.parent / self.table.phases
+        if not sidecar.exists():
+            raise LogError(f"{path}: no phase file {self.table.phases} beside it")
+        return sorted((p for p in read_phases(sidecar) if p.tag > 0), key=lambda p: p.start_s)
 
     def _open(self, path: Path, key: Any) -> _Episode:
         what = f"{path}" + ("" if key is None else f", episode {_cell_text(key)}")
@@ -233,7 +248,7 @@ class TableEpisodes:
             ep.resampler.add(0, pad, values=np.repeat(ep.last_values[None], len(pad), axis=0))  # type: ignore[index]
         data = ep.resampler.finish()
         start = float(ep.resampler.grid[0])  # type: ignore[index]
-        skill = self._text(self.table.skill, ep, path) or path.stem
+        skill = self._text(self.table.skill, ep, path) or ep.skill or path.stem
         label = self._text(self.table.label, ep, path)
         anomaly = None if label is None or label in self.table.normal else label
         onset = self._onset(ep, path)
@@ -278,6 +293,17 @@ class TableEpisodes:
             sidecar = path.parent / onset.sidecar
             return read_anomaly(sidecar).time_s if sidecar.exists() else None
         raise LogError("table.onset comes from a column or a sidecar label file")
+
+
+def phase_keys(t: np.ndarray, phases: list[Phase]) -> np.ndarray:
+    """(len(t),) the index of the phase holding each time (start <= t <= end), -1 outside every phase."""
+    if not phases:
+        return np.full(len(t), -1)
+    starts = np.array([p.start_s for p in phases])
+    ends = np.array([p.end_s for p in phases])
+    index = np.searchsorted(starts, t, side="right") - 1
+    inside = (index >= 0) & (t <= ends[np.maximum(index, 0)])
+    return np.where(inside, index, -1)
 
 
 def read_episodes(source: Path, mapping: Mapping, skip_bad: bool = False) -> Iterator[Recorded | str]:

@@ -287,6 +287,15 @@ class SkillStream:
         r = self.recaller
         return id(self.model), r.mode, r.cue_steps, r.t == 0, r.t < r.cue_steps
 
+    def recognised(self) -> str | None:
+        """The skill this stream's next step is recognised as: the one whose mean errors it takes out
+        (`Calibration.centre_step`). None before the first step and for calibrations without skills."""
+        cal = self.calibration
+        if cal is None or cal.error_mean is None:
+            return None
+        k = int(cal.pick(np.array([self.t]), self.misfit[None])[0])
+        return None if k < 0 else cal.skills[k]
+
     def check(self, observation: Sequence[float] | np.ndarray | Mapping[str, float]) -> np.ndarray:
         """The observation as a float vector in channel order, or a ValueError naming what is wrong.
 
@@ -332,6 +341,7 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
     model = streams[0].model
     recallers = [s.recaller for s in streams]
     steps = [r.t for r in recallers]
+    skills = [s.recognised() for s in streams]  # from the steps before this one
     batch = type(recallers[0]).stack(recallers)  # type: ignore[arg-type]
     x = model.normaliser.normalise(observations)
     expected = batch.step(x)
@@ -345,7 +355,8 @@ def step_streams(streams: Sequence[SkillStream], observations: np.ndarray) -> li
         if finite[i]:
             r.advance_as(batch, i)
             streams[i].misfit = misfits[i]
-            scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i]))
+            scores.append(StepScore(steps[i], expected_raw[i], errors[i], weighted[i], float(energies[i]), prediction[i],
+                                    skills[i]))
         else:
             scores.append(None)
     # The deciding streams' steps are decided together: isolation ranks their errors in one sort.

@@ -44,16 +44,24 @@ class Calibration:
     def key(self) -> str:
         return calibration_key(self.mode, self.cue_steps)
 
-    def centre(self, errors: np.ndarray) -> np.ndarray:
+    def centre(self, errors: np.ndarray, told: Sequence[str] | None = None) -> np.ndarray:
         """Errors (..., T, D) of whole episodes less, at each step, the mean error of the skill
         whose means explain the episode's steps before it best (the least sum of squared errors
         divided by their spreads; before any, the skills' average): the memory recognises the
-        skill by its systematic errors, as a session does step by step (`centre_step`)."""
+        skill by its systematic errors, as a session does step by step (`centre_step`).
+
+        ``told``: each episode's skill (N,), whose mean errors are taken out at every step instead:
+        an oracle that knows what a session does not, measuring what recognition costs (a skill
+        without mean errors here gets the skills' average)."""
         if self.error_mean is None:
             return errors.astype(np.float64)
         steps, width = errors.shape[-2:]
         flat = errors.reshape(-1, steps, width).astype(np.float64)
-        pick = self.recognised(flat)
+        if told is None:
+            pick = self.recognised(flat)
+        else:
+            index = [self.skills.index(s) if s in self.skills else -1 for s in np.asarray(told).astype(str)]
+            pick = np.repeat(np.array(index)[:, None], steps, axis=1)
         return (flat - self._means_at(np.arange(steps))[pick, np.arange(steps)]).reshape(errors.shape)
 
     def recognised(self, errors: np.ndarray) -> np.ndarray:
@@ -72,10 +80,15 @@ class Calibration:
         if self.error_mean is None:
             return errors, misfit
         means = self._means_at(steps)
-        pick = np.where(steps == 0, -1, misfit.argmin(axis=1))
+        pick = self.pick(steps, misfit)
         spread = self.error_std[np.minimum(steps, len(self.error_std) - 1)]
         added = (((errors[None] - means[:-1]) / spread[None]) ** 2).sum(-1).T  # (B, S)
         return errors - means[pick, np.arange(len(errors))], misfit + added
+
+    def pick(self, steps: np.ndarray, misfit: np.ndarray) -> np.ndarray:
+        """(B,) the skill (index into `skills`; -1 at the first step, before any) whose mean errors
+        centre each stream's step at `steps` (B,), given each skill's misfit to its steps before (B, S)."""
+        return np.where(steps == 0, -1, misfit.argmin(axis=1))
 
     def _means_at(self, steps: np.ndarray) -> np.ndarray:
         """Each skill's mean error at `steps` and, last, the skills' average (S + 1, len(steps), D):
@@ -83,15 +96,15 @@ class Calibration:
         means = self.error_mean[:, np.minimum(steps, len(self.error_std) - 1)]
         return np.concatenate([means, means.mean(axis=0, keepdims=True)])
 
-    def weigh(self, errors: np.ndarray) -> np.ndarray:
+    def weigh(self, errors: np.ndarray, told: Sequence[str] | None = None) -> np.ndarray:
         """Normalised errors (..., T, D), centred (`centre`), divided by their spreads: what the
         energy whitens and what isolation ranks."""
-        return self.centre(errors) / step_rows(self.error_std, errors.shape[-2])
+        return self.centre(errors, told) / step_rows(self.error_std, errors.shape[-2])
 
-    def energy(self, errors: np.ndarray) -> np.ndarray:
-        """Energy per step (..., T) of normalised errors (..., T, D)."""
+    def energy(self, errors: np.ndarray, told: Sequence[str] | None = None) -> np.ndarray:
+        """Energy per step (..., T) of normalised errors (..., T, D) (``told``: see `centre`)."""
         precision = None if self.error_precision is None else step_rows(self.error_precision, errors.shape[-2])
-        return quadratic(self.weigh(errors), precision)
+        return quadratic(self.weigh(errors, told), precision)
 
 
 def calibration_key(mode: str, cue_steps: int) -> str:

@@ -61,3 +61,4 @@ class StepScore:
     weighted_errors: np.ndarray  # (D,) errors divided by their expected spread (what isolation ranks)
     energy: float
     prediction: np.ndarray  # (D,) forecast of the next step, original units
+    skill: str | None = None  # the skill recognised at this step (`SkillStream.recognised`)

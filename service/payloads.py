@@ -41,7 +41,7 @@ def _named(names: tuple[str, ...], values: np.ndarray) -> dict[str, float]:
 
 def _timed(session: Session, o: StepOutcome) -> dict[str, Any]:
     return {"session_id": session.id, "step": o.score.step, "energy": o.score.energy,
-            "inference_ms": o.inference_ms, "batch_size": o.batch_size}
+            "inference_ms": o.inference_ms, "batch_size": o.batch_size, "skill": o.score.skill}
 
 
 def _predict(session: Session, o: StepOutcome) -> dict[str, Any]:

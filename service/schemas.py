@@ -167,6 +167,9 @@ class Timed(BaseModel):
     energy: float = Field(description="precision-weighted squared prediction error of this step")
     inference_ms: float = Field(description="server-side compute time of the batch this step ran in")
     batch_size: int = Field(description="steps computed together in that batch")
+    skill: str | None = Field(description="the skill the model recognises at this step, from the steps before it "
+                              "(the one whose calibrated mean errors it takes out); null at the first step and for "
+                              "models calibrated without skills")
 
 
 class PredictResponse(Timed):

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from kitting_fixtures import write_kitting, write_voraus
 from neural_asm.cli import app
 from neural_asm.experiments.kitting.config import KITTING_NETWORK, KittingConfig
-from neural_asm.experiments.kitting.data import MAPPING_DOC, read_segments, split_runs
+from neural_asm.experiments.kitting.data import MAPPING_DOC, WHOLE_RUNS_DOC, read_segments, split_runs
 from neural_asm.experiments.kitting.metrics import windows
 from neural_asm.experiments.kitting.run import make_sets
 from neural_asm.experiments.voraus.run import voraus_mapping_doc
@@ -29,6 +29,7 @@ def kitting(tmp_path_factory):
 
 def test_the_shipped_mappings_are_the_experiments_own():
     assert load_mapping(EXAMPLES / "baxter_kitting.toml") == parse_mapping(MAPPING_DOC, "kitting")
+    assert load_mapping(EXAMPLES / "baxter_whole_runs.toml") == parse_mapping(WHOLE_RUNS_DOC, "kitting whole runs")
     assert load_mapping(EXAMPLES / "voraus_ad.toml") == parse_mapping(voraus_mapping_doc(), "voraus")
 
 

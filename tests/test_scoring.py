@@ -105,6 +105,24 @@ def test_at_40_hz_each_skills_mean_error_is_taken_out_before_weighing(trained, s
                                               pooled.energy(errors[:1])[0, t]], rtol=1e-6)
 
 
+def test_a_stream_names_the_skill_it_recognises_and_an_oracle_may_be_told_it(trained, skills):
+    """A served step's skill is the one whose mean errors it takes out, as whole episodes are
+    centred; told each episode's skill, the calibration takes out that skill's means from step 0."""
+    train, test = skills
+    model = checkpoint.from_bytes(checkpoint.to_bytes(trained))
+    model.rate_hz = 40.0
+    cal = model.calibrate(train.data, test.data, "online", 1, labels=train.labels)
+    recognised = cal.recognised(model.errors(test.data, "online", 1))
+    for i in range(len(test.data)):
+        stream = model.stream("online", 1)
+        named = [stream.step(x).skill for x in test.data[i]]
+        assert named == [None if k < 0 else cal.skills[k] for k in recognised[i]]
+    assert named[0] is None and set(named[1:]) <= set(cal.skills)
+    assert np.abs(cal.energy(cal.error_mean, told=list(cal.skills))).max() < 1e-9
+    rotated = list(cal.skills[1:] + cal.skills[:1])
+    assert (cal.energy(cal.error_mean, told=rotated).max(axis=1) > 1e-3).all()
+
+
 def test_a_40_hz_model_calibrated_by_the_older_rule_is_told_apart(trained, skills):
     """The default model's cache recalibrates a 40 Hz checkpoint whose calibrations keep no mean errors."""
     train, test = skills

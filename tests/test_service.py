@@ -130,7 +130,7 @@ def test_predict_and_fault_match_the_model(client, episodes, reference):
             assert r["isolated_joint"].startswith("joint")
             errors = [c["error"] for c in r["ranked_channels"]]
             assert errors == sorted(errors, reverse=True) and len(errors) == 25
-        assert r["step"] == k and r["inference_ms"] > 0 and r["batch_size"] >= 1
+        assert r["step"] == k and r["inference_ms"] > 0 and r["batch_size"] >= 1 and r["skill"] == expected.skill
         assert r["energy"] == pytest.approx(expected.energy, rel=1e-4)
     client.delete(f"/sessions/{sid}")
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.mapping import Mapping, parse_mapping
-from neural_asm.logs.sources import read_mapped
+from neural_asm.logs.sources import own_steps, read_mapped
 
 PERIOD_S = 0.05
 STEPS = 120
@@ -35,11 +35,27 @@ MAPPING_DOC = {
               "label": {"sidecar": LABEL_FILE, "missing": "normal"}, "onset": {"sidecar": LABEL_FILE}},
     "channels": [{"name": n, "units": u, "column": c} for n, (u, c) in COLUMNS.items()],
 }
+# Whole runs (whole_experiment/<run>/<run>.csv beside tag_ranges.pkl): one episode per tagged skill
+# phase, at the segments' clock and units; as long as the longest phase (22.4 s here), each streamed
+# without its padding. The same mapping as examples/baxter_whole_runs.toml (a test holds them equal).
+WHOLE_RUN_STEPS = 600
+PHASES_FILE = "tag_ranges.pkl"
+ANOMALIES_FILE = "anomaly_signals.pkl"
+WHOLE_RUNS_DOC = {
+    "description": "Rethink Baxter kitting, whole runs: one episode per tagged skill phase",
+    "timing": {**MAPPING_DOC["timing"], "steps": WHOLE_RUN_STEPS},
+    "table": {"files": "*/*.csv", "time_column": 0, "time_unit": "s", "phases": PHASES_FILE},
+    "channels": MAPPING_DOC["channels"],
+}
 RUN = re.compile(r"experiment_at_(\d{4}y\d\dm\d\dd\d\dH\d\dM\d\dS)")
 
 
 def kitting_mapping() -> Mapping:
     return parse_mapping(MAPPING_DOC, "the kitting mapping")
+
+
+def whole_runs_mapping() -> Mapping:
+    return parse_mapping(WHOLE_RUNS_DOC, "the kitting whole-runs mapping")
 
 
 def run_of(origin: str) -> str:
@@ -78,7 +94,7 @@ def read_segments(scheme: Path) -> Segments:
     data = np.concatenate([p.data for p in parts])
     prov = {k: sum((p.provenance[k] for p in parts), []) for k in ("anomalies", "onsets_s", "lengths_s", "episodes")}
     onsets = np.array([-1 if o is None else int(round(o / PERIOD_S)) for o in prov["onsets_s"]])
-    lengths = np.minimum(np.round(np.array(prov["lengths_s"]) / PERIOD_S).astype(int) + 1, STEPS)
+    lengths = np.array([own_steps(p, i) for p in parts for i in range(len(p.data))])
     return Segments(data, np.concatenate([p.labels for p in parts]).astype(str), np.array(prov["anomalies"], dtype=object),
                     onsets, lengths, np.array([run_of(o) for o in prov["episodes"]]), prov["episodes"])
 

@@ -18,7 +18,7 @@ import numpy as np
 from torch import nn
 
 from neural_asm.experiments.kitting.config import KittingConfig
-from neural_asm.experiments.kitting.data import PERIOD_S, Segments
+from neural_asm.experiments.kitting.data import COLUMNS, PERIOD_S, Segments, kitting_mapping
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration, conformal_episode_threshold, estimate
 from neural_asm.models.config import SCORING
@@ -45,6 +45,9 @@ METHODS = (
     MethodInfo("nasm_one", "one Neural ASM for every skill, skill recognised (offline recall)", True, False, True),
     MethodInfo("nasm_one_online", "one Neural ASM, skill recognised (online recall)", True, False, True),
     MethodInfo("nasm_one_pooled", "one Neural ASM, one calibration for every skill (the 20 Hz default)", True, False, True),
+    MethodInfo("nasm_one_plan", "one Neural ASM, plan recall: the skill recognised at the cue", True, False, True),
+    MethodInfo("nasm_one_told", "oracle: one Neural ASM (offline), its calibration told each segment's skill", True,
+               True, True),
     MethodInfo("nasm_per_skill", "a Neural ASM per skill, told the skill", True, True, True),
     MethodInfo("template_told", "per-skill z-score template, told the skill", False, True, False),
     MethodInfo("template_nearest", "template picking the nearest skill itself", False, False, False),
@@ -92,10 +95,11 @@ def calibrated_energies(errors: Callable[[Segments], np.ndarray], sets: Sets, fp
 
 
 def fit_network(train: Segments, config: KittingConfig, seed: int) -> NeuralASM:
-    from neural_asm.experiments.kitting.data import COLUMNS
-
+    """The one network, its provenance naming the mapping its data were read through (what `nasm
+    replay` checks logs against before streaming them to it)."""
     return NeuralASM.fit(train.data, tuple(COLUMNS), config.network.with_(seed=seed), progress=False,
-                         provenance={"benchmark": "kitting", "seed": seed}, labels=train.skills, rate_hz=RATE_HZ)
+                         provenance={"benchmark": "kitting", "seed": seed, "mapping": kitting_mapping().to_dict()},
+                         labels=train.skills, rate_hz=RATE_HZ)
 
 
 def calibrate_served(model: NeuralASM, sets: Sets, mode: str, centred: bool, fprs: tuple[float, ...]) -> Calibration:
@@ -112,6 +116,17 @@ def score_network(model: NeuralASM, sets: Sets, mode: str, centred: bool, fprs: 
     cal = calibrate_served(model, sets, mode, centred, fprs)
     energies = model.score(sets.test.data, mode).energy
     return Scored(energies, _broadcast({f: cal.episode_thresholds[f] for f in fprs}, len(sets.test)))
+
+
+def score_told(model: NeuralASM, sets: Sets, mode: str, fprs: tuple[float, ...]) -> Scored:
+    """The oracle beside the served calibration (`calibrate_served`, centred, already done): each
+    segment's errors less its own skill's mean errors instead of the recognised skill's, thresholds
+    likewise; what recognising the skill costs the one network."""
+    cal = model.calibration(mode, 1)
+    assert cal is not None and cal.error_mean is not None, "calibrate_served(centred=True) first"
+    energies = cal.energy(model.errors(sets.threshold.data, mode), sets.threshold.skills)
+    thresholds = served_thresholds(energies, sets.threshold.lengths, fprs)
+    return Scored(cal.energy(model.errors(sets.test.data, mode), sets.test.skills), _broadcast(thresholds, len(sets.test)))
 
 
 def score_per_skill(sets: Sets, config: KittingConfig, seed: int, skills: tuple[str, ...]) -> Scored:

@@ -38,10 +38,14 @@ class Windows:
         return np.r_[np.ones(len(self.anomalous), bool), np.zeros(len(self.normal), bool)]
 
 
-def windows(test: Segments, config: KittingConfig, skills: tuple[str, ...], seed: int = 0) -> Windows:
-    """Anomalies (not those labelled as no anomaly) and normal segments of ``skills``; the normal
-    windows' ends drawn, per delta, from the same skill's anomaly windows (all skills' if it has none)."""
+def windows(test: Segments, config: KittingConfig, skills: tuple[str, ...], seed: int = 0,
+            anomaly_runs: tuple[str, ...] | None = None) -> Windows:
+    """Anomalies (not those labelled as no anomaly; with ``anomaly_runs``, only those of these runs)
+    and normal segments of ``skills``; the normal windows' ends drawn, per delta, from the same
+    skill's anomaly windows (all skills' if it has none)."""
     scored = np.isin(test.skills, skills)
+    if anomaly_runs is not None:
+        scored &= test.normal | np.isin(test.runs, anomaly_runs)
     anomalous = np.flatnonzero(scored & ~test.normal & ~np.isin(test.anomalies.astype(str), config.not_anomalies))
     normal = np.flatnonzero(scored & test.normal)
     rng = np.random.default_rng(seed)

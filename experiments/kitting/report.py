@@ -61,6 +61,7 @@ def markdown(result: KittingResult) -> str:
               "|---|" + "---|" * len(result.methods["nasm_one"]["per_type"])]
     for name, m in result.methods.items():
         lines.append(f"| {name} | " + " | ".join(_f(v["auroc_0.5"]) for v in m["per_type"].values()) + " |")
+    lines += _own_runs_table(result)
     p = result.paired
     lines += ["", f"## Paired: nasm_one against {p['baseline']}\n",
               f"{p['nasm_only']} items right only for the one network, {p['baseline_only']} only for {p['baseline']}; "
@@ -68,6 +69,24 @@ def markdown(result: KittingResult) -> str:
               "## Few demonstrations (skills 7-9)\n", "```", json.dumps(result.few, indent=1)[:4000], "```", "",
               "## Whole runs of the test split\n", "```", json.dumps(result.whole_runs, indent=1), "```"]
     return "\n".join(lines) + "\n"
+
+
+def _own_runs_table(result: KittingResult) -> list[str]:
+    """The headline on the anomalies of test runs only, beside all anomalies (the split is by run for
+    normal segments; anomalous ones come from every run)."""
+    n = result.counts["anomalies_from_test_runs_per_skill"]
+    skills = list(n)
+    lines = ["", f"## Anomalies of test runs only ({result.counts['anomalies_from_test_runs']} of "
+             f"{result.counts['test_anomalous_scored']}: " + ", ".join(f"skill {s}: {k}" for s, k in n.items())
+             + "), δ = 0.5 s\n",
+             "| method | AUROC all anomalies | AUROC test runs only | " + " | ".join(f"skill {s}" for s in skills)
+             + " | detected 1 % all | detected 1 % test runs only |", "|---|---|---|" + "---|" * (len(skills) + 2)]
+    for name, m in result.methods.items():
+        own = m["anomalies_from_test_runs"]
+        lines.append(f"| {name} | {_f(m['auroc']['0.5'])} | {_f(own['auroc']['0.5'])} | "
+                     + " | ".join(_f(own["per_skill_auroc"][s]) for s in skills)
+                     + f" | {_f(m['detected_1pct'])} | {_f(own['detected_1pct'])} |")
+    return lines
 
 
 def write_figures(result: KittingResult, out: Path) -> None:

@@ -1,93 +1,184 @@
-"""Whole runs of the test split, each tagged skill phase scored as one session of the served model.
+"""Whole runs of the test split through the product: the benchmark's model hosted by a real
+``nasm serve`` (`runtime.serving`), every tagged skill phase of each run streamed to it by a real
+``nasm replay`` through the whole-runs mapping (`data.WHOLE_RUNS_DOC`: one episode, so one
+session, per phase of ``tag_ranges.pkl``; the robot's task program marks each skill's start, as a
+bag's marker topic does), and the issue's ``whole_runs`` counts taken from the served answers:
+each step's fault flag and the skill the service recognised at it.
 
-A run's ``tag_ranges.pkl`` says which skill ran when (the robot's task program marks each skill's
-start, as a bag's marker topic does); each phase is one session, scored step by step as the
-service scores it (`NeuralASM.score` under the served calibration: the same energies and rule),
-the skill recognised from its steps (`Calibration.recognised`). Counting:
-- each labelled anomaly (``anomaly_signals.pkl``) is judged in the phase that holds its onset, by
-  that phase's first flag after the previous anomaly of the phase (+1 s): within 1 s of the onset
-  (either side), more than 1 s before it (early), or later/never (missed); an onset outside every
-  skill phase is counted in ``n_anomalies`` and as missed (``outside_phases`` says how many);
+Counting (`count_whole_runs`):
+- each labelled anomaly of ``anomaly_signals.pkl`` (not those labelled as no anomaly,
+  ``false_positive``) is judged in the phase that holds its onset (at a boundary two phases share,
+  the later, as the table reader cuts them), by that phase's first flag after
+  the previous anomaly of the phase (+1 s): within 1 s of the onset (either side), more than 1 s
+  before it (early), or later or never (missed); a run with several anomalies has each judged so;
+  an onset outside every tagged phase counts in ``n_anomalies`` as missed (``outside_phases``);
 - an empty label file (EOFError in the original reader) is a run without labelled anomalies: all
-  its phases count as clean phases;
-- a clean phase is one without a labelled onset; it is flagged if any step is.
+  its phases are clean;
+- a clean phase is a tagged phase without a labelled anomaly (one labelled ``false_positive``
+  included: the dataset's authors say it held none); it is flagged if any of its steps is;
+- the skill is recognised in a phase of a skill the model was trained on when the service's
+  answer at the phase's last step names the phase's tag.
 """
 
 from __future__ import annotations
 
+import json
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from neural_asm.experiments.kitting.config import KittingConfig
-from neural_asm.experiments.kitting.data import COLUMNS, PERIOD_S, Split
-from neural_asm.logs.label_pickle import read_anomalies, read_phases
+from neural_asm.experiments.kitting.data import (ANOMALIES_FILE, PERIOD_S, PHASES_FILE, WHOLE_RUNS_DOC, Split, run_of,
+                                                 whole_runs_mapping)
+from neural_asm.logs.label_pickle import Anomaly, Phase, read_anomalies, read_phases
+from neural_asm.logs.sources import read_mapped
+from neural_asm.logs.tables import phase_keys
+from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
-from neural_asm.models.fault import is_fault
+from neural_asm.models.config import SCORING
+from neural_asm.runtime.serving import serving
+
+MODEL_NAME = "kitting"
+WITHIN_S = 1.0
 
 
-def _run_table(folder: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(times, values) of a whole run's CSV, the mapped columns in order."""
-    path = folder / f"{folder.name}.csv"
-    with path.open() as f:
-        header = f.readline().rstrip("\n").split(",")
-    table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-    cols = [header.index(c) for _, c in COLUMNS.values()]
-    return table[:, 0], table[:, cols]
+@dataclass(frozen=True)
+class PhaseAnswer:
+    """What the service answered, step by step, for one replayed phase of a run."""
+
+    run: str
+    skill: str  # the phase's tag
+    start_s: float  # its first sample, on the run's clock
+    flags: np.ndarray  # (n,) the service's fault decision of each step
+    recognised: tuple[str | None, ...]  # the skill the service recognised at each step
+
+    @property
+    def times_s(self) -> np.ndarray:
+        return self.start_s + PERIOD_S * np.arange(len(self.flags))
 
 
-def score_whole_runs(scheme: Path, split: Split, model: NeuralASM, config: KittingConfig) -> dict[str, Any]:
-    fpr, mode = config.fprs[0], config.recall_mode
-    cal = model.calibration(mode, 1)
-    threshold = cal.episode_thresholds[fpr]  # type: ignore[union-attr]
-    n_runs = n_empty = 0
-    within = early = outside = 0
-    anomalies, clean, clean_flagged, recognised, tagged = 0, 0, 0, 0, 0
+@dataclass(frozen=True)
+class RunLabels:
+    """A run's tagged phases and labelled anomalies, read from its label pickles."""
+
+    phases: tuple[Phase, ...]  # tag > 0, in time order
+    anomalies: tuple[Anomaly, ...]
+
+
+def run_labels(folder: Path) -> RunLabels:
+    return RunLabels(tuple(sorted((p for p in read_phases(folder / PHASES_FILE) if p.tag > 0), key=lambda p: p.start_s)),
+                     tuple(read_anomalies(folder / ANOMALIES_FILE)))
+
+
+def replay_runs(runs: list[Path], model: NeuralASM, folder: Path, mode: str) -> list[PhaseAnswer]:
+    """Serve ``model`` with ``nasm serve`` and stream every tagged phase of ``runs`` (whole-run
+    folders) to it with ``nasm replay``; the answers, phase by phase. Files go under ``folder``:
+    the served model, the replayed runs (links), the mapping, the replay's recordings and summaries."""
+    source = folder / "runs"
+    shutil.rmtree(source, ignore_errors=True)  # links of an earlier run's split
+    source.mkdir(parents=True)
+    for run in runs:
+        (source / run.name).symlink_to(run.resolve(), target_is_directory=True)
+    checkpoint.save(model, folder / "models" / f"{MODEL_NAME}.safetensors")
+    mapping = folder / "whole_runs.yaml"
+    mapping.write_text(yaml.safe_dump(WHOLE_RUNS_DOC, sort_keys=False))
+    summaries = folder / "replayed.json"
+    with serving(folder / "models", log=folder / "serve.log") as url, (folder / "replay.log").open("wb") as log:
+        done = subprocess.run([sys.executable, "-m", "neural_asm.cli", "replay", str(source), "--mapping", str(mapping),
+                               "--url", url, "--model", MODEL_NAME, "--mode", mode, "--out", str(folder / "recordings"),
+                               "--json", str(summaries)], stdout=log, stderr=subprocess.STDOUT)
+    if done.returncode != 0:
+        raise RuntimeError(f"nasm replay exited with {done.returncode}; see {folder / 'replay.log'}")
+    return answers(json.loads(summaries.read_text()), read_mapped(source, whole_runs_mapping()).provenance)
+
+
+def answers(summaries: list[dict[str, Any]], provenance: dict[str, Any]) -> list[PhaseAnswer]:
+    """The replay's summaries (``nasm replay --json``) joined to the episodes they streamed (by
+    their number in the source): each episode's run and first sample's time."""
+    where = {n: (run_of(o), float(s)) for n, o, s in
+             zip(provenance["episode_numbers"], provenance["episodes"], provenance["starts_s"])}
+    out = []
+    for s in summaries:
+        if not s["completed"]:
+            raise RuntimeError(f"episode {s['episode']} was not replayed whole: {s.get('error')}")
+        run, start = where[s["episode"]]
+        out.append(PhaseAnswer(run, str(s["skill"]), start, np.array([step["fault"] for step in s["steps"]], bool),
+                               tuple(step.get("skill") for step in s["steps"])))
+    return out
+
+
+def count_whole_runs(answered: list[PhaseAnswer], labels: dict[str, RunLabels], known_skills: tuple[str, ...],
+                     not_anomalies: tuple[str, ...]) -> dict[str, Any]:
+    """The issue's whole-run counts (see the module's docstring for how each case is counted)."""
+    by_phase = {(a.run, _phase_of(a, labels[a.run].phases)): a for a in answered}
+    within = early = outside = n_anomalies = clean = clean_flagged = recognised = known = 0
+    several = empty = 0
     delays: list[float] = []
-    for run in split.test:
-        folder = scheme / "whole_experiment" / f"experiment_at_{run}"
-        if not folder.is_dir():
-            continue
-        n_runs += 1
-        labelled = read_anomalies(folder / "anomaly_signals.pkl")
-        n_empty += not labelled
-        phases = [p for p in read_phases(folder / "tag_ranges.pkl") if p.tag > 0]
-        t, x = _run_table(folder)
-        onsets = sorted(a.time_s for a in labelled)
-        held = {id(p): [o for o in onsets if p.start_s <= o <= p.end_s] for p in phases}
+    per_skill: dict[str, list[int]] = {}
+    for run, lab in labels.items():
+        onsets = sorted(a.time_s for a in lab.anomalies if a.label not in not_anomalies)
+        empty += not lab.anomalies
+        several += len(onsets) > 1
+        n_anomalies += len(onsets)
+        where = phase_keys(np.array(onsets), list(lab.phases))
+        held = {k: [o for o, at in zip(onsets, where) if at == k] for k in range(len(lab.phases))}
         outside += len(onsets) - sum(len(v) for v in held.values())
-        anomalies += len(onsets)
-        for p in phases:
-            rows = (t >= p.start_s) & (t <= p.end_s)
-            if rows.sum() < 2:
+        for k, phase in enumerate(lab.phases):
+            answer = by_phase.get((run, k))
+            if answer is not None and str(phase.tag) in known_skills:
+                known += 1
+                hit = answer.recognised[-1] == str(phase.tag)
+                recognised += hit
+                per_skill.setdefault(str(phase.tag), []).append(int(hit))
+            if not held[k]:
+                clean += answer is not None
+                clean_flagged += answer is not None and bool(answer.flags.any())
                 continue
-            pt = t[rows]
-            errors = model.errors(x[rows][None], mode, 1)
-            flags = is_fault(cal.energy(errors)[0], threshold)  # type: ignore[union-attr]
-            if cal.skills and str(p.tag) in cal.skills:  # type: ignore[union-attr]
-                tagged += 1
-                recognised += cal.skills[cal.recognised(errors)[0, -1]] == str(p.tag)  # type: ignore[union-attr]
-            if not held[id(p)]:
-                clean += 1
-                clean_flagged += bool(flags.any())
-                continue
-            since = p.start_s
-            for onset in held[id(p)]:
-                hits = pt[flags & (pt >= since)]
+            since = phase.start_s
+            for onset in held[k]:
+                hits = [] if answer is None else answer.times_s[answer.flags & (answer.times_s >= since)]
                 first = float(hits[0]) if len(hits) else None
-                if first is not None and first < onset - 1.0:
+                if first is not None and first < onset - WITHIN_S:
                     early += 1
-                elif first is not None and first <= onset + 1.0:
+                elif first is not None and first <= onset + WITHIN_S:
                     within += 1
                     delays.append(1000 * (first - onset))
-                since = onset + 1.0
-    return {"n_runs": n_runs, "n_anomalies": anomalies, "n_clean_phases": clean,
-            "flagged_within_1s": within / anomalies if anomalies else None,
-            "flagged_early": early / anomalies if anomalies else None,
-            "clean_phases_flagged": clean_flagged / clean if clean else None,
-            "skill_recognised": recognised / tagged if tagged else None,
-            "runs_without_labelled_anomaly": n_empty, "outside_phases": outside, "phases_of_known_skills": tagged,
-            "delay_ms_median": float(np.median(delays)) if delays else None,
-            "period_s": PERIOD_S, "fpr": fpr, "scored_as": "each tagged skill phase one session of the served model "
-            "(in process, NeuralASM.score under the served calibration; not through nasm replay)"}
+                since = onset + WITHIN_S
+
+    def share(k: int, n: int) -> float | None:
+        return k / n if n else None
+
+    return {"n_runs": len(labels), "n_anomalies": n_anomalies, "n_clean_phases": clean,
+            "flagged_within_1s": share(within, n_anomalies), "flagged_early": share(early, n_anomalies),
+            "clean_phases_flagged": share(clean_flagged, clean), "skill_recognised": share(recognised, known),
+            "n_phases_replayed": len(answered), "phases_of_known_skills": known,
+            "skill_recognised_per_skill": {s: share(sum(v), len(v)) for s, v in sorted(per_skill.items())},
+            "runs_without_labelled_anomaly": empty, "runs_with_several_anomalies": several,
+            "outside_phases": outside, "delay_ms_median": float(np.median(delays)) if delays else None}
+
+
+def _phase_of(answer: PhaseAnswer, phases: tuple[Phase, ...]) -> int:
+    """The index of the tagged phase holding the answer's first sample, as the table reader tells
+    (`logs.tables.phase_keys`: at a boundary shared by two phases, the later one)."""
+    k = int(phase_keys(np.array([answer.start_s]), list(phases))[0])
+    if k < 0:
+        raise ValueError(f"run {answer.run}: a replayed episode starting at {answer.start_s} lies in no tagged phase")
+    return k
+
+
+def score_whole_runs(config: KittingConfig, split: Split, model: NeuralASM) -> dict[str, Any]:
+    """The test runs' whole recordings through ``nasm serve`` + ``nasm replay``, counted."""
+    folders = [f for f in (config.data / "whole_experiment" / f"experiment_at_{r}" for r in split.test) if f.is_dir()]
+    answered = replay_runs(folders, model, config.out / "whole_runs", config.recall_mode)
+    calibration = model.calibration(config.recall_mode, 1)
+    known = calibration.skills if calibration is not None else ()
+    counts = count_whole_runs(answered, {run_of(f.name): run_labels(f) for f in folders}, known, config.not_anomalies)
+    return {**counts, "fpr": SCORING.default_fpr, "mode": config.recall_mode,
+            "scored_as": "each tagged skill phase one session of the benchmark's model, hosted by nasm serve and "
+                         "streamed by nasm replay through the whole-runs mapping (the service's default threshold)"}
