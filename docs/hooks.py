@@ -111,10 +111,11 @@ def service_documents() -> tuple[dict[str, Any], dict[str, Any]]:
         return app.openapi(), asyncapi.document(app.version, stream.PROTOCOL, stream.__doc__ or "")
 
 
-def on_pre_build(config: MkDocsConfig) -> None:
+def on_startup(command: str, dirty: bool) -> None:
     """``build/api-package/neural_asm``: the installed layout as links into the repository's
-    folders, where the API reference reads the package's source."""
-    root = Path(config.config_file_path).parent
+    folders, where the API reference reads the package's source. Made before the configuration
+    is read: mkdocstrings keeps only the search paths that exist then."""
+    root = Path(__file__).resolve().parents[1]
     package_dir = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
     staging = root / "build" / "api-package"
     shutil.rmtree(staging, ignore_errors=True)
