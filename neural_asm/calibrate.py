@@ -22,7 +22,6 @@ from neural_asm.data import load_sequences
 from neural_asm.memory import SkillMemory
 
 
-
 def _load(source: str, mapping: Path | None, model: NeuralASM, skip_bad: bool) -> Sequences:
     if mapping is not None:
         return read_logs(source, mapping, model, skip_bad)
@@ -48,9 +47,10 @@ def calibrate(
 ) -> None:
     """Calibrate a checkpoint's precisions and fault thresholds on held-out normal episodes."""
     try:
-        model = checkpoint.load(model_path)
+        memory = SkillMemory.load(model_path)
     except checkpoint.CheckpointError as exc:
         raise fail(exc) from None
+    model = memory.model
     seqs = _load(normal, mapping, model, skip_bad)
     if precision is None:
         spread_seqs = None
@@ -58,7 +58,6 @@ def calibrate(
     else:
         spread_seqs = _load(precision, mapping, model, skip_bad)
         source = f"precisions from {precision}, thresholds from {normal}"
-    memory = SkillMemory(model)
     try:
         report = memory.calibrate(seqs, spread_seqs, source=source)
     except ValueError as exc:
