@@ -34,27 +34,27 @@ service's). The
 same fleet unpaced (``unpaced_fleet_steps_per_s``, each step sent as soon as the last is
 answered) is the most the service takes at that rate.
 
-With ``--live`` the unpaced fleet is run, in the same run and in alternating rounds, against
-a recording service without metrics, with metrics (``metrics_vs_none``: steps/s with metrics
-over without) and with metrics and the live views (``live_vs_files``: with a served Rerun view
-and a Foxglove server over files only). Then one robot streams an episode at the model's pace
-while a Foxglove client subscribed to ``/fault`` stamps each message's arrival:
+With ``--live`` (``service_live.py``) the unpaced fleet is run, in ``--rounds`` rounds of rotating
+order, against a recording service without metrics, with metrics (``metrics_vs_none``: steps/s
+with metrics over without) and with metrics and the live views (``live_vs_files``: with a served
+Rerun view and a Foxglove server over files only): the medians of the rounds' ratios, their
+ranges as ``*_min``/``*_max``. Then one robot streams an episode at the model's pace while a
+Foxglove client subscribed to ``/fault`` stamps each message's arrival:
 ``live_lag_p50_ms``/``live_lag_p95_ms`` are from the robot's receipt of a step's answer to the
 live viewer's receipt of that step (same process, same clock). The Rerun view is fed by the
 same recorder messages, sent within ``recordings.live.LIVE_FLUSH_S``; its receipt is not timed.
 
-    python benchmarks/bench_service.py [--record] [--live] [--rate 2|40] [--steps 400] [--fleet-steps N]
-        [--sessions 1000]
+    python benchmarks/bench_service.py [--record] [--live [--rounds 9]] [--rate 2|40] [--steps 400]
+        [--fleet-steps N] [--sessions 1000]
 """
 
 import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import argparse
-import os
 import asyncio
 import gc
 import json
-import socket
+import os
 import subprocess
 import sys
 import tempfile
@@ -68,62 +68,15 @@ import orjson
 import websockets
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 
-from neural_asm.models import checkpoint
-from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import FAST
-from neural_asm.models.synthetic import make_skills
-from neural_asm.recordings.recorder import POLL_S
+from neural_asm.recordings.children import POLL_S
 from neural_asm.sim.config import RATES, SIM
+from service_harness import (FLEET, SESSION, build_model, free_port, percentiles, process_tree, start_server,
+                             stat_of, wait_until_up, warm_fleet, ws_session)
+from service_live import measure_live
 
 HERE = Path(__file__).parent
 ECHO_PADDING = 3350  # the reply is then ~3.4 kB, a 25-channel step reply's size
-CHANNELS = tuple(f"joint{i}" for i in range(1, 8)) + tuple(f"ch{i}" for i in range(18))
-FLEET = 64  # sessions stepping at once
-
-# Online recall: inference (K iterations) on every step, the costlier of the two modes; the
-# sessions say the model's rate (`main` sets it).
-SESSION: dict = {"mode": "online"}
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def percentiles(ms: list[float]) -> tuple[float, float]:
-    return float(np.percentile(ms, 50)), float(np.percentile(ms, 99))
-
-
-def build_model(folder: Path, rate: float) -> np.ndarray:
-    """Train the benchmark's model on synthetic episodes of ``rate``'s length (15 or 300 steps)."""
-    data = make_skills(n_skills=2, repetitions=10, channels=25, steps=SIM.timing.observations(rate))
-    model = NeuralASM.fit(data.data, CHANNELS, FAST.with_(epochs=60), progress=False, rate_hz=rate)
-    model.calibrate(data.data, data.data, SESSION["mode"], 1)
-    checkpoint.save(model, folder / "bench.safetensors")
-    return data.data
-
-
-def start_server(folder: Path, port: int, record: bool, extra: tuple[str, ...] = ()) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "neural_asm.service.cli", "serve", "--port", str(port), "--models-dir", str(folder),
-           "--recordings-dir", str(folder / "rec"), "--log-level", "warning", "--max-sessions", "128",
-           "--max-sessions-per-client", "128",
-           "--record" if record else "--no-record", *extra]
-    proc = subprocess.Popen(cmd)
-    wait_until_up(proc, f"http://127.0.0.1:{port}/healthz")
-    return proc
-
-
-def wait_until_up(proc: subprocess.Popen, url: str) -> None:
-    deadline = time.monotonic() + 300  # importing torch on a loaded machine can take a while
-    while time.monotonic() < deadline and proc.poll() is None:
-        try:
-            if httpx.get(url).status_code == 200:
-                return
-        except httpx.TransportError:
-            time.sleep(0.2)
-    proc.kill()
-    raise RuntimeError(f"server did not start (exit code {proc.poll()})")
 
 
 def http_latencies(url: str, episodes: np.ndarray, steps: int) -> dict[str, float]:
@@ -151,46 +104,9 @@ def http_latencies(url: str, episodes: np.ndarray, steps: int) -> dict[str, floa
     return result
 
 
-async def ws_session(
-    url: str, episodes: np.ndarray, steps: int, seed: int, connected: asyncio.Barrier | None = None
-) -> tuple[list[float], list[int]]:
-    """One client's steps, each sent after the previous reply (the first once every client of
-    ``connected`` is connected). The clients share this process's core with each other, so
-    they use orjson: parsing the ~3 kB replies is not the service's time."""
-    times, batches = [], []
-    async with websockets.connect(url) as ws:
-        await ws.recv()
-        if connected is not None:
-            await connected.wait()
-        k = 0
-        for i in range(steps):
-            if k == 0:
-                await ws.send(orjson.dumps({"type": "start", **SESSION}).decode())
-                await ws.recv()
-            x = episodes[(seed + i) % len(episodes), k].tolist()
-            t = time.perf_counter()
-            await ws.send(orjson.dumps({"type": "step", "observation": x}).decode())
-            reply = orjson.loads(await ws.recv())
-            times.append((time.perf_counter() - t) * 1e3)
-            batches.append(reply["batch_size"])
-            k = (k + 1) % episodes.shape[1]
-    return times, batches
-
-
 def tree_rss_mb(pid: int) -> float:
     """Resident memory of a process and all its descendants (the recorder process)."""
-    total, todo = 0.0, [pid]
-    while todo:
-        p = todo.pop()
-        try:
-            with open(f"/proc/{p}/statm") as f:
-                total += int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
-            for task in os.listdir(f"/proc/{p}/task"):
-                with open(f"/proc/{p}/task/{task}/children") as f:
-                    todo += [int(c) for c in f.read().split()]
-        except FileNotFoundError:
-            continue
-    return total
+    return sum(stat_of(p, "statm", 1) * os.sysconf("SC_PAGE_SIZE") / 2**20 for p in process_tree(pid))
 
 
 async def recorded_sessions(url: str, episodes: np.ndarray, n: int) -> None:
@@ -223,34 +139,6 @@ def rss_growth(url: str, pid: int, episodes: np.ndarray, sessions: int, samples:
         done.append(done[-1] + sessions // (samples - 1))
         rss.append(settled_rss_mb(pid))
     return float(np.polyfit(done, rss, 1)[0]) * 1000
-
-
-@dataclass(frozen=True)
-class Fleet:
-    steps_per_s: float  # from the moment every session is connected
-    mean_batch: float
-    connect_ms: float  # opening the connections, all at once
-
-
-async def fleet(url: str, episodes: np.ndarray, sessions: int, steps: int) -> Fleet:
-    """``sessions`` clients stepping episodes at once. Timed once all are connected: a robot
-    keeps its connection, and 64 handshakes at once would otherwise weigh on a short run."""
-    connected = asyncio.Barrier(sessions + 1)
-    start = time.perf_counter()
-    clients = [asyncio.create_task(ws_session(url, episodes, steps, s, connected)) for s in range(sessions)]
-    await connected.wait()
-    stepping = time.perf_counter()
-    results = await asyncio.gather(*clients)
-    elapsed = time.perf_counter() - stepping
-    batches = [b for _, bs in results for b in bs]
-    return Fleet(sessions * steps / elapsed, float(np.mean(batches)), (stepping - start) * 1e3)
-
-
-def warm_fleet(url: str, episodes: np.ndarray, steps: int) -> Fleet:
-    """64 sessions, measured after a 20-step fleet has warmed the server (its first sessions,
-    the allocator's pools)."""
-    asyncio.run(fleet(url, episodes, FLEET, 20))
-    return asyncio.run(fleet(url, episodes, FLEET, steps))
 
 
 @dataclass(frozen=True)
@@ -371,83 +259,6 @@ def measure(folder: Path, episodes: np.ndarray, record: bool, args: argparse.Nam
     return result
 
 
-def live_flags() -> tuple[str, ...]:
-    """Both live views, served on free loopback ports (no display here, or a viewer would pop up)."""
-    return ("--live", "--live-grpc-port", str(free_port()), "--live-web-port", str(free_port()),
-            "--foxglove", str(free_port()))
-
-
-LIVE_SETUPS = {"none": ("--no-metrics",), "metrics": ("--metrics",), "live": ("--metrics",)}
-
-
-def fleet_with(folder: Path, episodes: np.ndarray, steps: int, setup: str) -> float:
-    port = free_port()
-    extra = LIVE_SETUPS[setup] + (live_flags() if setup == "live" else ())
-    proc = start_server(folder, port, True, extra)
-    try:
-        return warm_fleet(f"ws://127.0.0.1:{port}/stream", episodes, steps).steps_per_s
-    finally:
-        proc.terminate()
-        proc.wait(30)
-
-
-async def live_lag(url: str, foxglove_url: str, episode: np.ndarray, period_s: float) -> list[float]:
-    """One robot at its pace; ms from its receipt of each answer to a Foxglove client's receipt of
-    that step on ``/fault``."""
-    answered: dict[int, float] = {}
-    arrived: dict[int, float] = {}
-    async with websockets.connect(foxglove_url, subprotocols=["foxglove.sdk.v1"]) as fox, \
-            websockets.connect(url) as ws:
-        await ws.recv()
-        await ws.send(orjson.dumps({"type": "start", **SESSION}).decode())
-        await ws.recv()
-        channel = None
-        while channel is None:  # the session's channels, advertised once its recorder opened them
-            message = await fox.recv()
-            if isinstance(message, str) and (op := orjson.loads(message))["op"] == "advertise":
-                channel = next((c["id"] for c in op["channels"] if c["topic"] == "/fault"), None)
-        await fox.send(orjson.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": channel}]}).decode())
-        await asyncio.sleep(0.5)  # subscribed before the first step
-
-        async def listen() -> None:
-            while len(arrived) < len(episode):
-                message = await fox.recv()
-                if isinstance(message, bytes) and message[0] == 1:
-                    arrived[orjson.loads(message[13:])["step"]] = time.perf_counter()
-
-        listener = asyncio.create_task(listen())
-        start = time.perf_counter()
-        for k, x in enumerate(episode.tolist()):
-            await asyncio.sleep(max(0.0, start + k * period_s - time.perf_counter()))
-            await ws.send(orjson.dumps({"type": "step", "observation": x}).decode())
-            answered[orjson.loads(await ws.recv())["step"]] = time.perf_counter()
-        await asyncio.wait_for(listener, 30)
-    return [(arrived[k] - answered[k]) * 1e3 for k in answered]
-
-
-def measure_live(folder: Path, episodes: np.ndarray, args: argparse.Namespace, rounds: int = 3) -> dict[str, float]:
-    """Fleet steps/s without metrics, with metrics, with metrics and live views, in rounds whose
-    order rotates (a shared machine's load drifts, and a server's exit may overlap the next
-    one's start); then the lag."""
-    totals = {setup: 0.0 for setup in LIVE_SETUPS}
-    order = list(LIVE_SETUPS)
-    for r in range(rounds):
-        for setup in order[r % len(order):] + order[:r % len(order)]:
-            totals[setup] += fleet_with(folder, episodes, args.fleet_steps, setup) / rounds
-    port, flags = free_port(), live_flags()
-    proc = start_server(folder, port, True, flags)
-    try:
-        lags = asyncio.run(live_lag(f"ws://127.0.0.1:{port}/stream", f"ws://127.0.0.1:{flags[-1]}", episodes[0],
-                                    1.0 / args.rate))
-    finally:
-        proc.terminate()
-        proc.wait(30)
-    return {"fleet_steps_per_s_no_metrics": totals["none"], "fleet_steps_per_s_metrics": totals["metrics"],
-            "fleet_steps_per_s_live": totals["live"], "metrics_vs_none": totals["metrics"] / totals["none"],
-            "live_vs_files": totals["live"] / totals["metrics"], "live_lag_p50_ms": float(np.percentile(lags, 50)),
-            "live_lag_p95_ms": float(np.percentile(lags, 95)), "live_lag_steps": len(lags)}
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=400, help="steps per latency measurement")
@@ -459,6 +270,7 @@ def main() -> None:
     parser.add_argument("--record", action="store_true", help="let the service record every session")
     parser.add_argument("--live", action="store_true", help="measure metrics and the live views against none, and "
                         "the live view's lag")
+    parser.add_argument("--rounds", type=int, default=9, help="rounds of the three setups with --live")
     args = parser.parse_args()
     if args.fleet_steps is None:
         args.fleet_steps = 150 if args.rate == SIM.timing.observation_hz else SIM.timing.observations(args.rate)
@@ -469,7 +281,7 @@ def main() -> None:
         gc.collect()  # the clients run in this process: no full collection over torch's objects
         gc.freeze()  # may pause every robot at once (~150 ms on a 2-core machine)
         if args.live:
-            result = measure_live(folder, episodes, args)
+            result = measure_live(folder, episodes, args.fleet_steps, args.rate, args.rounds)
         elif args.record:
             reference = measure(folder, episodes, False, args)
             result = measure(folder, episodes, True, args)

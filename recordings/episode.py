@@ -29,11 +29,6 @@ FORMATS = ("rrd", "mcap")
 class _Writer(Protocol):
     def write_step(self, r: StepRecord) -> None: ...
     def write_world(self, w: WorldRecord) -> None: ...
-    def send_live(self) -> None:
-        """Send the live view the steps it holds back (a batch of steps has arrived)."""
-        for w in self._live:
-            w.send_steps()
-
     def flush(self) -> None: ...
     def close(self) -> None: ...
 
@@ -53,7 +48,6 @@ class EpisodeRecorder:
         joints: Iterable[int] = (),
         events: bool = True,
         live: LiveViewer | None = None,
-        live_step_batch: int = 1,
         foxglove: FoxgloveLive | None = None,
     ) -> None:
         """``joints``: indices of the joint-angle channels, drawn observed against expected.
@@ -61,8 +55,8 @@ class EpisodeRecorder:
         share one, e.g. a service's sessions: see ``recorder``). ``events=False`` leaves the
         event log to another file of the same recording (the service's, which a client's file
         is opened with), so the merged view says each event once. ``live``: the same logged to
-        that viewer as it arrives (every ``live_step_batch`` steps, or at ``send_live``), with
-        its event log whatever ``events`` says (the viewer may have only this side). ``foxglove``:
+        that viewer as each step arrives, with its event log whatever ``events`` says (the viewer
+        may have only this side). ``foxglove``:
         the MCAP file's messages also sent on that Foxglove server as they are written."""
         names = tuple(channel_names)
         formats = tuple(formats)
@@ -74,16 +68,14 @@ class EpisodeRecorder:
         rrd, mcap = run_paths(folder, run_id)
         self.paths: dict[str, Path] = {}
         self._writers: list[_Writer] = []
-        self._live: list[RerunEpisode] = []  # also in _writers
         try:
             if "rrd" in formats:
                 stream = RrdFile(rrd, self.recording_id, bp.episode_blueprint() if layout else None)
                 self._writers.append(RerunEpisode(stream, names, step_period_s, tuple(joints), events))
                 self.paths["rrd"] = rrd
             if live is not None:
-                self._live.append(RerunEpisode(live.episode(self.recording_id), names, step_period_s, tuple(joints),
-                                               step_batch=live_step_batch))
-                self._writers.append(self._live[0])
+                self._writers.append(RerunEpisode(live.episode(self.recording_id), names, step_period_s,
+                                                  tuple(joints), step_batch=1))
             run = {"run_id": run_id, "recording_id": self.recording_id, "channel_names": list(names), **(metadata or {})}
             if "mcap" in formats:
                 writer = McapEpisode(McapFile(mcap), names, step_period_s)
@@ -105,11 +97,6 @@ class EpisodeRecorder:
     def log_world(self, record: WorldRecord) -> None:
         for w in self._writers:
             w.write_world(record)
-
-    def send_live(self) -> None:
-        """Send the live view the steps it holds back (a batch of steps has arrived)."""
-        for w in self._live:
-            w.send_steps()
 
     def flush(self) -> None:
         """Push what is buffered to the files, so that a crash cannot lose it."""

@@ -63,6 +63,11 @@ class FoxgloveOut:
     def foxglove_channel(self, topic: str, schema: FoxgloveSchema) -> foxglove.Channel:
         return self.live.channel(topic, schema, schema.encoding)
 
+    def wants(self, channel: foxglove.Channel) -> bool:
+        """Whether anyone subscribes to ``channel``: building a message no one receives costs the
+        recorder as much as one that someone does."""
+        return channel.has_sinks()
+
     def metadata(self, name: str, values: dict[str, Any]) -> None:
         """A file's metadata record: live, the ``/metadata`` topic says it."""
 

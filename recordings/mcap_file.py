@@ -105,6 +105,10 @@ class McapFile:
         self.writer.add_metadata(name, {k: v if isinstance(v, str) else orjson.dumps(v, option=_DUMP).decode()
                                         for k, v in values.items()})
 
+    def wants(self, channel: int) -> bool:
+        """A file keeps every message."""
+        return True
+
     def write(self, channel: int, time_ns: int, message: dict[str, Any]) -> None:
         self.write_encoded(channel, time_ns, orjson.dumps(message, option=_DUMP))
 

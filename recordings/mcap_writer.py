@@ -64,6 +64,11 @@ class McapEpisode:
     def _write(self, topic: str, time_s: float, message: dict[str, Any]) -> None:
         self.out.write(self.channels[topic], self._ns(time_s), message)
 
+    def _wanted(self, topic: str) -> bool:
+        """Whether to build ``topic``'s message: a world topic not yet registered is (its first
+        message registers it, so that a live viewer can subscribe)."""
+        return topic not in self.channels or self.out.wants(self.channels[topic])
+
     def write_metadata(self, metadata: dict[str, Any]) -> None:
         self.out.metadata("run", metadata)
         self._write(METADATA, 0.0, metadata)
@@ -76,9 +81,9 @@ class McapEpisode:
         t = r.step * self.step_period_s if r.time_s is None else r.time_s
         vectors = {"/observation": r.observation, "/expected": r.expected, "/prediction": r.prediction, "/errors": r.errors}
         for topic, values in vectors.items():
-            if values is not None:
+            if values is not None and self._wanted(topic):
                 self._write(topic, t, self._named(r.step, values))
-        if r.energy is not None:
+        if r.energy is not None and self._wanted(FAULT):
             self._write(FAULT, t, {"step": r.step, "energy": r.energy, "threshold": r.threshold, "margin": r.margin,
                                    "fault": r.fault, "isolated_joint": r.isolated_joint})
         self.out.flush()
@@ -89,11 +94,9 @@ class McapEpisode:
         if w.workcell is not None and w.workcell != self.workcell:
             self.workcell = w.workcell
             self.out.write_encoded(self._world_channel(WORKCELL), ns, foxglove_scene.workcell_update(w.workcell, stamp).encode())
-        scene = foxglove_scene.world_update(w, stamp)
-        if scene is not None:
+        if self._wanted(SCENE) and (scene := foxglove_scene.world_update(w, stamp)) is not None:
             self.out.write_encoded(self._world_channel(SCENE), ns, scene.encode())
-        transforms = _frames(w, stamp)
-        if transforms:
+        if self._wanted(TF) and (transforms := _frames(w, stamp)):
             self.out.write_encoded(self._world_channel(TF), ns, FrameTransforms(transforms=transforms).encode())
         self.out.flush()
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,3 +58,25 @@ class WorldRecord:
     cube: np.ndarray | None = None  # (3,) cube centre
     box: np.ndarray | None = None  # (3,) falling box centre, once an episode's box falls
     workcell: Workcell | None = None  # drawn once per file, from the first record carrying it
+
+
+@dataclass(frozen=True)
+class StepBatch:
+    """Scored steps of several sessions: row i belongs to the session recorded as ``keys[i]``."""
+
+    keys: list[str]
+    steps: list[int]
+    observation: np.ndarray  # (B, D), and likewise expected, prediction, errors
+    expected: np.ndarray
+    prediction: np.ndarray
+    errors: np.ndarray
+    energy: np.ndarray  # (B,), and likewise threshold, fault
+    threshold: np.ndarray
+    fault: np.ndarray
+    isolated_joint: list[str | None]
+
+    def records(self) -> Iterator[tuple[str, StepRecord]]:
+        for i, key in enumerate(self.keys):
+            yield key, StepRecord(self.steps[i], self.observation[i], self.expected[i], self.prediction[i],
+                                  self.errors[i], float(self.energy[i]), float(self.threshold[i]),
+                                  bool(self.fault[i]), self.isolated_joint[i])

@@ -11,9 +11,10 @@ layout's stream is built here and disconnected once the file has the layout, and
 Rerun also keeps each thread's current time per stream, forever; ``reset_time`` empties
 the entry of the thread that set it, which leaves ~0.2 KB per stream.
 
-The sweep flushes every live stream, so with many files open it costs more than the
-file itself. A process that opens and closes many files
-(``recorder``) calls ``defer_freeing()`` once and ``free_dropped_streams()`` now and then.
+The sweep flushes every live stream, waiting for each, so with many files open it costs more
+than the file itself. A process that opens and closes many files (``recorder``) calls
+``defer_freeing()`` once and ``free_dropped_streams()`` now and then, which sweeps only when a
+stream was dropped since the last sweep.
 """
 
 from __future__ import annotations
@@ -41,12 +42,17 @@ class RrdFile:
         with _layout_storage(blueprint) as layout:
             bindings.save(path=str(path), default_blueprint=layout, recording=self.rec.to_native(), write_footer=True)
 
+    def flush(self) -> None:
+        """Wait until what was logged is in the file (what a crash may lose)."""
+        self.rec.flush()
+
     def close(self) -> None:
         """Finish the file and free the stream; ``rec`` is gone afterwards."""
         self.rec.reset_time()
         self.rec.flush()
         self.rec.disconnect()
         del self.rec  # Python's last reference: the sweep frees only streams nobody holds
+        _dropped()
         if not _deferred:
             free_dropped_streams()
 
@@ -61,6 +67,10 @@ class LiveStream(RrdFile):
         with _layout_storage(blueprint) as layout:
             bindings.set_sinks([rr.GrpcSink(url)], default_blueprint=layout, recording=self.rec.to_native())
 
+    def flush(self) -> None:
+        """Nothing to wait for: the batcher sends within ``flush_s``, and a viewer is no file
+        that a crash could leave short (waiting spins a core while the viewer takes it)."""
+
 
 @contextlib.contextmanager
 def _layout_storage(blueprint: rrb.Blueprint) -> Iterator[Any]:
@@ -71,6 +81,7 @@ def _layout_storage(blueprint: rrb.Blueprint) -> Iterator[Any]:
     finally:
         layout.reset_time()
         layout.disconnect()  # drops the memory sink, and with it the cycle
+        _dropped()
 
 
 def _layout_stream(blueprint: rrb.Blueprint) -> rr.RecordingStream:
@@ -85,6 +96,12 @@ def _layout_stream(blueprint: rrb.Blueprint) -> rr.RecordingStream:
 
 
 _deferred = False
+_sweep_due = False  # a stream was dropped since the last sweep
+
+
+def _dropped() -> None:
+    global _sweep_due
+    _sweep_due = True
 
 
 def defer_freeing() -> None:
@@ -94,11 +111,15 @@ def defer_freeing() -> None:
 
 
 def free_dropped_streams() -> None:
-    """Free every stream only the bindings still hold (``rr.init``'s sweep).
+    """Free every stream only the bindings still hold (``rr.init``'s sweep), if one was dropped.
 
     The sweep also flushes the live streams and unsets the global recording, which is
     put back for whoever set it.
     """
+    global _sweep_due
+    if not _sweep_due:
+        return
+    _sweep_due = False
     global_recording = rr.get_global_data_recording()
     bindings.flush_and_cleanup_orphaned_recordings()
     rr.set_global_data_recording(global_recording)

@@ -64,6 +64,7 @@ class RerunEpisode:
         self.step_period_s = step_period_s
         self.ee_path: list[np.ndarray] = []
         self.pending: list[StepRecord] = []
+        self.pending_events: list[tuple[float, str, str]] = []  # (time, text, level), sent with the steps
         self.flagged_joint: str | None = None  # the isolated joint while the episode is flagged
         self.flagged = False
         self.links: np.ndarray | None = None  # the arm's latest link positions
@@ -88,7 +89,8 @@ class RerunEpisode:
             self.send_steps()
 
     def send_steps(self) -> None:
-        """Send the buffered steps, one column batch per entity."""
+        """Send the buffered steps, one column batch per entity, and their events."""
+        self._send_events()
         if not self.pending:
             return
         rows: dict[str, tuple[list[float], list[np.ndarray]]] = defaultdict(lambda: ([], []))
@@ -123,9 +125,7 @@ class RerunEpisode:
         indexes: dict[tuple[float, ...], list[rr.TimeColumn]] = {}  # entities with the same steps share them
         for path, (times, values) in rows.items():
             if (key := tuple(times)) not in indexes:
-                seconds = np.asarray(times)
-                indexes[key] = [rr.TimeColumn("step", sequence=(seconds / self.step_period_s + 1e-9).astype(np.int64)),
-                                rr.TimeColumn("time", duration=seconds)]
+                indexes[key] = self._time_columns(np.asarray(times))
             self.rrd.rec.send_columns(path, indexes=indexes[key], columns=rr.Scalars.columns(scalars=np.stack(values)))
 
     def _log_event(self, r: StepRecord, t: float) -> None:
@@ -133,16 +133,32 @@ class RerunEpisode:
         when the isolated joint changes."""
         if not r.fault or (self.flagged and r.isolated_joint == self.flagged_joint):
             return
-        self._set_time(t)
-        if not self.flagged:
-            text = (f"fault detected at step {r.step}: energy {r.energy:.4g} > threshold {r.threshold:.4g}; "
-                    f"isolated joint: {r.isolated_joint or 'none'}")
-        else:
-            text = f"step {r.step}: isolated joint now {r.isolated_joint or 'none'}"
-        if self.events:
-            self.rrd.rec.log(bp.EVENTS, rr.TextLog(text, level="WARN" if not self.flagged else "INFO"))
+        if self.events:  # a log call per event costs as much as a column send of many
+            if not self.flagged:
+                text = (f"fault detected at step {r.step}: energy {r.energy:.4g} > threshold {r.threshold:.4g}; "
+                        f"isolated joint: {r.isolated_joint or 'none'}")
+            else:
+                text = f"step {r.step}: isolated joint now {r.isolated_joint or 'none'}"
+            self.pending_events.append((t, text, "WARN" if not self.flagged else "INFO"))
         self.flagged, self.flagged_joint = True, r.isolated_joint
-        self._mark_faulty_joint()
+        if self.links is not None:  # the marker moves at the event's time
+            self._set_time(t)
+            self._mark_faulty_joint()
+
+    def _send_events(self) -> None:
+        if not self.pending_events:
+            return
+        seconds = np.asarray([t for t, _, _ in self.pending_events])
+        texts = [text for _, text, _ in self.pending_events]
+        levels = [level for _, _, level in self.pending_events]
+        self.pending_events = []
+        self.rrd.rec.send_columns(bp.EVENTS, indexes=self._time_columns(seconds),
+                                  columns=rr.TextLog.columns(text=texts, level=levels))
+
+    def _time_columns(self, seconds: np.ndarray) -> list[rr.TimeColumn]:
+        """The step and time timelines of rows at ``seconds``."""
+        return [rr.TimeColumn("step", sequence=(seconds / self.step_period_s + 1e-9).astype(np.int64)),
+                rr.TimeColumn("time", duration=seconds)]
 
     def _faulty_row(self) -> int | None:
         """The link-position row of the isolated joint (row i + 1 for the i-th joint channel)."""
@@ -197,9 +213,9 @@ class RerunEpisode:
                                    fill_mode="solid"))
 
     def flush(self) -> None:
-        """Send the buffered steps and wait until they are in the file."""
+        """Send the buffered steps and wait until they are in the file (not for a live view)."""
         self.send_steps()
-        self.rrd.rec.flush()
+        self.rrd.flush()
 
     def close(self) -> None:
         try:

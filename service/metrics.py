@@ -2,8 +2,8 @@
 
 Every name starts ``nasm_``. Counters and the latency histogram are updated as things happen
 (a step costs three updates, a few microseconds); the gauges (sessions open, the recorder's
-backlog, records dropped, checkpoints refused) are read from the service's state at each
-scrape. Labels are model names and status codes only: never a session id, a client address or
+backlog, records dropped, steps the live view skipped, checkpoints refused) are read from the
+service's state at each scrape. Labels are model names and status codes only: never a session id, a client address or
 anything a client sent, so the page tells an operator how the service does, not what its
 clients stream. Each app has a registry of its own (tests and benchmarks run several in one
 process).
@@ -47,6 +47,9 @@ class _StateGauges(Collector):
         yield CounterMetricFamily("nasm_records_dropped", "scored steps whose records were lost (the recorder "
                                   "process died or refused them); the steps were answered all the same",
                                   value=dropped)
+        yield CounterMetricFamily("nasm_live_steps_dropped", "scored steps the live Rerun view skipped because it "
+                                  "fell behind (the files have them)",
+                                  value=0 if recorder is None else recorder.live_dropped_steps)
         yield GaugeMetricFamily("nasm_checkpoints_refused", "checkpoints of the models folder refused at load "
                                 "(failed a check; listed as broken by GET /models)", value=len(state.registry.broken))
 

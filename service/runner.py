@@ -37,7 +37,8 @@ import numpy as np
 from neural_asm.models.asm import StreamStep, step_streams
 from neural_asm.models.fault import FaultDecision
 from neural_asm.models.scoring import StepScore
-from neural_asm.recordings.recorder import RecorderProcess, StepBatch
+from neural_asm.recordings.recorder import RecorderProcess
+from neural_asm.recordings.records import StepBatch
 from neural_asm.service.errors import BadObservation, ShuttingDown
 from neural_asm.service.sessions import Session
 
