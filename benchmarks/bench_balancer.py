@@ -35,7 +35,7 @@ import numpy as np
 import orjson
 import websockets
 
-from bench_service import SESSION, build_model, free_port, wait_until_up, warm_fleet
+from service_harness import SESSION, build_model, free_port, wait_until_up, warm_fleet
 from neural_asm.recordings.readers import read_mcap
 from neural_asm.sim.config import SIM
 

@@ -39,7 +39,8 @@ from neural_asm.models.kernels import compile_now
 from neural_asm.models.recall import Recaller
 from neural_asm.models.tpc import TemporalPC
 from neural_asm.pipelines.episodes import as_sequences
-from neural_asm.sim.dataset import demonstrations, held_out_normal, run_jobs
+from neural_asm.sim.paper import PAPER, demonstrations, held_out_normal
+from neural_asm.sim.runner import run_jobs
 
 
 def reference_epoch_ms(data: np.ndarray, epochs: int = 2) -> float:
@@ -138,10 +139,10 @@ def main() -> None:
                         help="training seeds of the default model for quality")
     args = parser.parse_args()
 
-    demos, _ = run_jobs(demonstrations(10), workers=2, desc="demonstrations")
-    held_out, _ = run_jobs(held_out_normal(60), workers=2, desc="held-out episodes")
-    demos_40hz, _ = run_jobs([replace(job, rate=40) for job in demonstrations(10)], workers=2, desc="demonstrations, 40 Hz")
-    held_out_40hz, _ = run_jobs([replace(job, rate=40) for job in held_out_normal(60)], workers=2,
+    demos, _ = run_jobs(PAPER, demonstrations(10), workers=2, desc="demonstrations")
+    held_out, _ = run_jobs(PAPER, held_out_normal(60), workers=2, desc="held-out episodes")
+    demos_40hz, _ = run_jobs(PAPER, [replace(job, rate=40) for job in demonstrations(10)], workers=2, desc="demonstrations, 40 Hz")
+    held_out_40hz, _ = run_jobs(PAPER, [replace(job, rate=40) for job in held_out_normal(60)], workers=2,
                                 desc="held-out episodes, 40 Hz")
     train = as_sequences(demos)
     validation = as_sequences(held_out[:20])

@@ -11,7 +11,8 @@ import os
 import resource
 import time
 
-from neural_asm.sim.dataset import demonstrations, faults, run_jobs
+from neural_asm.sim.paper import PAPER, demonstrations, faults
+from neural_asm.sim.runner import run_jobs
 
 
 def _children_cpu() -> float:
@@ -22,10 +23,10 @@ def _children_cpu() -> float:
 def main() -> None:
     workers = 2
     t0 = time.perf_counter()
-    demos, demo_failures = run_jobs(demonstrations(), workers, desc="demos")
+    demos, demo_failures = run_jobs(PAPER, demonstrations(), workers, desc="demos")
     t_demos = time.perf_counter() - t0
     t0, cpu0 = time.perf_counter(), _children_cpu()
-    sweep, sweep_failures = run_jobs(faults(), workers, desc="faults")
+    sweep, sweep_failures = run_jobs(PAPER, faults(), workers, desc="faults")
     sweep_seconds = time.perf_counter() - t0
     cpu_per_episode = (_children_cpu() - cpu0) / len(sweep)  # workers' CPU, incl. their start-up
     print(json.dumps({

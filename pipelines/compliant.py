@@ -19,7 +19,7 @@ The client's demo and the correction experiment both gate the correction with
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -32,10 +32,8 @@ from neural_asm.models.recall import NETWORK_MODES
 from neural_asm.pipelines.default_model import ensure_default_model, model_name
 from neural_asm.sim.config import SIM
 from neural_asm.sim.control import PlanCorrection, execute_recalled
-from neural_asm.sim.disturbances import FallingObject
 from neural_asm.sim.episode import Episode
-from neural_asm.sim.faults import FaultSpec
-from neural_asm.sim.runner import first_observation
+from neural_asm.sim.paper import Job, first_observation
 from neural_asm.sim.skills import SKILLS
 
 CONTROLLER = "compliant"
@@ -93,8 +91,9 @@ def undisturbed(model: NeuralASM, controller: str, seeds: MonitorSeeds,
     planner = planner_of(model, planner)
 
     def normal(first: int) -> np.ndarray:
-        return np.stack([execute_recalled(recall_plan(planner, skill_of(s), s), skill_of(s), s, None, controller,
-                                          rate=model.rate_hz).observations for s in range(first, first + seeds.per_split)])
+        return np.stack([execute_recalled(recall_plan(planner, skill_of(s), s),
+                                          Job(skill_of(s), s, rate=model.rate_hz, controller=controller)).observations
+                         for s in range(first, first + seeds.per_split)])
 
     return normal(seeds.first), normal(seeds.first + seeds.per_split)
 
@@ -128,16 +127,24 @@ class ServedMonitor:
         return self.flags[-1]
 
 
-def compliant_episode(model: NeuralASM, skill: str, seed: int, hit: FallingObject | None, fault: FaultSpec | None,
-                      corrected: bool, mode: str, fpr: float,
+@dataclass(frozen=True)
+class Gate:
+    """What gates a correction: the served monitor's recall mode and false-positive rate."""
+
+    mode: str
+    fpr: float = SCORING.default_fpr
+
+
+def compliant_episode(model: NeuralASM, job: Job, gate: Gate | None = None,
                       planner: NeuralASM | None = None) -> tuple[Episode, PlanCorrection | None]:
     """The plan `planner` (default: the monitor `model`) recalls from the first observation,
-    executed under compliant control and observed at `model`'s rate; with `corrected`, the
-    correction engages once the served monitor has kept flagging for the confirmation time of
-    its rate (`SIM.correction.confirm_at`)."""
-    correction = PlanCorrection(SIM.correction, ServedMonitor(model, mode, fpr), model.rate_hz) if corrected else None
-    plan = recall_plan(planner_of(model, planner), skill, seed)
-    episode = execute_recalled(plan, skill, seed, correction, CONTROLLER, hit, fault, rate=model.rate_hz)
+    executed as `job` (its scene, fault, disturbance) under compliant control and observed at
+    `model`'s rate; with a `gate`, the correction engages once the served monitor has kept
+    flagging for the confirmation time of its rate (`SIM.correction.confirm_at`)."""
+    correction = None if gate is None else PlanCorrection(SIM.correction, ServedMonitor(model, gate.mode, gate.fpr),
+                                                          model.rate_hz)
+    plan = recall_plan(planner_of(model, planner), job.skill, job.seed)
+    episode = execute_recalled(plan, replace(job, controller=CONTROLLER, rate=model.rate_hz), correction)
     return episode, correction
 
 

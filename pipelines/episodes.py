@@ -18,7 +18,10 @@ import numpy as np
 from neural_asm.models.sequences import Sequences
 from neural_asm.runtime.parallel import Parallel
 from neural_asm.sim.config import SIM
-from neural_asm.sim.dataset import generate, jobs_for, load_episodes, run_jobs, set_folder
+from neural_asm.sim.dataset import generate, load_episodes, set_folder
+from neural_asm.sim.paper import PaperTask
+from neural_asm.sim.runner import run_jobs
+from neural_asm.sim.task import SetSizes
 from neural_asm.sim.episode import Episode
 
 MIN_HELD_OUT = 60
@@ -49,9 +52,10 @@ def as_sequences(episodes: list[Episode], columns: np.ndarray | None = None,
 
 def simulated_episodes(kind: str = "demos", n_demos: int = 10, n_normal: int = 200,
                        rate_hz: float = SIM.timing.observation_hz, workers: int = 2) -> list[Episode]:
-    """Simulate one of the paper task's episode sets (``neural_asm.sim.dataset.KINDS``: ``demos``, ``normal``,
+    """Simulate one of the paper task's episode sets (``neural_asm.sim.paper.KINDS``: ``demos``, ``normal``,
     ``faults``...); the episodes MuJoCo could not run are left out with a warning."""
-    episodes, dropped = run_jobs(jobs_for(kind, n_demos, n_normal, rate_hz), workers, desc=kind)
+    task = PaperTask(rate_hz)
+    episodes, dropped = run_jobs(task, task.jobs(kind, SetSizes(n_demos, n_normal)), workers, desc=kind)
     for message in dropped:
         warnings.warn(f"left out: {message}", stacklevel=2)
     return episodes
@@ -107,7 +111,7 @@ def ensure_sets(data_dir: Path, kinds: tuple[str, ...], simulate: Simulate) -> d
 
 def paper_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int | None = None,
                parallel: Parallel = Parallel(), rate: float = SIM.timing.observation_hz) -> dict[str, list[Episode]]:
-    """The paper task's sets (sim/dataset.py) observed at `rate`, simulated where missing
+    """The paper task's sets (sim/paper.py) observed at `rate`, simulated where missing
     (`n_normal` held-out normal episodes, `DEFAULT_N_NORMAL` when None). The sets already there
     are checked before anything is simulated: one at another rate is refused (a folder holds one
     rate: `sim.dataset.set_folder`), and so is a normal set of another size than an `n_normal`
@@ -123,9 +127,9 @@ def paper_sets(data_dir: Path, kinds: tuple[str, ...], n_normal: int | None = No
                           f"{n_normal} asked for: give another data folder (the other sets can be linked into it) "
                           f"or move that file away to simulate {n_normal}")
     missing = tuple(kind for kind in kinds if kind not in found)
+    sizes = SetSizes(n_normal=n_normal or DEFAULT_N_NORMAL)
     sets = found | ensure_sets(folder, missing, lambda kind, into: generate(
-        kind, into, workers=parallel.workers, n_normal=n_normal or DEFAULT_N_NORMAL, backend=parallel.backend,
-        rate=rate))
+        PaperTask(rate), kind, into, sizes, parallel.workers, parallel.backend))
     return {kind: sets[kind] for kind in kinds}
 
 

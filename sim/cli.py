@@ -59,16 +59,17 @@ def demos(
 ) -> None:
     """Simulate episode sets and write <out>/<set>.mcap and <set>.npz."""
     from neural_asm.sim.dataset import generate, load_episodes, set_folder
+    from neural_asm.sim.paper import PaperTask
+    from neural_asm.sim.task import SetSizes
 
     if task == Task.varied:
         if rate != SIM.timing.observation_hz:
             raise typer.BadParameter(f"the varied task is observed at {SIM.timing.observation_hz:g} Hz only", param_hint="--rate")
-        from neural_asm.sim import varied_sets
+        from neural_asm.sim.varied_sets import VARIED
 
         out = out or home_path("data_varied")
-        for kind in varied_sets.VARIED_KINDS:
-            sizes = {"n_demos": n_demos} if kind == "demos" and n_demos is not None else {}
-            path, failures = varied_sets.generate(kind, out, workers, backend, **sizes)
+        for kind in VARIED.kinds:
+            path, failures = generate(VARIED, kind, out, SetSizes(n_demos=n_demos), workers, backend)
             typer.echo(f"varied {kind}: {len(load_episodes(path))} episodes -> {path} "
                        f"({len(failures)} refused by the simulation: velocity limits or IK)")
         return
@@ -77,7 +78,7 @@ def demos(
     kinds = {"demos": ["demos"], "normal": ["normal"], "faults": ["faults", "twins"], "hits": ["hits", "hit_twins"],
              "all": ["demos", "normal", "faults", "twins"]}[sets.value]
     for kind in kinds:
-        path, failures = generate(kind, out, workers, 10 if n_demos is None else n_demos, n_normal, backend, rate)
+        path, failures = generate(PaperTask(rate), kind, out, SetSizes(n_demos, n_normal), workers, backend)
         episodes = load_episodes(path)
         placed = sum(e.success for e in episodes)
         typer.echo(f"{kind}: {len(episodes)} episodes at {rate} Hz -> {path} "

@@ -174,7 +174,7 @@ class ElbowHit:
     # The client demo's hit (`nasm client --falling-object`): the compliant arm alone drops the
     # cube on one skill there, and the correction places it.
     demo_momentum: float = 40.0
-    # The falling-object set of the fault sweep (`sim.dataset`): these momenta (kg m/s), each on
+    # The falling-object set of the fault sweep (`sim.paper`): these momenta (kg m/s), each on
     # `set_seeds` seeds, skills alternating.
     set_momenta: tuple[float, ...] = (20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0)
     set_seeds: int = 14
@@ -187,7 +187,7 @@ class Seeds:
     demos: int = 0
     held_out: int = 10_000
     faults: int = 100_000
-    hits: int = 150_000  # the falling-object set (`sim.dataset`): hits and their twins
+    hits: int = 150_000  # the falling-object set (`sim.paper`): hits and their twins
     client: int = 50_000  # episodes the streaming client runs: none of the sets above
 
 

@@ -44,12 +44,11 @@ from typing import Callable
 import numpy as np
 
 from neural_asm.sim.channels import GRIPPER_CHANNEL, JOINT_CHANNELS
-from neural_asm.sim.config import SIM, ControllerKind, CorrectionGains
-from neural_asm.sim.disturbances import FallingObject
+from neural_asm.sim.config import SIM, CorrectionGains
 from neural_asm.sim.episode import Episode
-from neural_asm.sim.faults import FaultSpec
 from neural_asm.sim.panda import TAU_MAX, dh_forward
-from neural_asm.sim.runner import N_JOINTS, ControlState, execute_plan, seed_variation
+from neural_asm.sim.paper import Job, execute_plan, seed_variation
+from neural_asm.sim.runner import N_JOINTS, ControlState
 from neural_asm.sim.skills import DOWN, PRECISE_STEPS, shared_ik, skill_spec, waypoints
 
 Detector = Callable[[np.ndarray], bool]  # observations so far (k + 1, 25) -> fault at observation k?
@@ -144,18 +143,14 @@ class PlanCorrection:
             self.flagged_since = None
 
 
-def execute_recalled(recalled: np.ndarray, skill: str, seed: int, correction: PlanCorrection | None = None,
-                     controller: ControllerKind | None = None, disturbance: FallingObject | None = None,
-                     fault: FaultSpec | None = None, rate: float = SIM.timing.observation_hz) -> Episode:
-    """Execute a memory's recalled (15, 25) sequence (the skill layer's 2 Hz steps) for `seed`'s
-    scene, anchored to its cube and goal, observed at `rate` (2 or 40 Hz).
+def execute_recalled(recalled: np.ndarray, job: Job, correction: PlanCorrection | None = None) -> Episode:
+    """Execute a memory's recalled (15, 25) sequence (the skill layer's 2 Hz steps) as `job`'s
+    episode (its scene, fault, disturbance, controller and rate), anchored to its cube and goal.
 
     `correction` (a fresh `PlanCorrection` per run; None: uncorrected) is the tick hook, and the
-    caller keeps it to read when it engaged or let go; `controller` defaults to
-    `SIM.controller`. This is the one call a demo needs: recall from the episode's first
-    observation, then this.
+    caller keeps it to read when it engaged or let go. This is the one call a demo needs:
+    recall from the episode's first observation, then this.
     """
     joints, gripper = plan_from_recall(recalled)
-    joints = anchor_plan(joints, skill, seed_variation(skill, seed).cube_xy)
-    return execute_plan(joints, gripper, seed, correction_hook=correction, disturbance=disturbance, skill=skill,
-                        fault=fault, controller=controller, rate=rate)
+    joints = anchor_plan(joints, job.skill, seed_variation(job.skill, job.seed).cube_xy)
+    return execute_plan(joints, gripper, job, correction)

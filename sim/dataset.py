@@ -1,17 +1,8 @@
 """Episode sets and their files: MCAP as the source of truth, a `.npz` cache beside it.
 
-Sets (seed ranges from `sim.config.Seeds`, disjoint so no fault or held-out episode reuses a
-demonstration's variation):
-
-- `demos`: 10 demonstrations per skill, seeds 0..9;
-- `normal`: held-out normal episodes for threshold calibration, seeds 10000..;
-- `faults`: the paper's 980 joint-lock faults, each with its own seed 100000 + i;
-- `twins`: the same 980 seeds without a fault, so what a fault changes can be measured exactly;
-- `hits`: the falling object on the elbow during the carry (`SIM.hit.set_momenta`, 20-80 kg m/s,
-  each on `SIM.hit.set_seeds` seeds from 150000), and `hit_twins`, the same seeds without it.
-
-Every set can be observed at 2 Hz (the paper's skill layer) or at 40 Hz (every control tick):
-the rate is the episodes' `rate_hz`, and a set folder holds one rate (`set_folder`).
+A task's sets (`sim.paper`, `sim.varied_sets`) are simulated by `generate`. Every set of the
+paper's task can be observed at 2 Hz or at 40 Hz: the rate is the episodes' `rate_hz`, and a set
+folder holds one rate (`set_folder`).
 
 File format, one `<set>.mcap` per set (JSON-schema channels, zstd chunks):
 
@@ -31,7 +22,6 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,15 +29,14 @@ import orjson
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from neural_asm.runtime.parallel import Backend
 from neural_asm.sim.config import SIM
-from neural_asm.sim.disturbances import FallingObject, elbow_hit
+from neural_asm.sim.disturbances import FallingObject
 from neural_asm.sim.episode import Episode
-from neural_asm.sim.faults import FaultSpec, fault_grid
-from neural_asm.runtime.parallel import Backend, parallel_map
-from neural_asm.sim.skills import SKILLS
+from neural_asm.sim.faults import FaultSpec
+from neural_asm.sim.task import SetSizes, Task
 from neural_asm.sim.varied_faults import VariedFault
 
-KINDS = ("demos", "normal", "faults", "twins", "hits", "hit_twins")
 HI_RATE = ("t_hi", "qpos_hi", "command_hi", "ee_hi", "cube_hi", "box_hi")
 EPISODE_SCHEMA = {
     "title": "nasm.Episode", "type": "object",
@@ -65,77 +54,11 @@ OBSERVATION_SCHEMA = {
 }
 
 
-@dataclass(frozen=True)
-class Job:
-    """One episode to run."""
-
-    skill: str
-    seed: int
-    fault: FaultSpec | None = None
-    disturbance: FallingObject | None = None
-    rate: float = SIM.timing.observation_hz  # observations per second (sim.config.RATES)
-
-
 def set_folder(rate: float) -> str:
     """The data home's folder of the paper task's sets observed at `rate`: `data` at 2 Hz, as
     ever, `data_40hz` at 40 Hz."""
     SIM.timing.ticks_per_observation(rate)  # a ValueError for a rate episodes cannot be observed at
     return "data" if rate == SIM.timing.observation_hz else f"data_{rate:g}hz"
-
-
-def demonstrations(n_per_skill: int = 10) -> list[Job]:
-    return [Job(skill, SIM.seeds.demos + i) for skill in SKILLS for i in range(n_per_skill)]
-
-
-def held_out_normal(n: int = 200) -> list[Job]:
-    return [Job(SKILLS[i % len(SKILLS)], SIM.seeds.held_out + i) for i in range(n)]
-
-
-def faults() -> list[Job]:
-    return [Job(skill, SIM.seeds.faults + i, spec) for i, (skill, spec) in enumerate(fault_grid())]
-
-
-def twins() -> list[Job]:
-    return [Job(job.skill, job.seed) for job in faults()]
-
-
-def hits() -> list[Job]:
-    """The falling object on the elbow at each of `SIM.hit.set_momenta`, skills alternating over seeds."""
-    momenta, n = SIM.hit.set_momenta, SIM.hit.set_seeds
-    return [Job(SKILLS[i % len(SKILLS)], SIM.seeds.hits + i, disturbance=elbow_hit(momenta[i // n]))
-            for i in range(len(momenta) * n)]
-
-
-def hit_twins() -> list[Job]:
-    return [Job(job.skill, job.seed) for job in hits()]
-
-
-def jobs_for(kind: str, n_demos: int = 10, n_normal: int = 200, rate: float = SIM.timing.observation_hz) -> list[Job]:
-    """The jobs of set `kind` (one of KINDS), observed at `rate`."""
-    table = {"demos": lambda: demonstrations(n_demos), "normal": lambda: held_out_normal(n_normal),
-             "faults": faults, "twins": twins, "hits": hits, "hit_twins": hit_twins}
-    if kind not in table:
-        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    SIM.timing.ticks_per_observation(rate)
-    return [Job(job.skill, job.seed, job.fault, job.disturbance, rate) for job in table[kind]()]
-
-
-def run_job(job: Job) -> Episode | str:
-    """Run one job; a failed episode comes back as its error message (never as data)."""
-    from neural_asm.sim.runner import SimulationError, run_episode
-    from neural_asm.sim.skills import PlanError
-
-    try:
-        return run_episode(job.skill, job.seed, job.fault, job.disturbance, rate=job.rate)
-    except (SimulationError, PlanError) as err:
-        return f"{job.skill} seed {job.seed}: {err}"
-
-
-def run_jobs(jobs: list[Job], workers: int = 2, desc: str = "episodes",
-             backend: Backend = "processes") -> tuple[list[Episode], list[str]]:
-    """Run jobs over `workers` processes or on Ray (in order), with a progress bar."""
-    results = parallel_map(run_job, [(job,) for job in jobs], workers, backend, desc=desc, unit="ep", chunksize=8)
-    return [r for r in results if isinstance(r, Episode)], [r for r in results if isinstance(r, str)]
 
 
 def _meta(index: int, ep: Episode) -> dict:
@@ -249,12 +172,13 @@ def load_episodes(path: str | Path) -> list[Episode]:
     return read_episode_set(path)
 
 
-def generate(kind: str, out_dir: str | Path, workers: int = 2, n_demos: int = 10,
-             n_normal: int = 200, backend: Backend = "processes",
-             rate: float = SIM.timing.observation_hz) -> tuple[Path, list[str]]:
-    """Simulate set `kind` observed at `rate`, write `<out_dir>/<kind>.mcap` and its cache; return
-    the path and failures."""
-    episodes, failures = run_jobs(jobs_for(kind, n_demos, n_normal, rate), workers, desc=kind, backend=backend)
+def generate(task: Task, kind: str, out_dir: str | Path, sizes: SetSizes = SetSizes(), workers: int = 2,
+             backend: Backend = "processes") -> tuple[Path, list[str]]:
+    """Simulate `task`'s set `kind` (of `sizes`), write `<out_dir>/<kind>.mcap` and its cache;
+    return the path and failures."""
+    from neural_asm.sim.runner import run_jobs  # the simulator, only when simulating
+
+    episodes, failures = run_jobs(task, task.jobs(kind, sizes), workers, desc=kind, backend=backend)
     path = Path(out_dir) / f"{kind}.mcap"
     write_mcap(episodes, path)
     write_cache(episodes, path)

@@ -1,18 +1,14 @@
-"""Run episodes: reset the workcell for a seed, track a 2 Hz joint plan at 40 Hz, observe at 2 Hz
-(the paper's skill layer) or at 40 Hz (every control tick, `rate=40`).
+"""The executor every task shares: reset the workcell to an `EpisodeSpec`'s scene, track its
+2 Hz joint plan at 40 Hz, observe at 2 Hz (the paper's skill layer) or at 40 Hz (every control
+tick); and running a task's jobs (`simulate`, `run_job`, `run_jobs`).
 
-`run_episode` plans a skill by IK and executes it; `execute_plan` executes any 2 Hz joint plan
-(e.g. one recalled by a model). The loop per 40 Hz tick is: the controller interpolates the plan
-linearly between observation steps (target plus velocity feed-forward); an optional
-`correction_hook` may replace the target; then every effect (fault, disturbance) acts; then
-10 physics steps of 2.5 ms. The joint controller (`SimConfig.controller`: stiff servos or
-compliant impedance, both gravity compensated) acts at every physics step, as a robot's 1 kHz
-torque loop does under its slower set-point stream. MuJoCo warnings or a diverging state raise `SimulationError`: an
-unstable episode is never returned as data.
-
-At 40 Hz the observation at every 20th tick is the 2 Hz one, bit for bit (same physics, same
-sensor noise), so a 40 Hz episode is its 2 Hz twin plus the 19 ticks between each pair of
-observations; the noise of those ticks comes from a stream of its own.
+The loop per 40 Hz tick is: the controller interpolates the plan linearly between observation
+steps (target plus velocity feed-forward); an optional correction hook may replace the target;
+then every effect (fault, disturbance) acts; then 10 physics steps of 2.5 ms. The joint
+controller (`SimConfig.controller`: stiff servos or compliant impedance, both gravity
+compensated) acts at every physics step, as a robot's 1 kHz torque loop does under its slower
+set-point stream. MuJoCo warnings or a diverging state raise `SimulationError`: an unstable
+episode is never returned as data.
 """
 
 from __future__ import annotations
@@ -27,13 +23,14 @@ from dm_control import mjcf
 
 from neural_asm.sim.channels import EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS, WRENCH_CHANNELS
 from neural_asm.sim.config import SIM, ControllerKind
-from neural_asm.sim.disturbances import FallingObject, make_effect
-from neural_asm.sim.effects import Effect, Tick
+from neural_asm.runtime.parallel import Backend, parallel_map
+from neural_asm.sim.effects import Tick
 from neural_asm.sim.episode import Episode
-from neural_asm.sim.faults import FaultSpec, JointLock
+from neural_asm.sim.ik import IKError
 from neural_asm.sim.panda import Q_MAX, Q_MIN
 from neural_asm.sim.scene import BOX_PARK, CUBE_HALF, SceneHandles, build_scene
-from neural_asm.sim.skills import SKILLS, Variation, make_plan, sample_variation, skill_spec, target_position
+from neural_asm.sim.skills import PlanError
+from neural_asm.sim.task import EpisodeSpec, J, Task, V
 
 _CHANNELS = np.arange(N_CHANNELS)
 N_JOINTS, N_EE = len(_CHANNELS[JOINT_CHANNELS]), len(_CHANNELS[EE_CHANNELS])
@@ -105,10 +102,6 @@ def world() -> World:
                          float(physics.bind(scene.box_body).gravcomp)))
 
 
-def _rng(skill: str, seed: int) -> np.random.Generator:
-    return np.random.default_rng((int(seed), SKILLS.index(skill)))
-
-
 def set_joint_gains(w: World, controller: ControllerKind) -> tuple[np.ndarray, np.ndarray]:
     """Give the arm's joint actuators `controller`'s stiffness and damping; return the stiffness
     and damping / stiffness.
@@ -161,27 +154,25 @@ def _observe(w: World, gripper: float, tare: np.ndarray, noise: np.ndarray) -> n
     return obs
 
 
-def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube_xy: np.ndarray,
-             cube_yaw: float, noise: np.ndarray, effects: list[Effect], hook: CorrectionHook | None,
-             fault: FaultSpec | None, disturbance: FallingObject | None, cube_goal: np.ndarray | None = None,
-             controller: ControllerKind | None = None, rate: float = SIM.timing.observation_hz) -> Episode:
-    """Execute a joint plan (T, 7) and gripper toggles (T,) given at the skill layer's 2 Hz,
-    observed at `rate` (2 or 40 Hz; `noise` holds one row per observation).
+def execute(spec: EpisodeSpec, hook: CorrectionHook | None = None) -> Episode:
+    """Execute `spec`'s joint plan (T, 7) and gripper toggles (T,), given at the skill layer's
+    2 Hz, observed at `spec.rate` (2 or 40 Hz; `spec.noise` holds one row per observation).
 
-    The low-level loop every task shares: T blocks of 20 control ticks each;
-    `cube_goal` (where the cube should end up) defaults to the paper's skill's target;
-    `controller` defaults to `SIM.controller`.
+    The low-level loop every task shares: T blocks of 20 control ticks each. `hook`, if given,
+    is called before every tick with a `ControlState` and may return a (7,) joint target
+    replacing the plan's (None keeps it); the spec's effects act after it.
     """
     timing, w = SIM.timing, world()
     physics, scene = w.physics, w.scene
     model, data = physics.model.ptr, physics.data.ptr
-    stiffness, kv_over_kp = set_joint_gains(w, SIM.controller if controller is None else controller)
-    tare = _reset(w, joints[0], cube_xy, cube_yaw)
-    for effect in effects:
+    joints, gripper, noise = spec.joints, spec.gripper, spec.noise
+    stiffness, kv_over_kp = set_joint_gains(w, SIM.controller if spec.controller is None else spec.controller)
+    tare = _reset(w, joints[0], spec.cube_xy, spec.cube_yaw)
+    for effect in spec.effects:
         effect.initialize(physics, scene)
     warnings = physics.data.warning.number  # a live view of MuJoCo's warning counters
     block, n = timing.ticks_per_step, len(joints)
-    period = timing.ticks_per_observation(rate)
+    period = timing.ticks_per_observation(spec.rate)
     hi = {key: np.empty((n * block + 1, width)) for key, width in
           (("q", N_JOINTS), ("cmd", N_JOINTS), ("ee", N_EE), ("cube", 3), ("box", 3))}
 
@@ -209,7 +200,7 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
             corrected = hook(state)
             if corrected is not None:
                 tick.target = np.asarray(corrected, dtype=float).reshape(N_JOINTS)
-        for effect in effects:
+        for effect in spec.effects:
             effect.before_tick(physics, scene, tick)
         target = np.minimum(np.maximum(tick.target, Q_MIN), Q_MAX)
         data.ctrl[w.arm_act] = target + kv_over_kp * tick.velocity
@@ -220,86 +211,31 @@ def execute(skill: str, seed: int, joints: np.ndarray, gripper: np.ndarray, cube
     observations = np.array(obs)
     if not np.isfinite(observations).all():
         raise SimulationError("non-finite observation")
-    cube_goal = target_position(skill) if cube_goal is None else cube_goal
-    cube_error = float(np.linalg.norm(hi["cube"][-1] - cube_goal))
-    return Episode(observations=observations, skill=skill, seed=int(seed), fault=fault, disturbance=disturbance,
-                   success=cube_error < SIM.success_tolerance_m, cube_error_m=cube_error, plan=joints.copy(),
-                   rate_hz=float(rate),
+    cube_error = float(np.linalg.norm(hi["cube"][-1] - spec.cube_goal))
+    return Episode(observations=observations, skill=spec.skill, seed=int(spec.seed), fault=spec.fault,
+                   disturbance=spec.disturbance, success=cube_error < SIM.success_tolerance_m, cube_error_m=cube_error,
+                   plan=joints.copy(), rate_hz=float(spec.rate),
                    t_hi=np.arange(n * block + 1) / timing.control_hz, qpos_hi=hi["q"],
                    command_hi=hi["cmd"], ee_hi=hi["ee"], cube_hi=hi["cube"], box_hi=hi["box"])
 
 
-def _effects(fault: FaultSpec | None, disturbance: FallingObject | None) -> list[Effect]:
-    return ([] if fault is None else [JointLock(fault)]) + make_effect(disturbance)
+def simulate(task: Task[J, V], job: J, variation: V | None = None) -> Episode:
+    """`task`'s episode of `job`, under the variation its seed draws or the `variation` given."""
+    prepared = task.prepare(job, task.variation(job) if variation is None else variation)
+    return prepared.finish(execute(prepared.spec))
 
 
-def seed_variation(skill: str, seed: int) -> Variation:
-    """What `seed` changes in `skill`'s scene (cube pose, start posture, tremor): what a
-    perception of the workcell would report before the episode starts."""
-    skill_spec(skill)
-    return sample_variation(skill, _rng(skill, seed))
+def run_job(task: Task[J, V], job: J, variation: V | None = None) -> Episode | str:
+    """`simulate`, with a failed episode coming back as its error message (never as data)."""
+    try:
+        return simulate(task, job, variation)
+    except (SimulationError, PlanError, IKError) as err:
+        return f"{job.skill} seed {job.seed}: {err}"  # type: ignore[attr-defined]
 
 
-def _seeded(skill: str, seed: int, rate: float = SIM.timing.observation_hz) -> tuple[Variation, np.ndarray]:
-    """`seed`'s scene variation and sensor noise for `skill` observed at `rate`: the variation and
-    the 2 Hz observations' noise drawn in this order from one stream, the other ticks' noise
-    (at 40 Hz) from a second stream of the same seed."""
-    skill_spec(skill)
-    rng = _rng(skill, seed)
-    variation = sample_variation(skill, rng)
-    noise = rng.standard_normal((SIM.timing.n_steps, N_NOISY))
-    period = SIM.timing.ticks_per_observation(rate)
-    if period == SIM.timing.ticks_per_step:
-        return variation, noise
-    ticks = np.random.default_rng((int(seed), SKILLS.index(skill), period)).standard_normal(
-        (SIM.timing.observations(rate), N_NOISY))
-    ticks[:: SIM.timing.ticks_per_step // period] = noise
-    return variation, ticks
-
-
-def run_episode(skill: str, seed: int, fault: FaultSpec | None = None,
-                disturbance: FallingObject | None = None, controller: ControllerKind | None = None,
-                rate: float = SIM.timing.observation_hz) -> Episode:
-    """Plan `skill` for `seed` by IK and execute it, optionally with a fault and/or a disturbance,
-    under `controller` (default `SIM.controller`), observed at `rate` (2 or 40 Hz)."""
-    variation, noise = _seeded(skill, seed, rate)
-    plan = make_plan(skill, variation)
-    return execute(skill, seed, plan.joints, plan.gripper, variation.cube_xy, variation.cube_yaw, noise,
-                    _effects(fault, disturbance), None, fault, disturbance, controller=controller, rate=rate)
-
-
-def first_observation(skill: str, seed: int) -> np.ndarray:
-    """(25,) the observation `run_episode(skill, seed)` starts with, taken before any motion:
-    the cue a memory recalls the skill from, simulating one step of the plan instead of fifteen."""
-    variation, noise = _seeded(skill, seed)
-    plan = make_plan(skill, variation)
-    return execute(skill, seed, plan.joints[:1], plan.gripper[:1], variation.cube_xy, variation.cube_yaw, noise,
-                   [], None, None, None).observations[0]
-
-
-def execute_plan(joint_plan: np.ndarray, gripper_plan: np.ndarray, seed: int,
-                 correction_hook: CorrectionHook | None = None, disturbance: FallingObject | None = None,
-                 skill: str = SKILLS[0], fault: FaultSpec | None = None,
-                 controller: ControllerKind | None = None, rate: float = SIM.timing.observation_hz) -> Episode:
-    """Execute a (15, 7) joint plan (rad) and (15,) gripper toggles given at 2 Hz, observed at
-    `rate` (2 or 40 Hz).
-
-    The scene (cube pose, sensor noise) is the one `run_episode(skill, seed)` would see, so a
-    recalled plan can be compared with the demonstration of the same seed. `correction_hook`,
-    if given, is called before every 40 Hz tick with a `ControlState` and may return a (7,)
-    joint target replacing the plan's for that tick (None keeps it; at 40 Hz its observations
-    gain one every tick); faults and disturbances still act after it. Targets are clipped to the joint limits. `controller` (default
-    `SIM.controller`) tracks the targets: the stiff servos or the compliant impedance.
-    """
-    skill_spec(skill)
-    joints = np.asarray(joint_plan, dtype=float)
-    gripper = np.asarray(gripper_plan, dtype=float)
-    n = SIM.timing.n_steps
-    if joints.shape != (n, N_JOINTS) or not np.isfinite(joints).all():
-        raise ValueError(f"joint_plan must be a finite ({n}, {N_JOINTS}) array, got shape {joints.shape}")
-    if gripper.shape != (n,) or not np.isin(gripper, (0.0, 1.0)).all():
-        raise ValueError(f"gripper_plan must be a ({n},) array of 0/1, got {gripper!r}")
-    variation, noise = _seeded(skill, seed, rate)
-    return execute(skill, seed, joints, gripper, variation.cube_xy, variation.cube_yaw, noise,
-                    _effects(fault, disturbance), correction_hook, fault, disturbance, controller=controller,
-                    rate=rate)
+def run_jobs(task: Task[J, V], jobs: list[J], workers: int = 2, desc: str = "episodes",
+             backend: Backend = "processes") -> tuple[list[Episode], list[str]]:
+    """Run `task`'s jobs over `workers` processes or on Ray (in order), with a progress bar;
+    the episodes, and the failures' messages."""
+    results = parallel_map(run_job, [(task, job) for job in jobs], workers, backend, desc=desc, unit="ep", chunksize=8)
+    return [r for r in results if isinstance(r, Episode)], [r for r in results if isinstance(r, str)]

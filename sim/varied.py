@@ -248,17 +248,32 @@ def make_plan(skill: str, ctx: Context, noise: PlanNoise, wrong_side: bool = Fal
     return VariedPlan(joints, gripper, tcp, phases)
 
 
-def perceived(episode: Episode, skill: str, ctx: Context, cube_yaw: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+@dataclass(frozen=True)
+class PerceptionNoise:
+    """What the perception system gets wrong at each step (m, rad)."""
+
+    cube_xy: np.ndarray  # (T, 2)
+    cube_yaw: np.ndarray  # (T,)
+    post_xy: np.ndarray  # (T, 2)
+
+
+def draw_perception_noise(rng: np.random.Generator, n: int) -> PerceptionNoise:
+    cfg = SIM.varied
+    cube = rng.normal(0.0, cfg.perceived_xy_m, (n, 2))
+    yaw = rng.normal(0.0, np.deg2rad(cfg.perceived_yaw_deg), n)
+    return PerceptionNoise(cube, yaw, rng.normal(0.0, cfg.perceived_xy_m, (n, 2)))
+
+
+def perceived(episode: Episode, skill: str, ctx: Context, cube_yaw: np.ndarray, noise: PerceptionNoise) -> np.ndarray:
     """(T, 7) context channels (CONTEXT_NAMES): the cube pose a perception system reports at
     each step, the goal and the post."""
-    cfg = SIM.varied
     n = len(episode.observations)
     block = SIM.timing.ticks_per_step
-    cube = episode.cube_hi[::block][:n, :2] + rng.normal(0.0, cfg.perceived_xy_m, (n, 2))
+    cube = episode.cube_hi[::block][:n, :2] + noise.cube_xy[:n]
     # yaw is tracked continuously from the first sighting (the cube is symmetric under 90 deg)
     turn = (cube_yaw - ctx.cube_yaw + np.pi / 4) % (np.pi / 2) - np.pi / 4
-    yaw = ctx.cube_yaw + turn + rng.normal(0.0, np.deg2rad(cfg.perceived_yaw_deg), n)
-    post = post_xy(skill, ctx) + rng.normal(0.0, cfg.perceived_xy_m, (n, 2))
+    yaw = ctx.cube_yaw + turn + noise.cube_yaw[:n]
+    post = post_xy(skill, ctx) + noise.post_xy[:n]
     columns = {"cube_seen_x": cube[:, 0], "cube_seen_y": cube[:, 1], "cube_seen_yaw": yaw,
                "goal_x": np.full(n, ctx.goal_xy[0]), "goal_y": np.full(n, ctx.goal_xy[1]),
                "post_x": post[:, 0], "post_y": post[:, 1]}

@@ -21,17 +21,17 @@ the episode's context and the recorded channels (25 + 7 context channels) in eve
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
 from neural_asm.sim.config import SIM
 from neural_asm.sim.episode import Episode
-from neural_asm.runtime.parallel import Backend, parallel_map
-from neural_asm.sim.varied import (VARIED_SKILLS, Context, draw_plan_noise, keyframes, make_plan, perceived, post_xy, sample_context,
-                        with_context_channels)
-from neural_asm.sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestoreFriction, VariedFault, apply_sensor_fault,
-                               execution_effects)
+from neural_asm.sim.task import EpisodeSpec, Prepared, SetSizes
+from neural_asm.sim.varied import (VARIED_SKILLS, Context, PerceptionNoise, PlanNoise, draw_perception_noise,
+                                   draw_plan_noise, keyframes, make_plan, perceived, post_xy, sample_context,
+                                   with_context_channels)
+from neural_asm.sim.varied_faults import (FORCE_CHANNELS, PLAN_FAULTS, PlacePost, RestoreFriction, VariedFault,
+                                          apply_sensor_fault, execution_effects)
 
 VARIED_KINDS = ("demos", "normal", "ood", "faults", "twins", "val_faults", "val_twins")
 SEED_BASE = {"demos": 0, "normal": 10_000, "ood": 20_000, "faults": 100_000, "val_faults": 200_000}
@@ -54,25 +54,28 @@ class VariedJob:
     seed: int
     fault: VariedFault | None = None
     out_of_range: bool = False
-    # 0: the seed's own noise. k > 0: the same context (cube, goal, speed, post) and fault with
-    # fresh tremor, start posture, sensor and perception noise: a replicate of the episode;
-    # with `same_start`, the start posture (what the first observation shows) stays the seed's.
-    replicate: int = 0
-    same_start: bool = False
-    # An execution speed in place of the context's (None: the context's own): replicates at
-    # other speeds tell what an oracle owes to knowing it (experiments/varied/ceiling.py).
-    speed: float | None = None
 
 
-def _rng(job: VariedJob, stream: int) -> np.random.Generator:
-    """Stream 0 draws the context, streams 1-3 the plan, execution and perception noise."""
+@dataclass(frozen=True)
+class VariedVariation:
+    """What a varied job's seed draws: the context, then (each from a stream of its own) the
+    plan's noise, the sensor noise and the perception's noise."""
+
+    context: Context
+    plan: PlanNoise
+    sensor: np.ndarray  # (T, 14) standard normal, wrench and finger channels
+    perception: PerceptionNoise
+
+
+def _rng(job: VariedJob, stream: int, draw: int = 0) -> np.random.Generator:
+    """Stream 0 draws the context, streams 1-3 the plan, execution and perception noise; a
+    draw k > 0 of streams 1-3 is a fresh one of its own."""
     key = (int(job.seed), VARIED_SKILLS.index(job.skill), TASK_TAG, stream)
-    return np.random.default_rng(key if stream == 0 or job.replicate == 0 else (*key, job.replicate))
+    return np.random.default_rng(key if stream == 0 or draw == 0 else (*key, draw))
 
 
 def context_of(job: VariedJob) -> Context:
-    ctx = sample_context(job.skill, _rng(job, 0), job.out_of_range)
-    return ctx if job.speed is None else replace(ctx, speed=float(job.speed))
+    return sample_context(job.skill, _rng(job, 0), job.out_of_range)
 
 
 class _CubeYaw:
@@ -90,31 +93,52 @@ class _CubeYaw:
             self.yaw[tick.step] = 2.0 * np.arctan2(z, w)
 
 
-def run_varied(job: VariedJob) -> Episode:
-    """Simulate one varied-task episode; its observations have 25 + 7 context channels."""
-    from neural_asm.sim.runner import execute
+@dataclass(frozen=True)
+class VariedTask:
+    """The varied task (observed at 2 Hz): its sets, and a job's context, plan and effects."""
 
-    ctx = context_of(job)
-    fault = job.fault
-    wrong_cube = None
-    if fault is not None and fault.kind == "wrong_cube":
-        wrong_cube = ctx.cube_xy + fault.value * np.asarray(fault.direction)
-    plan_noise = draw_plan_noise(_rng(job, 1))
-    if job.same_start:
-        plan_noise = replace(plan_noise, start=draw_plan_noise(_rng(replace(job, replicate=0), 1)).start)
-    plan = make_plan(job.skill, ctx, plan_noise, wrong_side=fault is not None and fault.kind == "wrong_side",
-                     cube_xy=wrong_cube)
-    n = len(plan.joints)
-    tracker = _CubeYaw(n)
-    effects = [RestoreFriction(), tracker, PlacePost(0, post_xy(job.skill, ctx)), *execution_effects(fault)]
-    if fault is not None and fault.kind == "stray_post":
-        effects.append(PlacePost(1, stray_post_xy(job.skill, ctx)))
-    noise = _rng(job, 2).standard_normal((n, 14))
-    target = np.array([*(ctx.cube_xy if job.skill == "lift_hold" else ctx.goal_xy), 0.025])
-    episode = execute(job.skill, job.seed, plan.joints, plan.gripper, ctx.cube_xy, ctx.cube_yaw, noise, effects,
-                      None, fault, None, target)
-    episode = replace(episode, observations=apply_sensor_fault(episode.observations, fault), task=ctx.to_dict())
-    return with_context_channels(episode, perceived(episode, job.skill, ctx, tracker.yaw, _rng(job, 3)))
+    kinds: tuple[str, ...] = VARIED_KINDS
+
+    def jobs(self, kind: str, sizes: SetSizes = SetSizes()) -> list[VariedJob]:
+        """The jobs of varied set `kind` (one of VARIED_KINDS)."""
+        return jobs_for(kind, sizes)
+
+    def variation(self, job: VariedJob) -> VariedVariation:
+        return self.redraw(job, 0)
+
+    def redraw(self, job: VariedJob, draw: int) -> VariedVariation:
+        """The job's context with draw `draw` of its noise (0: the seed's own; k > 0: fresh
+        tremor, start posture, sensor and perception noise, the same for the same k)."""
+        n = SIM.varied.n_steps
+        return VariedVariation(context_of(job), draw_plan_noise(_rng(job, 1, draw)),
+                               _rng(job, 2, draw).standard_normal((n, 14)),
+                               draw_perception_noise(_rng(job, 3, draw), n))
+
+    def prepare(self, job: VariedJob, variation: VariedVariation) -> Prepared:
+        """The job's plan in its context (a plan fault replans it), its posts and fault effects;
+        its finish applies a sensor fault and adds what perception reports (25 + 7 channels)."""
+        ctx, fault = variation.context, job.fault
+        wrong_cube = None
+        if fault is not None and fault.kind == "wrong_cube":
+            wrong_cube = ctx.cube_xy + fault.value * np.asarray(fault.direction)
+        plan = make_plan(job.skill, ctx, variation.plan, wrong_side=fault is not None and fault.kind == "wrong_side",
+                         cube_xy=wrong_cube)
+        tracker = _CubeYaw(len(plan.joints))
+        effects = [RestoreFriction(), tracker, PlacePost(0, post_xy(job.skill, ctx)), *execution_effects(fault)]
+        if fault is not None and fault.kind == "stray_post":
+            effects.append(PlacePost(1, stray_post_xy(job.skill, ctx)))
+        target = np.array([*(ctx.cube_xy if job.skill == "lift_hold" else ctx.goal_xy), 0.025])
+        spec = EpisodeSpec(job.skill, job.seed, plan.joints, plan.gripper, ctx.cube_xy, ctx.cube_yaw, target,
+                           variation.sensor, tuple(effects), fault)
+
+        def finish(episode: Episode) -> Episode:
+            episode = replace(episode, observations=apply_sensor_fault(episode.observations, fault), task=ctx.to_dict())
+            return with_context_channels(episode, perceived(episode, job.skill, ctx, tracker.yaw, variation.perception))
+
+        return Prepared(spec, finish)
+
+
+VARIED = VariedTask()
 
 
 def stray_post_xy(skill: str, ctx: Context) -> np.ndarray:
@@ -170,9 +194,11 @@ def fault_jobs(validation: bool = False) -> list[VariedJob]:
     return jobs
 
 
-def jobs_for(kind: str, n_demos: int | None = None, n_normal: int = 850, n_ood: int = 200) -> list[VariedJob]:
+def jobs_for(kind: str, sizes: SetSizes = SetSizes()) -> list[VariedJob]:
     """The jobs of varied set `kind` (one of VARIED_KINDS)."""
-    n_demos = SIM.varied.n_demos if n_demos is None else n_demos
+    n_demos = SIM.varied.n_demos if sizes.n_demos is None else sizes.n_demos
+    n_normal = 850 if sizes.n_normal is None else sizes.n_normal
+    n_ood = 200 if sizes.n_ood is None else sizes.n_ood
     k = len(VARIED_SKILLS)
     if kind == "demos":
         return [VariedJob(skill, SEED_BASE["demos"] + i) for skill in VARIED_SKILLS for i in range(n_demos)]
@@ -187,31 +213,4 @@ def jobs_for(kind: str, n_demos: int | None = None, n_normal: int = 850, n_ood: 
     raise ValueError(f"kind must be one of {VARIED_KINDS}, got {kind!r}")
 
 
-def run_job(job: VariedJob) -> Episode | str:
-    """Run one job; a failed episode comes back as its error message (never as data)."""
-    from neural_asm.sim.ik import IKError
-    from neural_asm.sim.runner import SimulationError
-    from neural_asm.sim.skills import PlanError
-
-    try:
-        return run_varied(job)
-    except (SimulationError, PlanError, IKError) as err:
-        return f"{job.skill} seed {job.seed}: {err}"
-
-
-def generate(kind: str, out_dir: Path, workers: int = 2, backend: Backend = "processes", **sizes: int
-             ) -> tuple[Path, list[str]]:
-    """Simulate varied set `kind`; write `<out_dir>/<kind>.mcap` and its cache."""
-    from neural_asm.sim.dataset import write_cache, write_mcap
-
-    jobs = jobs_for(kind, **sizes)
-    results = parallel_map(run_job, [(job,) for job in jobs], workers, backend, desc=f"varied {kind}", unit="ep",
-                           chunksize=8)
-    episodes = [r for r in results if isinstance(r, Episode)]
-    path = Path(out_dir) / f"{kind}.mcap"
-    write_mcap(episodes, path)
-    write_cache(episodes, path)
-    return path, [r for r in results if isinstance(r, str)]
-
-
-__all__ = ["VARIED_KINDS", "VariedJob", "run_varied", "jobs_for", "generate", "PLAN_FAULTS"]
+__all__ = ["VARIED", "VARIED_KINDS", "VariedJob", "VariedTask", "VariedVariation", "jobs_for", "PLAN_FAULTS"]
