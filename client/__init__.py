@@ -5,7 +5,7 @@
     python sim/client.py --url http://127.0.0.1:8000 --api-key KEY --episodes 5 --reconnect
     python sim/client.py --falling-object --controller compliant --correct   # the reactive-correction demo
 
-Each episode is simulated first (``neural_asm.sim.runner.run_episode``; under ``--controller compliant``
+Each episode is simulated first (``neural_asm.sim.paper.run_episode``; under ``--controller compliant``
 the memory's recalled plan, see ``neural_asm.client.run``), then its 15 observations
 are streamed to the service one step at a time over the websocket ``/stream`` (or, with
 ``--transport http``, ``POST /sessions`` + ``POST /fault``). A live line is printed per

@@ -1,4 +1,5 @@
-"""``nasm client`` and ``python sim/client.py``: the command line of the streaming client."""
+"""``nasm client`` and ``python sim/client.py``: the command line of the streaming client; and
+``nasm replay``, which streams a robot's logged episodes the same way."""
 
 from __future__ import annotations
 
@@ -9,13 +10,18 @@ from pathlib import Path
 
 import typer
 
-from neural_asm.runtime.cli import Command, Group
-from neural_asm.pipelines.default_model import RATE_MODES
-from neural_asm.client.run import MODES, SHOWCASE_FAULT, falling_object, fault_spec, run_client
+from neural_asm.client.replay import replay_logs
+from neural_asm.client.run import MODES, SHOWCASE_FAULT, SimulatedRun, falling_object, fault_spec, run_client
+from neural_asm.client.stream import Connection, StreamOptions
 from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost
+from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, read_logs, write_json
+from neural_asm.logs.errors import LogError
+from neural_asm.models.recall import RECALL_MODES
+from neural_asm.pipelines.default_model import RATE_MODES
 from neural_asm.recordings import DEFAULT_DIR
 from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.live import LiveViewer, open_viewer
+from neural_asm.runtime.cli import Command, Group, fail
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.cli import RATE_HELP, check_rate
 from neural_asm.sim.config import CONTROLLERS, SIM
@@ -25,11 +31,6 @@ Skill = Enum("Skill", {s: s for s in SKILLS}, type=str)
 Mode = Enum("Mode", {m: m for m in MODES}, type=str)
 TransportName = Enum("TransportName", {t: t for t in TRANSPORTS}, type=str)
 Controller = Enum("Controller", {c: c for c in CONTROLLERS}, type=str)
-
-
-def _fail(message: str, code: int) -> typer.Exit:
-    typer.secho(f"error: {message}", fg="red", err=True)
-    return typer.Exit(code)
 
 
 def client(
@@ -94,16 +95,16 @@ def client(
             typer.echo(fox.how)
         fault = fault_spec(fault_joint, fault_time, fault_overshoot)
         hit = falling_object(drop, hit_momentum)
-        showcase = episodes is None and fault is None and hit is None
-        summaries = run_client(skill.value, seed, fault, hit, episodes or 1, url,
-                               api_key, None if mode is None else mode.value, out, reconnect, transport.value,
-                               models_dir, controller=controller.value, correct=correct, rate=rate, realtime=realtime,
-                               showcase=showcase, live=viewer, foxglove=fox)
+        run = SimulatedRun(skill.value, seed, fault, hit, episodes or 1, controller.value, correct, rate,
+                           showcase=episodes is None and fault is None and hit is None)
+        summaries = run_client(run, Connection(url, api_key, transport.value, reconnect),
+                               StreamOptions(None if mode is None else mode.value, out, realtime=realtime, live=viewer,
+                                             foxglove=fox), models_dir)
         streamed = True
     except (ValueError, ServiceError) as exc:  # a bad option, or the service refused the request
-        raise _fail(str(exc), 2) from None
+        raise fail(exc) from None
     except ServiceLost as exc:
-        raise _fail(f"{exc}; nothing was recorded for the episode", 3) from None
+        raise fail(f"{exc}; nothing was recorded for the episode", 3) from None
     except KeyboardInterrupt:
         typer.echo("interrupted; recordings closed", err=True)
         raise typer.Exit(130) from None
@@ -117,7 +118,7 @@ def client(
     if viewer is not None and viewer.served:
         _serve_until_interrupted(viewer)
     if any(s.error for s in summaries):
-        raise _fail("lost the service; the recordings so far are closed and readable", 3)
+        raise fail("lost the service; the recordings so far are closed and readable", 3)
 
 
 def _serve_until_interrupted(viewer: LiveViewer) -> None:
@@ -130,6 +131,39 @@ def _serve_until_interrupted(viewer: LiveViewer) -> None:
         pass
     finally:
         viewer.close()
+
+
+def replay(
+    source: str = typer.Argument(..., help="bag (.mcap, .db3, .bag, rosbag2 folder, folder of bags) or LeRobot dataset"),
+    mapping: Path = typer.Option(..., help=MAPPING_HELP),
+    url: str = typer.Option(..., help="URL of a running service (nasm serve)"),
+    model: str | None = typer.Option(None, help="name of the served model to score with (default: the service's default)"),
+    episode: list[int] = typer.Option([], help="episode number in the source (repeatable) (default: every episode)"),
+    api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
+    mode: str = typer.Option("offline", help="recall mode: offline, online or plan (a model with a plan memory)"),
+    out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
+    transport: str = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
+    reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
+    skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
+    json_out: Path | None = typer.Option(None, "--json", help="also write the summaries as JSON here"),
+) -> None:
+    """Stream recorded episodes to a running service exactly as the live robot client does,
+    after the same checks as ``nasm score`` against the served model."""
+    if mode not in RECALL_MODES or transport not in TRANSPORTS:
+        raise fail(f"--mode must be one of {', '.join(RECALL_MODES)} and --transport ws or http; "
+                   f"got {mode!r}, {transport!r}")
+    seqs = read_logs(source, mapping, skip_bad=skip_bad)
+    try:
+        summaries = replay_logs(seqs, episode, Connection(url, api_key, transport, reconnect), StreamOptions(mode, out),
+                                model)
+    except (LogError, ServiceError) as exc:
+        raise fail(exc) from None
+    except ServiceLost as exc:
+        raise fail(exc, 3) from None
+    if json_out is not None:
+        write_json(json_out, [s.to_dict() for s in summaries])
+    if any(s.error for s in summaries):
+        raise typer.Exit(3)
 
 
 app = typer.Typer(cls=Group, add_completion=False, pretty_exceptions_enable=False)

@@ -12,26 +12,25 @@ monitors every tick."""
 from __future__ import annotations
 
 import contextlib
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterator
 
-from neural_asm.client.stream import stream_episode
+from neural_asm.client.source import Outcome, simulated
+from neural_asm.client.stream import Connection, StreamOptions, stream_episode
 from neural_asm.client.summary import EpisodeSummary, closing_lines, say, summary_line, verdicts_side_by_side
 from neural_asm.client.transport import TRANSPORTS, ServiceError, check_url, served_digest
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import SCORING
-from neural_asm.pipelines.compliant import compliant_episode, digest_of, ensure_compliant_model
+from neural_asm.pipelines.compliant import Gate, compliant_episode, digest_of, ensure_compliant_model
 from neural_asm.pipelines.default_model import RATE_MODES, ensure_default_model, model_name
-from neural_asm.recordings import DEFAULT_DIR
-from neural_asm.recordings.foxglove_live import FoxgloveLive
-from neural_asm.recordings.live import LiveViewer
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.config import CONTROLLERS, RATES, SIM
 from neural_asm.sim.disturbances import FallingObject, elbow_hit
 from neural_asm.sim.episode import Episode
 from neural_asm.sim.faults import FaultSpec
-from neural_asm.sim.runner import run_episode
+from neural_asm.sim.paper import Job, run_episode
 from neural_asm.sim.skills import SKILLS
 
 MODES = ("offline", "online")
@@ -78,26 +77,68 @@ def _check_served(url: str, api_key: str | None, path: Path) -> None:
                            f"(nasm serve --models-dir {path.parent}) or omit --url")
 
 
-def _simulate(skill: str, seed: int, fault: FaultSpec | None, disturbance: FallingObject | None, rate: float,
-              monitor: tuple[NeuralASM, NeuralASM] | None, correct: bool, mode: str) -> tuple[Episode, dict | None]:
-    """The episode observed at ``rate`` (stiff: the IK plan; compliant, ``monitor`` = (monitor,
-    planner) given: the recalled plan) and, with ``correct``, when its correction engaged and let go."""
+@dataclass(frozen=True)
+class SimulatedRun:
+    """What a client run simulates: ``episodes`` episodes of ``skill`` (seeds ``seed``, ``seed + 1``,
+    ...), with the fault and falling object given, under ``controller`` (``correct``, compliant
+    only: the memory's correction on), observed and streamed at ``rate`` Hz. The ``showcase`` (no
+    fault, falling object or second episode given) streams the episode of ``seed`` twice, normal and
+    with ``SHOWCASE_FAULT``, and prints both verdicts side by side: what the monitor is for, on a
+    first run."""
+
+    skill: str = SKILLS[0]
+    seed: int = SIM.seeds.client
+    fault: FaultSpec | None = None
+    falling_object: FallingObject | None = None
+    episodes: int = 1
+    controller: str = SIM.controller
+    correct: bool = False
+    rate: float = SIM.timing.observation_hz
+    showcase: bool = False
+
+    def __post_init__(self) -> None:
+        if self.rate not in RATES:
+            raise ValueError(f"--rate must be one of {', '.join(map(str, RATES))} Hz, got {self.rate!r}")
+        for name, value, known in (("skill", self.skill, SKILLS), ("controller", self.controller, CONTROLLERS)):
+            if value not in known:
+                raise ValueError(f"--{name} must be one of {', '.join(known)}, got {value!r}")
+        if self.episodes < 1:
+            raise ValueError(f"--episodes must be >= 1, got {self.episodes}")
+        if self.showcase and (self.fault is not None or self.falling_object is not None or self.episodes != 1):
+            raise ValueError("the showcase streams its own normal and faulty episode: give no fault, falling object "
+                             "or --episodes with it")
+        if self.correct and self.controller != "compliant":
+            raise ValueError("--correct needs --controller compliant: the correction drives a compliant arm's "
+                             "set-point (the stiff servos hold these hits alone)")
+
+    def jobs(self) -> list[Job]:
+        """The episodes in order."""
+        if self.showcase:
+            return [Job(self.skill, self.seed, fault=fault, rate=self.rate) for fault in (None, SHOWCASE_FAULT)]
+        return [Job(self.skill, self.seed + i, self.fault, self.falling_object, self.rate)
+                for i in range(self.episodes)]
+
+
+def _simulate(run: SimulatedRun, job: Job, mode: str,
+              monitor: tuple[NeuralASM, NeuralASM] | None) -> tuple[Episode, Outcome]:
+    """The episode of ``job`` (stiff: the IK plan; compliant, ``monitor`` = (monitor, planner)
+    given: the recalled plan, corrected with ``run.correct``) and what the arm did."""
     if monitor is None:
-        return run_episode(skill, seed, fault=fault, disturbance=disturbance, rate=rate), None
-    ep, correction = compliant_episode(monitor[0], skill, seed, disturbance, fault, correct, mode,
-                                       SCORING.default_fpr, planner=monitor[1])
-    if correction is None:
-        return ep, None
-    return ep, {"engaged_step": correction.engaged_step, "yielded_step": correction.yielded_step}
+        ep, correction = run_episode(job.skill, job.seed, job.fault, job.disturbance, rate=job.rate), None
+    else:
+        ep, corrected = compliant_episode(monitor[0], job, Gate(mode, SCORING.default_fpr) if run.correct else None,
+                                          monitor[1])
+        correction = None if corrected is None else {"engaged_step": corrected.engaged_step,
+                                                     "yielded_step": corrected.yielded_step}
+    return ep, Outcome(run.controller, correction, ep.cube_error_m)
 
 
 @contextlib.contextmanager
-def _service(url: str | None, api_key: str | None, models_dir: Path, out: Path, rate: float,
-             quiet: bool) -> Iterator[str]:
-    """The given URL, or an embedded service on a free loopback port for the block's duration,
+def _service(connection: Connection, models_dir: Path, out: Path, rate: float, quiet: bool) -> Iterator[Connection]:
+    """The given service, or an embedded one on a free loopback port for the block's duration,
     hosting the default model at ``rate`` (built first if missing)."""
-    if url:
-        yield url
+    if connection.url:
+        yield connection
         return
     from neural_asm.service.embedded import start_embedded  # only to start it in-process
     from neural_asm.service.settings import Settings
@@ -105,95 +146,56 @@ def _service(url: str | None, api_key: str | None, models_dir: Path, out: Path, 
     say(f"starting the service in-process (models: {models_dir}; the default Panda model at {rate:g} Hz is built "
         "on first run, which takes a few minutes)", quiet)
     ensure_default_model(models_dir, progress=not quiet, rate=rate)
-    settings = Settings(models_dir=models_dir, recordings_dir=out, api_key=api_key or None)
+    settings = Settings(models_dir=models_dir, recordings_dir=out, api_key=connection.api_key or None)
     with start_embedded(settings) as server:
         say(f"service at {server.url}", quiet)
-        yield server.url
+        yield replace(connection, url=server.url)
 
 
-def run_client(
-    skill: str = SKILLS[0],
-    seed: int = SIM.seeds.client,
-    fault: FaultSpec | None = None,
-    falling_object: FallingObject | None = None,
-    episodes: int = 1,
-    url: str | None = None,
-    api_key: str | None = None,
-    mode: str | None = None,
-    out: Path = DEFAULT_DIR,
-    reconnect: bool = False,
-    transport: str = "ws",
-    models_dir: Path | None = None,
-    quiet: bool = False,
-    after_step: Callable[[int, int], None] | None = None,
-    controller: str = SIM.controller,
-    correct: bool = False,
-    rate: float = SIM.timing.observation_hz,
-    realtime: bool = False,
-    showcase: bool = False,
-    live: LiveViewer | None = None,
-    foxglove: FoxgloveLive | None = None,
-) -> list[EpisodeSummary]:
-    """Simulate ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) and stream each to the service.
-
-    ``controller`` is the arm's joint controller; ``correct`` (compliant only) turns the
-    memory's correction on. ``rate`` (Hz) is how often the episode is observed and streamed
-    (the default model at that rate, ``panda`` or ``panda-40hz``, built on first use when the
-    service is started here); ``mode`` defaults to the rate's ``RATE_MODES``; ``realtime``
-    sends each observation at its time in the episode instead of as fast as the service answers.
-    ``after_step(episode, step)`` is called after each scored step (tests use it to stop the
-    service mid-episode). ``showcase`` (no fault, falling object or second episode given) streams
-    the episode of ``seed`` twice, normal and with ``SHOWCASE_FAULT``, and prints both verdicts
-    side by side: what the monitor is for, on a first run. ``live``: each episode also shown in
-    that Rerun viewer as it streams, ``foxglove`` on that Foxglove server. Stops after an episode the service was lost in.
+def run_client(run: SimulatedRun = SimulatedRun(), connection: Connection = Connection(),
+               options: StreamOptions = StreamOptions(), models_dir: Path | None = None,
+               after_step: Callable[[int, int], None] | None = None) -> list[EpisodeSummary]:
+    """Simulate the ``run``'s episodes and stream each to the service at ``connection`` (its URL,
+    or one started here, on ``models_dir``, hosting the default model at the run's rate,
+    ``panda`` or ``panda-40hz``, built on first use); ``options.mode`` defaults to the rate's
+    ``RATE_MODES``. ``after_step(episode, step)`` is called after each scored step (tests use it
+    to stop the service mid-episode). Stops after an episode the service was lost in.
     """
-    if rate not in RATES:
-        raise ValueError(f"--rate must be one of {', '.join(map(str, RATES))} Hz, got {rate!r}")
-    mode = RATE_MODES[rate] if mode is None else mode
-    for name, value, known in (("skill", skill, SKILLS), ("mode", mode, MODES), ("transport", transport, TRANSPORTS),
-                               ("controller", controller, CONTROLLERS)):
+    rate, quiet = run.rate, options.quiet
+    options = replace(options, mode=RATE_MODES[rate] if options.mode is None else options.mode)
+    for name, value, known in (("mode", options.mode, MODES), ("transport", connection.transport, TRANSPORTS)):
         if value not in known:
             raise ValueError(f"--{name} must be one of {', '.join(known)}, got {value!r}")
-    if episodes < 1:
-        raise ValueError(f"--episodes must be >= 1, got {episodes}")
-    if showcase and (fault is not None or falling_object is not None or episodes != 1):
-        raise ValueError("the showcase streams its own normal and faulty episode: give no fault, falling object "
-                         "or --episodes with it")
-    if correct and controller != "compliant":
-        raise ValueError("--correct needs --controller compliant: the correction drives a compliant arm's "
-                         "set-point (the stiff servos hold these hits alone)")
-    if url:
-        check_url(url)
-    out = Path(out)
+    if connection.url:
+        check_url(connection.url)
+    out = Path(options.out)
     summaries: list[EpisodeSummary] = []
     models_dir = home_path("models") if models_dir is None else Path(models_dir)
-    monitor_path, monitor = _compliant_monitor(models_dir, rate, quiet) if controller == "compliant" else (None, None)
-    with _service(url, api_key, models_dir, out, rate, quiet) as service_url:
+    compliant = run.controller == "compliant"
+    monitor_path, monitor = _compliant_monitor(models_dir, rate, quiet) if compliant else (None, None)
+    with _service(connection, models_dir, out, rate, quiet) as service:
         session: dict = {"rate_hz": rate}
         if monitor_path is not None:
-            if url:
-                _check_served(url, api_key, monitor_path)
+            if connection.url:
+                _check_served(connection.url, connection.api_key, monitor_path)
             session |= {"model": monitor_path.stem, "fpr": SCORING.default_fpr}
-        elif not url or rate != SIM.timing.observation_hz:  # at 2 Hz a given service's default model
+        elif not connection.url or rate != SIM.timing.observation_hz:  # at 2 Hz a given service's default model
             session["model"] = model_name(rate)
-        plans = [(seed, None), (seed, SHOWCASE_FAULT)] if showcase else [(seed + i, fault) for i in range(episodes)]
-        for i, (episode_seed, episode_fault) in enumerate(plans):
-            ep, correction = _simulate(skill, episode_seed, episode_fault, falling_object, rate, monitor, correct, mode)
-            say(f"episode {i + 1}/{len(plans)}: {skill}, seed {episode_seed}, {rate:g} Hz, {controller} control"
-                + (", corrected" if correct else "")
-                + (f", fault {episode_fault.to_dict()}" if episode_fault else "")
-                + (", falling object" if falling_object else "") + f", streaming to {service_url}", quiet)
+        options = replace(options, out=out, session={**options.session, **session})
+        jobs = run.jobs()
+        for i, job in enumerate(jobs):  # each simulated once the previous one has been streamed
+            ep, outcome = _simulate(run, job, options.mode, monitor)
+            say(f"episode {i + 1}/{len(jobs)}: {job.skill}, seed {job.seed}, {rate:g} Hz, {run.controller} control"
+                + (", corrected" if run.correct else "")
+                + (f", fault {job.fault.to_dict()}" if job.fault else "")
+                + (", falling object" if job.disturbance else "") + f", streaming to {service.url}", quiet)
             hook = None if after_step is None else (lambda k, i=i: after_step(i, k))
-            outcome = {"controller": controller, "correction": correction, "cube_error_m": ep.cube_error_m}
-            s = stream_episode(ep, i + 1, service_url, api_key, mode, out, transport, reconnect, quiet, hook,
-                               period=1.0 / rate, session=session, metadata=outcome, realtime=realtime, live=live,
-                               foxglove=foxglove)
-            s.controller, s.correction, s.cube_error_m = controller, correction, ep.cube_error_m
+            s = stream_episode(simulated(ep, i + 1, outcome), service, options, hook)
             summaries.append(s)
             say(summary_line(s), quiet)
             if s.error:
                 break
-    if showcase:
+    if run.showcase:
         say(verdicts_side_by_side(summaries), quiet)
     say(closing_lines(summaries), quiet)
     return summaries

@@ -5,24 +5,46 @@ from __future__ import annotations
 
 import contextlib
 import time
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
+from neural_asm.client.source import StreamedEpisode
 from neural_asm.client.summary import EpisodeSummary, StepLine, say, step_line
 from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost, Transport
-from neural_asm.client.world import world_records
 from neural_asm.models.fault import joint_channels
-from neural_asm.recordings import EpisodeRecorder, new_run_id
+from neural_asm.recordings import DEFAULT_DIR, EpisodeRecorder, new_run_id
 from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.live import LiveViewer
 from neural_asm.recordings.records import StepRecord
-from neural_asm.sim.config import SIM
-from neural_asm.sim.episode import Episode
 
 RECONNECT_ATTEMPTS = 5
 RECONNECT_BACKOFF_S = (0.5, 1.0, 2.0, 4.0, 8.0)
+
+
+@dataclass(frozen=True)
+class Connection:
+    """Where and how the client reaches the service."""
+
+    url: str | None = None  # None: a client run starts the service in-process (``run_client``)
+    api_key: str | None = None
+    transport: str = "ws"  # ws (websocket /stream) or http (/sessions + /fault)
+    reconnect: bool = False  # if the service goes away: a new session, the steps so far replayed
+
+
+@dataclass(frozen=True)
+class StreamOptions:
+    """How each episode is streamed and recorded."""
+
+    mode: str | None = None  # the session's recall mode (a client run: None is its rate's default)
+    out: Path = DEFAULT_DIR  # recordings folder
+    session: dict[str, Any] = field(default_factory=dict)  # further session parameters: model, fpr, rate_hz
+    realtime: bool = False  # send observation k no sooner than k periods after the first, as a robot would
+    quiet: bool = False
+    live: LiveViewer | None = None  # also shown in that Rerun viewer as it streams
+    foxglove: FoxgloveLive | None = None  # also served to Foxglove
 
 
 def _vector(result: dict[str, Any], key: str, names: tuple[str, ...]) -> np.ndarray | None:
@@ -32,52 +54,29 @@ def _vector(result: dict[str, Any], key: str, names: tuple[str, ...]) -> np.ndar
     return np.array([values[n] for n in names], np.float64)
 
 
-def stream_episode(
-    ep: Episode,
-    index: int,
-    url: str,
-    api_key: str | None,
-    mode: str,
-    out: Path,
-    transport: str = "ws",
-    reconnect: bool = False,
-    quiet: bool = False,
-    after_step: Callable[[int], None] | None = None,
-    period: float = 1.0 / SIM.timing.observation_hz,
-    session: dict[str, Any] | None = None,
-    metadata: dict[str, Any] | None = None,
-    realtime: bool = False,
-    live: LiveViewer | None = None,
-    foxglove: FoxgloveLive | None = None,
-) -> EpisodeSummary:
-    """Stream one episode (simulated, or recorded with no 40 Hz world trace) to the service,
-    recording it; never leaves files open. ``period`` is the time between its observations;
-    ``session`` adds session parameters (the model, its rate), ``metadata`` what the
-    client's recording says about the run; ``realtime`` sends observation k no sooner than
-    k periods after the first (as a robot would), else each as soon as the last is answered;
-    ``live``: also shown in that Rerun viewer as it streams; ``foxglove``: on that Foxglove server."""
-    names = tuple(ep.channel_names)
-    run_id = new_run_id("client")
-    recording_id = run_id  # shared with the service session so both files merge
-    summary = EpisodeSummary(
-        episode=index, skill=ep.skill, seed=ep.seed,
-        fault=None if ep.fault is None else ep.fault.to_dict(),
-        disturbance=None if ep.disturbance is None else ep.disturbance.to_dict(),
-        mode=mode, steps_total=len(ep.observations), steps_scored=0, detected=False, first_flag_step=None,
-        first_flag_time_s=None, isolated_joint=None, fault_step=None if ep.fault is None else ep.fault.step,
-        completed=False, reconnects=0, recording_id=recording_id, recordings={}, service_recordings={},
-    )
-    params = {"mode": mode, "cue_steps": 1, "recording_id": recording_id, **(session or {})}
-    metadata = {"source": "client", "skill": ep.skill, "seed": ep.seed, "fault": summary.fault,
-                "disturbance": summary.disturbance, "mode": mode, "service_url": url, "transport": transport,
-                **(metadata or {})}
-    make = TRANSPORTS[transport]
+class _Stream:
+    """One episode's stream: its session (re)opened as needed, every step sent, scored, recorded."""
 
-    def open_session(replay: int) -> Transport:
+    def __init__(self, episode: StreamedEpisode, connection: Connection, options: StreamOptions) -> None:
+        if connection.url is None or options.mode is None or connection.transport not in TRANSPORTS:
+            raise ValueError(f"a stream needs a service URL, a recall mode and a transport of {list(TRANSPORTS)}")
+        self.episode, self.connection, self.options = episode, connection, options
+        recording_id = new_run_id("client")  # the run id, shared with the service session so both files merge
+        self.summary = EpisodeSummary(
+            episode=episode.number, skill=episode.skill, seed=episode.seed, fault=episode.fault,
+            disturbance=episode.disturbance, mode=options.mode, steps_total=len(episode.observations),
+            steps_scored=0, detected=False, first_flag_step=None, first_flag_time_s=None, isolated_joint=None,
+            fault_step=episode.fault_step, completed=False, reconnects=0, recording_id=recording_id, recordings={},
+            service_recordings={}, **(asdict(episode.outcome) if episode.outcome else {}))
+        self.params = {"mode": options.mode, "cue_steps": 1, "recording_id": recording_id, **options.session}
+        self.conn: Transport | None = None  # the session's connection while one is open
+
+    def open(self, replay: int) -> Transport:
         """Connect, start a session and replay the first ``replay`` observations."""
-        t = make(url, api_key)
+        names, summary = self.episode.channel_names, self.summary
+        t = TRANSPORTS[self.connection.transport](self.connection.url, self.connection.api_key)
         try:
-            info = t.start(params)
+            info = t.start(self.params)
             service_names = tuple(info.get("channel_names", names))
             if service_names != names:
                 raise ServiceError(f"the service's model expects channels {list(service_names)}, "
@@ -86,77 +85,106 @@ def stream_episode(
                 {f"{k}#{summary.reconnects}" if summary.reconnects else k: v
                  for k, v in info.get("recordings", {}).items()})
             for k in range(replay):
-                t.step(ep.observations[k].tolist())
+                t.step(self.episode.observations[k].tolist())
             return t
         except BaseException:
             t.close()
             raise
 
-    try:  # connect before recording: an unreachable service leaves no empty files
-        conn: Transport | None = open_session(0)
-    except ServiceLost as exc:
-        say(f"cannot reach the service: {exc}", quiet)
-        if not reconnect:
-            raise
-        conn = _reconnect(open_session, 0, summary, quiet)
-    # The service's own .rrd of the session logs the fault events; the client's then does not,
-    # so the merged view says each event once.
-    service_logs_events = any(k.split("#")[0] == "rrd" for k in summary.service_recordings)
-    with EpisodeRecorder(run_id, names, folder=out, recording_id=recording_id, metadata=metadata,
-                         step_period_s=period, joints=joint_channels(names), events=not service_logs_events,
-                         live=live, foxglove=foxglove) as rec:
-        summary.recordings = {k: str(p) for k, p in rec.paths.items()}
+    def connect(self) -> None:
+        """The first session; an unreachable service is retried with ``reconnect``."""
         try:
-            next_row = 0
-            k = 0
-            started = time.monotonic()
-            while k < len(ep.observations):
-                t_k = k * period
-                if realtime:
-                    time.sleep(max(0.0, started + t_k - time.monotonic()))
-                for row, world in world_records(ep, t_k, next_row):
-                    rec.log_world(world)
-                    next_row = row + 1
-                try:
-                    result = conn.step(ep.observations[k].tolist())
-                except ServiceLost as exc:
-                    conn.close()
-                    conn = None
-                    say(f"service lost at step {k}: {exc}", quiet)
-                    if not reconnect:
-                        raise
-                    conn = _reconnect(open_session, k, summary, quiet)
-                    continue  # send step k again on the new session
-                line = StepLine(step=k, time_s=t_k, energy=float(result["energy"]),
-                                threshold=float(result["threshold"]), fault=bool(result["fault"]),
-                                isolated_joint=result.get("isolated_joint"),
-                                inference_ms=float(result.get("inference_ms", float("nan"))), skill=result.get("skill"))
-                rec.log_step(StepRecord(
-                    step=k, observation=ep.observations[k], expected=_vector(result, "expected", names),
-                    prediction=_vector(result, "prediction", names), errors=_vector(result, "errors", names),
-                    energy=line.energy, threshold=line.threshold, fault=line.fault,
-                    isolated_joint=line.isolated_joint, time_s=t_k))
-                summary.steps.append(line)
-                summary.steps_scored = k + 1
-                if line.fault and not summary.detected:
-                    summary.detected = True
-                    summary.first_flag_step, summary.first_flag_time_s = k, t_k
-                    summary.isolated_joint = line.isolated_joint
-                say(step_line(line), quiet)
-                if after_step is not None:
-                    after_step(k)
-                k += 1
-            for _, world in world_records(ep, float(ep.t_hi[-1]) if len(ep.t_hi) else 0.0, next_row):  # settling
-                rec.log_world(world)
-            summary.completed = True
-            with contextlib.suppress(ServiceLost):
-                conn.end()
+            self.conn = self.open(0)
         except ServiceLost as exc:
-            summary.error = f"lost the service at {url}: {exc}"
+            self.reopen(0, exc, "cannot reach the service")
+
+    def reopen(self, k: int, exc: ServiceLost, what: str) -> None:
+        """After losing the service (``what`` says when): a new session replaying ``k`` steps, if
+        reconnecting, else the loss raised again."""
+        if self.conn is not None:
+            self.conn.close()
+            self.conn = None
+        say(f"{what}: {exc}", self.options.quiet)
+        if not self.connection.reconnect:
+            raise exc
+        self.conn = _reconnect(self.open, k, self.summary, self.options.quiet)
+
+    def recorder(self) -> EpisodeRecorder:
+        """The client's recording. The service's own .rrd of the session logs the fault events;
+        the client's then does not, so the merged view says each event once."""
+        ep, summary = self.episode, self.summary
+        metadata = {"source": "client", "skill": ep.skill, "seed": ep.seed, "fault": ep.fault,
+                    "disturbance": ep.disturbance, "mode": self.options.mode, "service_url": self.connection.url,
+                    "transport": self.connection.transport, **(asdict(ep.outcome) if ep.outcome else {})}
+        service_logs_events = any(k.split("#")[0] == "rrd" for k in summary.service_recordings)
+        return EpisodeRecorder(summary.recording_id, ep.channel_names, folder=self.options.out,
+                               recording_id=summary.recording_id, metadata=metadata, step_period_s=ep.period_s,
+                               joints=joint_channels(ep.channel_names), events=not service_logs_events,
+                               live=self.options.live, foxglove=self.options.foxglove)
+
+    def score(self, k: int, result: dict[str, Any], rec: EpisodeRecorder) -> None:
+        """Record and print step ``k``'s verdict."""
+        names, summary, t_k = self.episode.channel_names, self.summary, k * self.episode.period_s
+        line = StepLine(step=k, time_s=t_k, energy=float(result["energy"]), threshold=float(result["threshold"]),
+                        fault=bool(result["fault"]), isolated_joint=result.get("isolated_joint"),
+                        inference_ms=float(result.get("inference_ms", float("nan"))), skill=result.get("skill"))
+        rec.log_step(StepRecord(
+            step=k, observation=self.episode.observations[k], expected=_vector(result, "expected", names),
+            prediction=_vector(result, "prediction", names), errors=_vector(result, "errors", names),
+            energy=line.energy, threshold=line.threshold, fault=line.fault,
+            isolated_joint=line.isolated_joint, time_s=t_k))
+        summary.steps.append(line)
+        summary.steps_scored = k + 1
+        if line.fault and not summary.detected:
+            summary.detected = True
+            summary.first_flag_step, summary.first_flag_time_s = k, t_k
+            summary.isolated_joint = line.isolated_joint
+        say(step_line(line), self.options.quiet)
+
+    def send(self, rec: EpisodeRecorder, after_step: Callable[[int], None] | None) -> None:
+        """Every step, the world up to its time logged first."""
+        ep, world, k, shown = self.episode, self.episode.world, 0, 0
+        started = time.monotonic()
+        while k < len(ep.observations):
+            t_k = k * ep.period_s
+            if self.options.realtime:
+                time.sleep(max(0.0, started + t_k - time.monotonic()))
+            while shown < len(world) and world[shown].time_s <= t_k + 1e-9:
+                rec.log_world(world[shown])
+                shown += 1
+            try:
+                result = self.conn.step(ep.observations[k].tolist())
+            except ServiceLost as exc:
+                self.reopen(k, exc, f"service lost at step {k}")
+                continue  # send step k again on the new session
+            self.score(k, result, rec)
+            if after_step is not None:
+                after_step(k)
+            k += 1
+        for row in world[shown:]:  # settling
+            rec.log_world(row)
+
+
+def stream_episode(episode: StreamedEpisode, connection: Connection, options: StreamOptions,
+                   after_step: Callable[[int], None] | None = None) -> EpisodeSummary:
+    """Stream one episode to the service at ``connection``, recording it into ``options.out``;
+    never leaves files open. ``after_step(k)`` is called after each scored step (tests use it to
+    stop the service mid-episode). A service lost for good ends the summary with its error."""
+    stream = _Stream(episode, connection, options)
+    stream.connect()  # before recording: an unreachable service leaves no empty files
+    with stream.recorder() as rec:
+        stream.summary.recordings = {k: str(p) for k, p in rec.paths.items()}
+        try:
+            stream.send(rec, after_step)
+            stream.summary.completed = True
+            with contextlib.suppress(ServiceLost):
+                stream.conn.end()
+        except ServiceLost as exc:
+            stream.summary.error = f"lost the service at {connection.url}: {exc}"
         finally:
-            if conn is not None:
-                conn.close()
-    return summary
+            if stream.conn is not None:
+                stream.conn.close()
+    return stream.summary
 
 
 def _reconnect(open_session: Callable[[int], Transport], k: int, summary: EpisodeSummary, quiet: bool) -> Transport:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Iterator
-
 import numpy as np
 
 from neural_asm.recordings.records import Workcell, WorldRecord
@@ -21,14 +19,13 @@ def link_positions(q: np.ndarray) -> np.ndarray:
     return np.array([frame[:3, 3] for frame in dh_frames(q)])
 
 
-def world_records(ep: Episode, upto_s: float, start_row: int) -> Iterator[tuple[int, WorldRecord]]:
-    """40 Hz world rows from ``start_row`` with time <= ``upto_s``; the falling box after its release
-    (the row at the release instant still has it parked, out of sight)."""
+def world_trace(ep: Episode) -> tuple[WorldRecord, ...]:
+    """Every 40 Hz world row of the episode; the falling box after its release (the row at the
+    release instant still has it parked, out of sight)."""
     release_s = None if ep.disturbance is None else ep.disturbance.release_s
-    row = start_row
-    while row < len(ep.t_hi) and ep.t_hi[row] <= upto_s + 1e-9:
-        t = float(ep.t_hi[row])
+    rows = []
+    for row, t in enumerate(map(float, ep.t_hi)):
         falling = release_s is not None and t > release_s + 1e-9
-        yield row, WorldRecord(time_s=t, link_positions=link_positions(ep.qpos_hi[row]), ee=ep.ee_hi[row],
-                               cube=ep.cube_hi[row], box=ep.box_hi[row] if falling else None, workcell=WORKCELL)
-        row += 1
+        rows.append(WorldRecord(time_s=t, link_positions=link_positions(ep.qpos_hi[row]), ee=ep.ee_hi[row],
+                                cube=ep.cube_hi[row], box=ep.box_hi[row] if falling else None, workcell=WORKCELL))
+    return tuple(rows)

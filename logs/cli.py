@@ -14,15 +14,10 @@ from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.fault import THRESHOLD_KINDS
 from neural_asm.models.sequences import Sequences
+from neural_asm.runtime.cli import fail
 
 MAPPING_HELP = "channel mapping (.toml or .yaml): which topic or feature becomes which channel"
 SKIP_BAD_HELP = "skip bad or missing episodes with a warning naming each (default: refuse the source)"
-
-
-def fail(exc: Exception | str) -> typer.Exit:
-    """The command's one-line error, and exit 2."""
-    typer.secho(f"error: {exc}", fg="red", err=True)
-    return typer.Exit(2)
 
 
 def read_logs(source: str, mapping: Path, model: NeuralASM | None = None, skip_bad: bool = False) -> Sequences:
