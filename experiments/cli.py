@@ -20,9 +20,11 @@ from typer.core import TyperCommand
 from neural_asm.experiments.catalogue import EXPERIMENTS
 from neural_asm.experiments.plotting import require_matplotlib
 from neural_asm.experiments.registry import Experiment
-from neural_asm.experiments.writer import write_report
+from neural_asm.experiments.results import splice, table
+from neural_asm.experiments.writer import write_atomically, write_report
+from neural_asm.logs.errors import LogError
 from neural_asm.pipelines.episodes import SetMismatch
-from neural_asm.runtime.cli import Command, Group
+from neural_asm.runtime.cli import Command, Group, fail
 from neural_asm.runtime.home import home_path
 
 app = typer.Typer(cls=Group, help="The paper's experiments and our benchmarks: list them, run one.",
@@ -45,11 +47,6 @@ class ExperimentCommand(Command):
         except UsageError as exc:
             typer.secho(f"{ctx.command_path}: {exc.format_message()}", fg="red", err=True)  # type: ignore[attr-defined]
             raise typer.Exit(2) from None
-
-
-def fail(message: str) -> None:
-    typer.secho(f"error: {message}", fg="red", err=True)
-    raise typer.Exit(2)
 
 
 def _choices(name: str, hint: Any) -> type[Enum]:
@@ -84,10 +81,12 @@ def run_experiment(experiment: Experiment, config: Any, out: Path | None, comman
     if experiment.figures:
         require_matplotlib(command)
     out = out or home_path(experiment.folder(config))
+    if "out" in {f.name for f in dataclasses.fields(config)}:  # it writes into its folder as it runs
+        config = dataclasses.replace(config, out=out)
     try:
         report = experiment.run(config)
-    except SetMismatch as exc:
-        fail(str(exc))
+    except (SetMismatch, LogError) as exc:  # episode sets or a dataset that cannot give what is asked
+        raise fail(str(exc))
     paths = write_report(report, out)
     typer.echo(report.markdown())
     typer.echo("wrote " + ", ".join(str(p) for p in paths))
@@ -105,7 +104,7 @@ def derive(experiment: Experiment, command: str) -> Callable[..., None]:
         try:
             config = experiment.config(**{k: _plain(v) for k, v in values.items()})
         except ValueError as exc:
-            fail(str(exc))
+            raise fail(str(exc))
         run_experiment(experiment, config, folder, command)
 
     main.__doc__ = experiment.summary
@@ -127,7 +126,26 @@ def list_experiments(tag: list[str] = typer.Option([], help="only the experiment
                      ) -> None:
     """The experiments, their tags and what each measures."""
     for experiment in EXPERIMENTS.tagged(*tag):
-        typer.echo(f"{experiment.name:<12} {','.join(experiment.tags):<8} {experiment.summary}")
+        typer.echo(f"{experiment.name:<12} {','.join(experiment.tags):<12} {experiment.summary}")
+
+
+@app.command("table", cls=Command)
+def results_table(
+    results: Path | None = typer.Option(None, help="the folder holding each experiment's output folder "
+                                        "(default: the data home)"),
+    readme: Path | None = typer.Option(None, help="rewrite the table between this file's results markers "
+                                       "(README.md) instead of printing it"),
+) -> None:
+    """The results table: one row per experiment, its numbers read from the JSON its last run wrote."""
+    block = table(EXPERIMENTS, results or home_path())
+    if readme is None:
+        typer.echo(block)
+        return
+    try:
+        write_atomically(readme, splice(readme.read_text(), block))
+    except (OSError, ValueError) as exc:
+        raise fail(f"{readme}: {exc}")
+    typer.echo(f"wrote the results table into {readme}")
 
 
 for _experiment in EXPERIMENTS:

@@ -2,8 +2,10 @@
 
 An experiment is a typed config (a frozen dataclass whose `option` fields are its command
 line), `run(config)`, which returns a typed `writer.Report`, and the folder of the data home
-its outputs go to. Tags group them: `paper` for what reproduces the paper, `beyond` for what
-goes past it.
+its outputs go to. A config with a plain `out` field (no option) is handed that folder before it
+runs: an experiment that writes as it goes (kitting serves the model it saved to its whole runs).
+Tags group them: `paper` for what reproduces the paper, `beyond` for what goes past it, `real`
+for a real robot's data.
 """
 
 from __future__ import annotations
@@ -16,6 +18,18 @@ from neural_asm.experiments.writer import Report
 
 
 @dataclass(frozen=True)
+class Headline:
+    """What the README's results table says of an experiment, read from the JSON its run wrote
+    (`nasm experiments table`): the table is made from the outputs, never typed by hand."""
+
+    file: str  # the JSON in the experiment's output folder
+    numbers: Callable[[Any], str]  # that JSON -> the measured cell
+    docs: str  # the page that reports it in full, from the repository's root
+    published: str = ""  # a published figure to set beside ours
+    unrun: str = "not run here"  # the measured cell while the file is missing
+
+
+@dataclass(frozen=True)
 class Experiment:
     name: str
     summary: str  # one line: what it measures
@@ -24,6 +38,7 @@ class Experiment:
     folder: Callable[[Any], str]  # the config -> its output folder in the data home
     tags: tuple[str, ...]
     figures: bool = True  # whether its report draws (needs matplotlib)
+    headline: Headline | None = None  # its row of the README's results table
 
 
 class TaggedExperiments:

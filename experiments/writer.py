@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, ClassVar, Protocol
 
@@ -53,6 +53,13 @@ class Document:
 
     def files(self, out: Path) -> list[Path]:
         return []
+
+
+def headline_first(result: Any) -> dict[str, Any]:
+    """A dataclass result as its JSON document with its `headline` first: the part a reader (and
+    `nasm experiments table`) looks up, the rest behind it."""
+    document = asdict(result)
+    return {"headline": document.pop("headline"), **document}
 
 
 def write_atomically(path: Path, text: str) -> Path:

@@ -166,38 +166,20 @@ FAITHFUL = TPCConfig(
     keep_best_on_held_out=False,
 )
 FAST = TPCConfig()
-# FAST trained on noisy observations: the varied task's default. On it, noise of 0, 0.2, 0.35
-# and 0.5 normalised units gave held-out online errors of 0.366, 0.354, 0.341-0.344 and 0.354
-# (experiments/varied/ablation.py); 0.35 was kept. Not yet measured on the paper's task, whose
-# default stays FAST.
+# FAST trained on noisy observations: the varied task's held-out online error fell with noise up
+# to 0.35 (docs/results.md, the varied task's ablation).
 ROBUST = FAST.with_(training_noise=0.35)
-# ROBUST with the last two observations added to the hidden state's prior through W_D. Chosen by
-# held-out online error on the varied task's precision split, three trainings each
-# (experiments/varied/ablation.py, observed context): 0.333
-# (0.325-0.338) against ROBUST's 0.341 (0.336-0.347); the same pathways into the expected
-# observation instead 0.383 (0.380-0.385). docs/varied_levers.md has the study.
+# ROBUST with the last two observations in the hidden state's prior: the lowest held-out online
+# error of the varied task's levers (docs/varied_levers.md).
 PATHWAYS = ROBUST.with_(direct_lags=2, direct_target="hidden")
-# PATHWAYS with observation precisions learned from the relaxed errors, the varied task's
-# featured network. Chosen by the same held-out error, three trainings each: observed context
-# 0.325 (0.325-0.325) against PATHWAYS' 0.334 (0.326-0.338); hidden 0.352 (0.349-0.357) against
-# 0.353 (0.350-0.356). docs/varied_levers.md has the study.
-# Its plan memory adds plan recall (models/plan.py) and changes nothing else: on the varied task
-# plan recall flags more of the validation faults than online recall (experiments/varied/ablation.py,
-# three trainings; docs/varied_levers.md), so the benchmark features it.
+# PATHWAYS with learned observation precisions and plan recall, the varied task's featured
+# network: lower held-out error, more validation faults flagged (docs/varied_levers.md).
 PRECISE = PATHWAYS.with_(observation_precision="learned", plan_memory=True)
 PRESETS: dict[str, TPCConfig] = {"fast": FAST, "faithful": FAITHFUL, "robust": ROBUST, "pathways": PATHWAYS,
                                  "precise": PRECISE}
-# FAST for 300-step episodes at the controller's 40 Hz: whole sequences, 100 epochs at 2e-4,
-# with the last three observations added to the expected observation through W_D, started from
-# least squares (beyond the paper). Chosen by online one-step error on the 100 held-out
-# precision episodes (normalised units, mean (min-max) of three trainings): the paper's form
-# 0.199 (0.197-0.200); pathways into the hidden prior, 2 or 3 lags, 0.188 (0.171-0.218) and
-# 0.187 (0.170-0.218); into the expectation grown from zero, 2 lags, 0.191; from least squares,
-# 1, 2, 3 lags, 0.187, 0.183, 0.181 (every training within 0.0002). The joint channels, whose
-# tick-to-tick change is what a fault's first ticks alter, are expected 8 times closer than by
-# the paper's form (RMS 0.007 against 0.055). At 2e-3 the paper's form diverged; 20-tick windows
-# gained nothing worth losing the hidden state's continuity for. Most of the remaining error is
-# the finger wrench's contact chatter from tick to tick, which no predictor of the arm foresees.
+# FAST for 300-step episodes at the controller's 40 Hz: the recent past in the expectation,
+# started from least squares, expects the joints' tick-to-tick change 8 times closer than the
+# paper's form (docs/rate.md, "The network's form at 40 Hz").
 FAST_40HZ = FAST.with_(epochs=100, learning_rate=2e-4, direct_lags=3, direct_target="observation",
                        direct_init="least_squares")
 # The default network per observation rate (Hz).

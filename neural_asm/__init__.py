@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from neural_asm.service.settings import Settings as ServiceSettings
     from neural_asm.sim.episode import Episode
     from neural_asm.sim.faults import FaultSpec
-    from neural_asm.sim.runner import run_episode
+    from neural_asm.sim.paper import run_episode
 
 # public name -> (module, attribute)
 _EXPORTS: dict[str, tuple[str, str]] = {
@@ -50,7 +50,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "TPCConfig": ("neural_asm.models.config", "TPCConfig"),
     "PRESETS": ("neural_asm.models.config", "PRESETS"),
     "CheckpointError": ("neural_asm.models.checkpoint", "CheckpointError"),
-    "run_episode": ("neural_asm.sim.runner", "run_episode"),
+    "run_episode": ("neural_asm.sim.paper", "run_episode"),
     "Episode": ("neural_asm.sim.episode", "Episode"),
     "FaultSpec": ("neural_asm.sim.faults", "FaultSpec"),
     "simulate_sequences": ("neural_asm.pipelines.episodes", "simulate_sequences"),

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import typer
 
-from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, fail, read_logs, write_json
+from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, read_logs, write_json
+from neural_asm.runtime.cli import fail
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.sequences import Sequences

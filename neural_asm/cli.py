@@ -12,9 +12,8 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from neural_asm.runtime.cli import Command, Group
-from neural_asm.client.cli import client
-from neural_asm.client.replay import replay
+from neural_asm.runtime.cli import Command, Group, fail
+from neural_asm.client.cli import client, replay
 from neural_asm.experiments.catalogue import EXPERIMENTS
 from neural_asm.experiments.cli import ExperimentCommand, derive
 from neural_asm.experiments.cli import app as experiments_app
@@ -38,22 +37,17 @@ app = typer.Typer(cls=Group, help="Neural ASM: train, recall and score skill mem
                   pretty_exceptions_show_locals=False)
 
 
-def _fail(message: str) -> None:
-    typer.secho(message, fg="red", err=True)
-    raise typer.Exit(2)
-
-
 def _load_model(path: Path) -> NeuralASM:
     try:
         return checkpoint.load(path)
     except checkpoint.CheckpointError as exc:
-        _fail(str(exc))
+        raise fail(str(exc))
         raise
 
 
 def _check_mode(mode: str) -> None:
     if mode not in RECALL_MODES:
-        _fail(f"--mode must be one of {', '.join(RECALL_MODES)}, got {mode!r}")
+        raise fail(f"--mode must be one of {', '.join(RECALL_MODES)}, got {mode!r}")
 
 
 @app.command(cls=Command)
@@ -69,7 +63,7 @@ def train(
 ) -> None:
     """Train a Neural ASM on demonstrations and write a checkpoint."""
     if preset not in PRESETS:
-        _fail(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}")
+        raise fail(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}")
     config = PRESETS[preset].with_(seed=seed)
     if epochs is not None:
         config = config.with_(epochs=epochs)
@@ -119,7 +113,7 @@ def score(
     try:
         result = model.score(seqs.data, mode, cue_steps, weighted)
     except (KeyError, ValueError) as exc:
-        _fail(str(exc.args[0]))
+        raise fail(str(exc.args[0]))
     if as_json:
         typer.echo(json.dumps({"energy": result.energy.round(6).tolist()}))
         return

@@ -110,3 +110,11 @@ def markdown(summary: dict[str, Any]) -> str:
     lines += [f"- [{'x' if ok else ' '}] {text}" for text, ok in claims(summary)]
     return "\n".join(lines) + "\n"
 
+
+def headline(summary: dict[str, Any]) -> str:
+    """The README's cell: how far the Neural ASM's recalled paths bow apart, planned and not."""
+    bow = summary["pead"]["plan_and_execute"]["neural_asm"]
+    share = {c: round(100 * expressed(summary, c, "neural_asm")) for c in ("plan_and_execute", "execute_only")}
+    return (f"plan & execute: the recalled hand paths bow {1000 * bow['CW']['mean']:+.1f} / "
+            f"{1000 * bow['CCW']['mean']:+.1f} mm, {share['plan_and_execute']} % of the demonstrated separation; "
+            f"execute only: {share['execute_only']} %")

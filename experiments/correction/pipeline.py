@@ -39,7 +39,8 @@ from neural_asm.sim.config import SIM
 from neural_asm.sim.control import PlanCorrection, execute_recalled
 from neural_asm.sim.disturbances import FallingObject, elbow_hit
 from neural_asm.sim.episode import Episode
-from neural_asm.sim.runner import SimulationError, run_episode
+from neural_asm.sim.paper import Job, run_episode
+from neural_asm.sim.runner import SimulationError
 from neural_asm.sim.skills import SKILLS
 
 
@@ -100,7 +101,8 @@ def _run(recalled: np.ndarray, skill: str, seed: int, controller: str, correctio
     try:
         gate = ServedMonitor(monitor, config.monitor_mode, config.fpr) if config.gated else None
         hook = PlanCorrection(config.gains, gate, config.rate) if correction == "corrected" else None
-        return execute_recalled(recalled, skill, seed, hook, controller, disturbance, rate=config.rate)
+        return execute_recalled(recalled, Job(skill, seed, disturbance=disturbance, rate=config.rate,
+                                              controller=controller), hook)
     except SimulationError as exc:
         return repr(exc)
 

@@ -152,3 +152,13 @@ Without a hit (cube within 1 cm of its target; monitor alarms on undisturbed rec
 
 Runtime: {result.seconds:.0f} s.
 """
+
+
+def headline(doc: dict) -> str:
+    """The README's cell: the compliant arm hit at 40 kg m/s (else its hardest hit measured)."""
+    rows = [r for r in doc["results"] if r["controller"] == "compliant"]
+    r = next((r for r in rows if r["momentum"] == 40), rows[-1])
+    rec = r["recovery_rate"]
+    return (f"{doc['rate_hz']:g} Hz monitor, compliant arm, {r['momentum']:g} kg m/s hit: recovery without -> with "
+            f"the correction {pct(rec['none'], 0)} -> {pct(rec['corrected'], 0)} % (mean over trainings: "
+            f"{len(r['per_training'])}); unrecovered hits detected {pct(r['detected_rate_unrecovered'], 0)} %")

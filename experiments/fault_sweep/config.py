@@ -14,7 +14,7 @@ from neural_asm.sim.dataset import set_folder
 
 @dataclass(frozen=True)
 class PaperSets(Simulates):
-    """The paper task's episode sets (sim/dataset.py), simulated where missing."""
+    """The paper task's episode sets (sim/paper.py), simulated where missing."""
 
     data: Path | None = option(None, "episode sets, simulated when missing (default: the data home's folder "
                                "of the rate: data, data_40hz)")

@@ -236,3 +236,13 @@ def quiet_lines(result: dict) -> list[str]:
             lines.append(f"| {hz} Hz | {mode} | {spread_cell(m['lock_quiet_100ms'], count)} "
                          f"| {spread_cell(m['falling_object_quiet_100ms'], count)} |")
     return lines
+
+
+def headline(doc: dict) -> str:
+    """The README's cell: detection and the first flag's latency over the trainings, at the monitor's rate."""
+    a = doc["across_trainings"]
+    return (f"{doc['rate_hz']:g} Hz, {doc['mode']}, {doc['trainings']} trainings: locks "
+            f"{spread_cell(a['lock'], percent)} detected, falling object {spread_cell(a['falling_object'], percent)}; "
+            f"first flag after a lock's onset {spread_cell(a['lock_latency_median_ms'], ms)} ms (median), p95 "
+            f"{spread_cell(a['lock_latency_p95_ms'], ms)} ms; normal episodes flagged "
+            f"{spread_cell(a['normal_episodes_flagged'], percent)}")

@@ -94,3 +94,16 @@ def write_csv(result: SweepResult, path: Path) -> Path:
                         int(o["isolated_at_detection"][i]), round(float(o["peak_energy"][i]), 4)]
             writer.writerow(row)
     return path
+
+
+def headline(doc: dict) -> str:
+    """The README's cell: the default network (offline recall, whitened errors) at the 1 % rate."""
+    m, key = doc["methods"]["nasm_offline"]["whitened"], f"{MAIN_FPR:.2f}"
+    return (f"{pct(m['detection_rate'][key])} % of {doc['episodes']['faults']} locks detected at a 1 % per-step "
+            f"false-positive rate, {pct(m['detection_rate_episode_calibrated'][key])} % with an episode-calibrated "
+            f"1 % threshold; the locked joint isolated in {pct(m['isolation_accuracy_at_detection'])} % at first "
+            f"detection; AUROC {m['auroc']:.3f}")
+
+
+PUBLISHED = (f"the paper: {PAPER['neural_asm']['detection_rate']} detected, {PAPER['neural_asm']['isolation']} "
+             "isolated")

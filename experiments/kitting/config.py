@@ -1,11 +1,15 @@
-"""The kitting benchmark's one configuration: the split, the clock, the trainings, the windows."""
+"""The kitting benchmark's one configuration (the split, the clock, the trainings, the windows) and
+the options its command offers (`KittingRun`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
+from neural_asm.experiments.options import option
+from neural_asm.logs.errors import LogError
 from neural_asm.models.config import FAST, TPCConfig
+from neural_asm.runtime.home import home_path
 
 # A smaller, shorter-trained default network: the 2-core budget of 20 minutes holds three trainings
 # of the one network, of the per-skill networks and of the LSTM (the default H = 256 costs ~1.4 s
@@ -36,3 +40,28 @@ class KittingConfig:
     @property
     def seeds(self) -> tuple[int, ...]:
         return tuple(range(self.trainings))
+
+
+@dataclass(frozen=True)
+class KittingRun:
+    """What `nasm experiments run kitting` (and `nasm faults --task kitting`) is given; the rest of
+    the protocol is `KittingConfig`'s. The size is an option because docs/kitting.md measures a
+    larger network than the default."""
+
+    data: Path | None = option(None, "the clone's 'anomaly_detection_feature_selection_folder/No.0 filtering "
+                               "scheme' folder")
+    trainings: int = option(3, "trainings of every learned method (seeds 0, 1, ...)", flag="seeds", min=1)
+    hidden_size: int = option(KITTING_NETWORK.hidden_size, "hidden units of the one network and the per-skill "
+                              "networks", min=1)
+    epochs: int = option(KITTING_NETWORK.epochs, "their training epochs", min=1)
+    # The command's --out: the run writes its model there, then serves it to the whole runs.
+    out: Path | None = None
+
+    def config(self) -> KittingConfig:
+        """The benchmark's configuration; a folder that is not the clone's is refused in one line."""
+        if self.data is None or not (self.data / "successful_skills").is_dir():
+            raise LogError(f"{self.data or 'no --data'}: no successful_skills folder: give the clone's "
+                           "'anomaly_detection_feature_selection_folder/No.0 filtering scheme' folder")
+        network = KITTING_NETWORK.with_(hidden_size=self.hidden_size, epochs=self.epochs)
+        return KittingConfig(data=self.data, out=self.out or home_path("kitting"), trainings=self.trainings,
+                             network=network)

@@ -4,7 +4,6 @@ fault_sweep.md (the tables), auroc_vs_delta.png, timeline.png and timeline.rrd."
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -27,17 +26,10 @@ def _range(m: dict[str, Any], *keys: str) -> str:
     return "" if not node or node[0] == node[1] else f" ({_f(node[0])}–{_f(node[1])})"
 
 
-def write_json(result: KittingResult, path: Path) -> None:
-    doc = {"headline": result.headline, **{k: v for k, v in asdict(result).items() if k != "headline"}}
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(doc, indent=1))
-    tmp.replace(path)
-
-
 def markdown(result: KittingResult) -> str:
     h = result.headline
     deltas = [str(d) for d in h["deltas_s"]]
-    lines = [f"# Baxter kitting: anomalies scored from their onset\n", f"`{COMMAND}`, {result.seconds:.0f} s; "
+    lines = ["# Baxter kitting: anomalies scored from their onset\n", f"`{COMMAND}`, {result.seconds:.0f} s; "
              f"trainings per learned method: {result.config['trainings']} (mean, range); split seed "
              f"{result.split['seed']}: {len(result.split['train'])} training, {len(result.split['calibration'])} "
              f"calibration, {len(result.split['test'])} test runs. Segments: {result.counts}\n",

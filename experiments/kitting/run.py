@@ -103,12 +103,12 @@ def run(config: KittingConfig) -> KittingResult:
     own_training: dict[str, list[dict[str, Any]]] = {}
     few_training: dict[str, list[dict[str, Any]]] = {}
     correct: dict[str, list[np.ndarray]] = {}
-    model0: NeuralASM | None = None
+    models: list[NeuralASM] = []
     timeline: dict[str, Any] = {}
     with tqdm(total=3 * len(config.seeds), desc="kitting: trainings", unit="step") as progress:
         for seed in config.seeds:
             scored, model = _one_training(sets, config, seed, progress)
-            model0 = model0 or model
+            models.append(model)
             for name, s in scored.items():
                 metrics, ok = method_metrics(s, sets.test, w, config, skills)
                 per_training.setdefault(name, []).append(metrics)
@@ -126,7 +126,7 @@ def run(config: KittingConfig) -> KittingResult:
                            "anomalies_from_test_runs": _own_runs(across(own_training[m.name])[0], config)}
     few_out = {name: {"trainings": len(v), **across(v)[0]} for name, v in few_training.items()}
     path = config.out / "kitting_model.safetensors"
-    checkpoint.save(model0, path)  # type: ignore[arg-type]
+    checkpoint.save(models[0], path)
     test = sets.test
     counts = {"segments": len(segs), "train_normal": len(sets.train), "precision_normal": len(sets.precision),
               "threshold_normal": len(sets.threshold), "test_normal": int(test.normal.sum()),
@@ -149,7 +149,7 @@ def run(config: KittingConfig) -> KittingResult:
     if config.whole_runs:
         from neural_asm.experiments.kitting.whole_runs import score_whole_runs
 
-        result.whole_runs = score_whole_runs(config, split, model0)  # type: ignore[arg-type]
+        result.whole_runs = score_whole_runs(config, split, models)
     result.seconds = round(time.perf_counter() - start, 1)
     result.headline = headline(result, config)
     return result

@@ -1,5 +1,5 @@
-"""Whole runs of the test split through the product: the benchmark's model hosted by a real
-``nasm serve`` (`runtime.serving`), every tagged skill phase of each run streamed to it by a real
+"""Whole runs of the test split through the product: each training's model of the benchmark in turn
+hosted by a real ``nasm serve`` (`runtime.serving`), every tagged skill phase of each run streamed to it by a real
 ``nasm replay`` through the whole-runs mapping (`data.WHOLE_RUNS_DOC`: one episode, so one
 session, per phase of ``tag_ranges.pkl``; the robot's task program marks each skill's start, as a
 bag's marker topic does), and the issue's ``whole_runs`` counts taken from the served answers:
@@ -28,7 +28,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import yaml
@@ -36,6 +36,7 @@ import yaml
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import (ANOMALIES_FILE, PERIOD_S, PHASES_FILE, WHOLE_RUNS_DOC, Split, run_of,
                                                  whole_runs_mapping)
+from neural_asm.experiments.kitting.metrics import across
 from neural_asm.logs.label_pickle import Anomaly, Phase, read_anomalies, read_phases
 from neural_asm.logs.sources import read_mapped
 from neural_asm.logs.tables import phase_keys
@@ -172,13 +173,20 @@ def _phase_of(answer: PhaseAnswer, phases: tuple[Phase, ...]) -> int:
     return k
 
 
-def score_whole_runs(config: KittingConfig, split: Split, model: NeuralASM) -> dict[str, Any]:
-    """The test runs' whole recordings through ``nasm serve`` + ``nasm replay``, counted."""
+def score_whole_runs(config: KittingConfig, split: Split, models: Sequence[NeuralASM]) -> dict[str, Any]:
+    """The test runs' whole recordings through ``nasm serve`` + ``nasm replay``, once for each
+    training's model (files under ``OUT/whole_runs/seed_<seed>``), counted: the mean over the
+    trainings, each count's [min, max] in ``range`` and every training's counts."""
     folders = [f for f in (config.data / "whole_experiment" / f"experiment_at_{r}" for r in split.test) if f.is_dir()]
-    answered = replay_runs(folders, model, config.out / "whole_runs", config.recall_mode)
-    calibration = model.calibration(config.recall_mode, 1)
-    known = calibration.skills if calibration is not None else ()
-    counts = count_whole_runs(answered, {run_of(f.name): run_labels(f) for f in folders}, known, config.not_anomalies)
-    return {**counts, "fpr": SCORING.default_fpr, "mode": config.recall_mode,
-            "scored_as": "each tagged skill phase one session of the benchmark's model, hosted by nasm serve and "
+    labels = {run_of(f.name): run_labels(f) for f in folders}
+    per_training = []
+    for seed, model in zip(config.seeds, models):
+        answered = replay_runs(folders, model, config.out / "whole_runs" / f"seed_{seed}", config.recall_mode)
+        calibration = model.calibration(config.recall_mode, 1)
+        known = calibration.skills if calibration is not None else ()
+        per_training.append(count_whole_runs(answered, labels, known, config.not_anomalies))
+    mean, spread = across(per_training)
+    return {**mean, "range": spread, "trainings": len(per_training), "per_training": per_training,
+            "fpr": SCORING.default_fpr, "mode": config.recall_mode,
+            "scored_as": "each tagged skill phase one session of each training's model, hosted by nasm serve and "
                          "streamed by nasm replay through the whole-runs mapping (the service's default threshold)"}

@@ -66,6 +66,13 @@ def markdown(results: dict[str, dict], jitter_s: float) -> str:
     return "\n".join(lines) + "\n"
 
 
+def headline(doc: dict) -> str:
+    """The README's cell: the default network trained from the native files and from bags, side by side."""
+    scored = {source: next(iter(methods.values())) for source, methods in doc["results"].items()}
+    return "; ".join(f"from {source}: {100 * m['detection_rate']['0.01']:.1f} % detected at a 1 % per-step "
+                     f"false-positive rate, AUROC {m['auroc']:.3f}" for source, m in scored.items())
+
+
 @dataclass(frozen=True)
 class RobotLogsResult:
     jitter_s: float

@@ -141,3 +141,14 @@ def ablation_markdown(rows: list[dict], context: str) -> str:
                      f"{col('normal_episode_false_alarm', '.1%')} | {col('benign_ood_false_alarm', '.1%')} | "
                      f"{col('auroc', '.3f')} |")
     return "\n".join(lines) + "\n"
+
+
+def ablation_headline(rows: list[dict]) -> str:
+    """The README's cell: the range of visible-fault detection over the variants, each its trainings' mean."""
+    by_label: dict[str, list[float]] = {}
+    for r in rows:
+        by_label.setdefault(r["label"], []).append(r["detection"])
+    means = {label: float(np.mean(v)) for label, v in by_label.items()}
+    low, high = min(means, key=means.__getitem__), max(means, key=means.__getitem__)
+    return (f"variants: {len(means)}; visible faults detected at the served 1 % episode threshold from "
+            f"{100 * means[low]:.1f} % ({low}) to {100 * means[high]:.1f} % ({high})")

@@ -7,10 +7,11 @@ the free-space waypoints, the operator's start posture, sensor and perception no
 how many visible faults stand out of that remaining noise at the benchmark's own threshold.
 
 Every scored episode (held-out normals, benign out-of-range ones, each fault's twin) is
-simulated again with its context and fault and fresh noise (``VariedJob.replicate``), and once
-more keeping its start posture (``same_start``: what its first observation, the network's cue,
-shows). The oracles, scored exactly like the benchmark's methods (``outcomes.outcomes``: whitened
-energies from the precision split, the served episode threshold at 1 % on the calibration split):
+simulated again with its context and fault and fresh noise (a `Replicate`: another draw of the
+job's noise, ``VariedTask.redraw``), and once more keeping its start posture (``same_start``:
+what its first observation, the network's cue, shows). The oracles, scored exactly like the
+benchmark's methods (``outcomes.outcomes``: whitened energies from the precision split, the served
+episode threshold at 1 % on the calibration split):
 
 - *replay*: expects an episode to be its replicate (residual ``x - x_rep``). It is realisable
   (the simulator and the true context, hidden speed included), and its residual noise is twice
@@ -34,7 +35,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -55,30 +56,49 @@ from neural_asm.sim.config import SIM
 from neural_asm.sim.dataset import load_episodes, write_cache, write_mcap
 from neural_asm.sim.episode import Episode
 from neural_asm.sim.varied import channel_groups, context_columns
-from neural_asm.sim.varied_sets import VariedJob, run_job
+from neural_asm.sim.runner import run_job
+from neural_asm.sim.varied_sets import VARIED, VariedJob, VariedVariation
 
 LOWER_FLOORS = (0.01, 0.002)  # normalised units, against ScoringConfig.error_std_floor (0.05)
-REPLICATES = {"fresh": {"replicate": 1}, "same_start": {"replicate": 2, "same_start": True}}
+@dataclass(frozen=True)
+class Replicate:
+    """An episode again under another variation: draw `draw` of its noise (the same context), its
+    own start posture kept with `same_start`, at another execution `speed` if given."""
+
+    draw: int
+    same_start: bool = False
+    speed: float | None = None
+
+    def variation(self, job: VariedJob) -> VariedVariation:
+        """The job's variation as this replicate changes it."""
+        variation = VARIED.redraw(job, self.draw)
+        if self.same_start:
+            variation = replace(variation, plan=replace(variation.plan, start=VARIED.variation(job).plan.start))
+        if self.speed is not None:
+            variation = replace(variation, context=replace(variation.context, speed=float(self.speed)))
+        return variation
+
+
+REPLICATES = {"fresh": Replicate(1), "same_start": Replicate(2, same_start=True)}
 # The same start posture at four execution speeds, strata of the task's uniform 1 +- range: their
 # mean is the exact plan of an episode whose speed is not known (`without_speed`).
 SPEED_STRATA = tuple(1.0 + SIM.varied.speed * q for q in (-0.75, -0.25, 0.25, 0.75))
-SPEED_REPLICATES = {f"speed_{k}": {"replicate": 100 + k, "same_start": True, "speed": speed}
+SPEED_REPLICATES = {f"speed_{k}": Replicate(100 + k, same_start=True, speed=speed)
                     for k, speed in enumerate(SPEED_STRATA)}
 
 
-def replicate_jobs(bench: VariedBenchmark, kind: str) -> dict[str, list[VariedJob]]:
-    """One replicate (of REPLICATES' or SPEED_REPLICATES' ``kind``) of every scored episode:
-    normals, out-of-range ones, and each fault's twin."""
-    options = {**REPLICATES, **SPEED_REPLICATES}[kind]
+def replicate_jobs(bench: VariedBenchmark) -> dict[str, list[VariedJob]]:
+    """The job of every scored episode: normals, out-of-range ones, and each fault's twin."""
 
-    def jobs(s: Sequences, **kw: bool) -> list[VariedJob]:
-        return [VariedJob(str(skill), int(seed), **options, **kw) for skill, seed in zip(s.labels, s.seeds)]
+    def jobs(s: Sequences, out_of_range: bool = False) -> list[VariedJob]:
+        return [VariedJob(str(skill), int(seed), out_of_range=out_of_range) for skill, seed in zip(s.labels, s.seeds)]
 
     return {"precision": jobs(bench.precision), "calibration": jobs(bench.calibration), "test": jobs(bench.test),
             "ood": jobs(bench.ood, out_of_range=True), "faults": jobs(bench.twins)}
 
 
-def _replicates(jobs: list[VariedJob], name: str, parallel: Parallel, cache: Path | None) -> list[Episode | str]:
+def _replicates(jobs: list[VariedJob], replicate: Replicate, name: str, parallel: Parallel,
+                cache: Path | None) -> list[Episode | str]:
     """Each job's episode (or why the simulation refused it), read from ``cache/<name>.mcap``
     where an earlier run left it: replicates depend on the episodes' seeds, not the context."""
     path = None if cache is None else Path(cache) / f"{name}.mcap"
@@ -88,7 +108,8 @@ def _replicates(jobs: list[VariedJob], name: str, parallel: Parallel, cache: Pat
         refused = {tuple(k): reason for *k, reason in json.loads(refused_path.read_text())}
         if all((j.skill, j.seed) in done or (j.skill, j.seed) in refused for j in jobs):
             return [done.get((j.skill, j.seed)) or refused[(j.skill, j.seed)] for j in jobs]
-    results = parallel.map(run_job, [(job,) for job in jobs], desc=name.replace("_", " "), unit="ep", chunksize=8)
+    results = parallel.map(run_job, [(VARIED, job, replicate.variation(job)) for job in jobs],
+                           desc=name.replace("_", " "), unit="ep", chunksize=8)
     if path is not None:
         episodes = [r for r in results if isinstance(r, Episode)]
         write_mcap(episodes, path)
@@ -104,9 +125,10 @@ def simulate_replicates(bench: VariedBenchmark, parallel: Parallel = Parallel(),
     restricted to the episodes that have all of them (a replicate the simulation refuses, at its
     velocity limits or in IK, drops its episode; the drops are counted per set)."""
     results = {}
+    replicates = {**REPLICATES, **SPEED_REPLICATES}
     for kind in kinds:
-        for key, jobs in replicate_jobs(bench, kind).items():
-            results[kind, key] = _replicates(jobs, f"replicates_{kind}_{key}", parallel, cache)
+        for key, jobs in replicate_jobs(bench).items():
+            results[kind, key] = _replicates(jobs, replicates[kind], f"replicates_{kind}_{key}", parallel, cache)
     kept = {key: np.logical_and.reduce([[isinstance(r, Episode) for r in results[kind, key]] for kind in kinds])
             for key in SETS}
     bench = _keep(bench, kept)
@@ -289,3 +311,12 @@ def without_speed_lines(result: dict, pct: Callable[[float | None], str]) -> lis
                      f"| {pct(fam.get('wrong_side', {}).get('detection_visible'))} "
                      f"| {pct(fam.get('lock', {}).get('detection_visible'))} |")
     return lines
+
+
+def ceiling_headline(result: dict) -> str:
+    """The README's cell: the oracle that detects most, at the served episode threshold."""
+    scored = {name: o["episode"] for name, o in result["oracles"].items()}
+    best = max(scored, key=lambda name: scored[name]["detection"])
+    return (f"{result['context']} context: the best oracle ({best}) detects {100 * scored[best]['detection']:.1f} % "
+            f"of visible faults, {100 * scored[best]['consequential']['detection']:.1f} % of those that make the task "
+            "fail")

@@ -28,7 +28,9 @@ from neural_asm.pipelines.episodes import as_sequences, ensure_sets, split_three
 from neural_asm.runtime.parallel import Parallel
 from neural_asm.sim.episode import Episode
 from neural_asm.sim.varied import channel_names, check_context, context_columns
-from neural_asm.sim.varied_sets import VARIED_KINDS, generate, jobs_for
+from neural_asm.sim.dataset import generate
+from neural_asm.sim.task import SetSizes
+from neural_asm.sim.varied_sets import VARIED, VARIED_KINDS, jobs_for
 
 if TYPE_CHECKING:
     from neural_asm.experiments.varied.config import VariedSets
@@ -84,13 +86,13 @@ class VariedBenchmark(FaultSet):
 
 def ensure_varied_sets(data_dir: Path, parallel: Parallel = Parallel()) -> tuple[dict, dict]:
     """Load the varied sets from data_dir, simulating missing ones; returns sets and drop counts."""
-    sets = ensure_sets(data_dir, VARIED_KINDS, lambda kind, folder: generate(kind, folder, parallel.workers,
-                                                                             parallel.backend))
+    sets = ensure_sets(data_dir, VARIED_KINDS, lambda kind, folder: generate(
+        VARIED, kind, folder, SetSizes(), parallel.workers, parallel.backend))
     dropped = {}
     for kind, episodes in sets.items():
         # a demos file may hold any number per skill (nasm demos --n-demos): its seeds say how many
-        sizes = {"n_demos": 1 + max(e.seed for e in episodes)} if kind == "demos" else {}
-        dropped[kind] = len(jobs_for(kind, **sizes)) - len(episodes)
+        sizes = SetSizes(n_demos=1 + max(e.seed for e in episodes)) if kind == "demos" else SetSizes()
+        dropped[kind] = len(jobs_for(kind, sizes)) - len(episodes)
     return sets, dropped
 
 

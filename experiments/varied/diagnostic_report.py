@@ -119,3 +119,12 @@ if __name__ == "__main__":
     import sys
 
     main(sys.argv[1:-1], sys.argv[-1])
+
+
+def headline(result: dict) -> str:
+    """The README's cell: held-out error and detection of the Hebbian and BPTT trainings, the best linear beside."""
+    mse = {kind: spread(result[kind], lambda r: r["held_out_mse"])[0] for kind in ("hebbian", "bptt")}
+    found = {kind: spread(result[kind], lambda r: r["detection"])[0] for kind in ("hebbian", "bptt")}
+    return (f"{result['context']} context, {len(result['seeds'])} trainings: held-out MSE Hebbian {mse['hebbian']:.3f}, "
+            f"BPTT {mse['bptt']:.3f}, best linear one-step {result['best_linear']['held_out_mse']:.3f}; visible "
+            f"faults detected {100 * found['hebbian']:.1f} % and {100 * found['bptt']:.1f} %")

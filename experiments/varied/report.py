@@ -158,3 +158,14 @@ def write_figures(result: VariedResult, out: Path) -> list[Path]:
     fig.savefig(paths[1], dpi=120)
     plt.close(fig)
     return paths
+
+
+def headline(doc: dict) -> str:
+    """The README's cell: the featured network and the strongest rival at the served 1 % episode threshold."""
+    h = doc["headline"]
+    featured, methods = h["featured"], h["methods"]
+    rival = max((n for n, m in methods.items() if not m["is_neural_asm"]), key=lambda n: methods[n]["detection"])
+    return (f"{doc['benchmark']['context']} context, {featured} at the served 1 % episode threshold: "
+            f"{_pct(methods[featured]['detection'])} % of visible faults, "
+            f"{_pct(h['consequential']['methods'][featured]['detection'])} % of those that make the task fail; "
+            f"strongest rival ({rival}) {_pct(methods[rival]['detection'])} %; paired p = {h['paired']['p_value']:.2f}")

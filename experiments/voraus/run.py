@@ -14,12 +14,15 @@ import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from sklearn.metrics import roc_auc_score
 from tqdm import tqdm
 
+from neural_asm.experiments.options import option
+from neural_asm.experiments.voraus import report
+from neural_asm.experiments.writer import headline_first
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.mapping import parse_mapping
 from neural_asm.logs.sources import read_mapped
@@ -62,10 +65,9 @@ def voraus_mapping_doc() -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class VorausConfig:
-    data: Path
-    out: Path
+    data: Path | None = option(None, "voraus-AD's parquet file (or a file in its layout)")
+    trainings: int = option(3, "trainings (seeds 0, 1, ...)", flag="seeds", min=1)
     network: TPCConfig = FAST.with_(hidden_size=64, epochs=150)
-    trainings: int = 3
     split_seed: int = 0
     fprs: tuple[float, ...] = (0.01, 0.05)
 
@@ -77,6 +79,17 @@ class VorausResult:
     trainings: list[dict[str, Any]]
     headline: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
+
+    stem: ClassVar[str] = "fault_sweep"
+
+    def to_json(self) -> dict[str, Any]:
+        return headline_first(self)
+
+    def markdown(self) -> str:
+        return report.markdown(self)
+
+    def files(self, out: Path) -> list[Path]:
+        return [report.per_category_figure(self, out / "per_category.png")]
 
 
 def _training(seqs, anomalies: np.ndarray, parts: dict[str, np.ndarray], config: VorausConfig, seed: int) -> dict[str, Any]:
@@ -109,6 +122,8 @@ def _training(seqs, anomalies: np.ndarray, parts: dict[str, np.ndarray], config:
 
 def run(config: VorausConfig) -> VorausResult:
     start = time.perf_counter()
+    if config.data is None:
+        raise LogError("no --data: give voraus-AD's parquet file")
     seqs = read_mapped(config.data, parse_mapping(voraus_mapping_doc(), "the voraus mapping"), "voraus")
     anomalies = np.array(seqs.provenance["anomalies"], dtype=object)
     normal = np.flatnonzero(anomalies == None)  # noqa: E711
