@@ -49,7 +49,7 @@ def rng():
 def small_panda_model() -> NeuralASM:
     """A small network trained on simulated Panda episodes (4 per skill), calibrated in both
     recall modes on others: the model the client tests serve."""
-    from neural_asm.sim.runner import run_episode
+    from neural_asm.sim.paper import run_episode
     from neural_asm.sim.skills import SKILLS
 
     def episodes(seeds: range) -> np.ndarray:
