@@ -39,18 +39,36 @@ after the run, when the arm starts moving in each day's normal skill-5 and ``no_
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 from unittest.mock import patch
 
 import numpy as np
 import typer
-
 from neural_asm.experiments.kitting.config import KittingConfig
-from neural_asm.experiments.kitting.data import Segments, Split, read_segments, run_of, split_runs, whole_runs_mapping
-from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network, served_thresholds
+from neural_asm.experiments.kitting.data import (
+    Segments,
+    Split,
+    read_segments,
+    run_of,
+    split_runs,
+    whole_runs_mapping,
+)
+from neural_asm.experiments.kitting.methods import (
+    Scored,
+    Sets,
+    calibrate_served,
+    fit_network,
+    served_thresholds,
+)
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics, windows
 from neural_asm.experiments.kitting.run import make_sets
-from neural_asm.experiments.kitting.whole_runs import PhaseAnswer, RunLabels, count_whole_runs, run_labels
+from neural_asm.experiments.kitting.whole_runs import (
+    PhaseAnswer,
+    RunLabels,
+    count_whole_runs,
+    run_labels,
+)
 from neural_asm.logs.sources import own_steps, read_mapped
 from neural_asm.logs.tables import phase_keys
 from neural_asm.models import asm
@@ -233,13 +251,16 @@ def whole_run_phases(config: KittingConfig, split: Split, folder: Path) -> tuple
 
 
 def whole_runs(model: NeuralASM, phases: Sequences, labels: dict[str, RunLabels],
-               config: KittingConfig) -> dict[str, float]:
+               config: KittingConfig, table: np.ndarray | None = None) -> dict[str, float]:
     """The benchmark's whole-run counts (`count_whole_runs`) from the model's served offline
     calibration scoring each phase in process (what the served sessions answer: the benchmark's
-    tests hold them equal), each phase over its own steps."""
+    tests hold them equal), each phase over its own steps; with ``table``, each step held to the
+    threshold of the skill recognised at it (the last entry: no skill recognised yet)."""
     cal = model.calibration("offline", 1)
     errors = model.errors(phases.data, "offline")
     energies, picks_ = cal.energy(errors), cal.recognised(errors.astype(np.float64))
+    if table is not None:
+        energies, cal = energies / table[picks_], replace(cal, episode_thresholds={0.01: 1.0})
     prov = phases.provenance
     answered = [PhaseAnswer(run_of(prov["episodes"][i]), str(phases.labels[i]), float(prov["starts_s"][i]),
                             is_fault(energies[i, :n], cal.episode_thresholds[0.01]),
