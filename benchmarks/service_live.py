@@ -23,7 +23,8 @@ import websockets
 from service_harness import FLEET, SESSION, WARM_STEPS, free_port, start_server, tree_cpu_s, warm_fleet
 
 SETUPS = {"none": ("--no-metrics",), "metrics": ("--metrics",), "live": ("--metrics",)}
-RATIOS = {"metrics_vs_none": ("metrics", "none"), "live_vs_files": ("live", "metrics")}
+# (what is compared, against what) -> (setup, reference setup): keys "<a>_vs_<b>" and "<a>_cpu_vs_<b>"
+RATIOS = {("metrics", "none"): ("metrics", "none"), ("live", "files"): ("live", "metrics")}
 NAMES = {"no_metrics": "none", "metrics": "metrics", "live": "live"}  # the keys' names for the setups
 
 
@@ -97,10 +98,9 @@ def measure_live(folder: Path, episodes: np.ndarray, fleet_steps: int, rate_hz: 
             proc.wait(30)
     result = {f"fleet_steps_per_s_{name}": float(np.median(rates[setup])) for name, setup in NAMES.items()}
     result |= {f"service_cpu_ms_per_step_{name}": float(np.median(cpu_ms[setup])) for name, setup in NAMES.items()}
-    for key, (setup, reference) in RATIOS.items():
-        ratios = np.asarray(rates[setup]) / np.asarray(rates[reference])
+    for (name, against), (setup, reference) in RATIOS.items():
+        key, ratios = f"{name}_vs_{against}", np.asarray(rates[setup]) / np.asarray(rates[reference])
         result |= {key: float(np.median(ratios)), f"{key}_min": float(ratios.min()), f"{key}_max": float(ratios.max())}
-        prefix = key.split("_vs_")[0]
-        result[f"{prefix}_cpu_vs_{key.split('_vs_')[1]}"] = float(np.median(cpu_ms[reference]) / np.median(cpu_ms[setup]))
+        result[f"{name}_cpu_vs_{against}"] = float(np.median(cpu_ms[reference]) / np.median(cpu_ms[setup]))
     return {**result, "live_rounds": rounds, "live_lag_p50_ms": float(np.percentile(lags, 50)),
             "live_lag_p95_ms": float(np.percentile(lags, 95)), "live_lag_steps": len(lags)}
