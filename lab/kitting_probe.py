@@ -45,30 +45,13 @@ from unittest.mock import patch
 
 import numpy as np
 import typer
+
 from neural_asm.experiments.kitting.config import KittingConfig
-from neural_asm.experiments.kitting.data import (
-    Segments,
-    Split,
-    read_segments,
-    run_of,
-    split_runs,
-    whole_runs_mapping,
-)
-from neural_asm.experiments.kitting.methods import (
-    Scored,
-    Sets,
-    calibrate_served,
-    fit_network,
-    served_thresholds,
-)
+from neural_asm.experiments.kitting.data import Segments, Split, read_segments, run_of, split_runs, whole_runs_mapping
+from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network, served_thresholds
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics, windows
 from neural_asm.experiments.kitting.run import make_sets
-from neural_asm.experiments.kitting.whole_runs import (
-    PhaseAnswer,
-    RunLabels,
-    count_whole_runs,
-    run_labels,
-)
+from neural_asm.experiments.kitting.whole_runs import PhaseAnswer, RunLabels, count_whole_runs, run_labels
 from neural_asm.logs.sources import own_steps, read_mapped
 from neural_asm.logs.tables import phase_keys
 from neural_asm.models import asm

@@ -45,27 +45,16 @@ from pathlib import Path
 
 import numpy as np
 import typer
+
+from lab.kitting_probe import MIN_SKILL_EPISODES, energies, picks, print_table, whole_run_phases, whole_runs
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import Segments, read_segments, split_runs
-from neural_asm.experiments.kitting.methods import (
-    Scored,
-    Sets,
-    calibrate_served,
-    fit_network,
-)
+from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics, windows
 from neural_asm.experiments.kitting.run import make_sets
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration, conformal_episode_threshold
 
-from lab.kitting_probe import (
-    MIN_SKILL_EPISODES,
-    energies,
-    picks,
-    print_table,
-    whole_run_phases,
-    whole_runs,
-)
 
 LEFT_PAD = 4
 RATE = 0.01
