@@ -234,19 +234,24 @@ def whole_run_phases(config: KittingConfig, split: Split, folder: Path) -> tuple
 
 
 def whole_runs(model: NeuralASM, phases: Sequences, labels: dict[str, RunLabels],
-               config: KittingConfig, table: np.ndarray | None = None) -> dict[str, float]:
+               config: KittingConfig, table: np.ndarray | None = None,
+               recognised: np.ndarray | None = None) -> dict[str, float]:
     """The benchmark's whole-run counts (`count_whole_runs`) from the model's served offline
     calibration scoring each phase in process (what the served sessions answer: the benchmark's
     tests hold them equal), each phase over its own steps; with ``table``, each step held to the
-    threshold of the skill recognised at it (the last entry: no skill recognised yet)."""
+    threshold of the skill recognised at it (the last entry: no skill recognised yet); with
+    ``recognised`` (N, T), the skills (indices, -1 none) that centre each step instead of the served ones."""
     cal = model.calibration("offline", 1)
     errors = model.errors(phases.data, "offline")
-    energies, picks_ = cal.energy(errors), cal.recognised(errors.astype(np.float64))
+    if recognised is None:
+        energies_, picks_ = cal.energy(errors), cal.recognised(errors.astype(np.float64))
+    else:
+        energies_, picks_ = energies(cal, errors.astype(np.float64), recognised), recognised
     if table is not None:
-        energies, cal = energies / table[picks_], replace(cal, episode_thresholds={0.01: 1.0})
+        energies_, cal = energies_ / table[picks_], replace(cal, episode_thresholds={0.01: 1.0})
     prov = phases.provenance
     answered = [PhaseAnswer(run_of(prov["episodes"][i]), str(phases.labels[i]), float(prov["starts_s"][i]),
-                            is_fault(energies[i, :n], cal.episode_thresholds[0.01]),
+                            is_fault(energies_[i, :n], cal.episode_thresholds[0.01]),
                             tuple(None if k < 0 else cal.skills[k] for k in picks_[i, :n]))
                 for i in range(len(phases.data)) for n in (own_steps(phases, i),)]
     counts = count_whole_runs(answered, labels, cal.skills, config.not_anomalies)
