@@ -54,6 +54,8 @@ class KittingRun:
     hidden_size: int = option(KITTING_NETWORK.hidden_size, "hidden units of the one network and the per-skill "
                               "networks", min=1)
     epochs: int = option(KITTING_NETWORK.epochs, "their training epochs", min=1)
+    split_seed: int = option(0, "the seed that shuffles the runs before they are split into train, calibration "
+                             "and test (another split, the same protocol)", min=0)
     # The command's --out: the run writes its model there, then serves it to the whole runs.
     out: Path | None = None
 
@@ -64,4 +66,4 @@ class KittingRun:
                            "'anomaly_detection_feature_selection_folder/No.0 filtering scheme' folder")
         network = KITTING_NETWORK.with_(hidden_size=self.hidden_size, epochs=self.epochs)
         return KittingConfig(data=self.data, out=self.out or home_path("kitting"), trainings=self.trainings,
-                             network=network)
+                             network=network, split_seed=self.split_seed)

@@ -62,6 +62,15 @@ def test_windows_end_at_onset_plus_delta_and_normals_share_their_lengths(kitting
     assert all(e in set(w.ends[0.5][:n_a]) or e == o for e, o in zip(normal_ends, own))
 
 
+def test_the_split_seed_reaches_the_protocol_and_moves_runs(kitting):
+    from neural_asm.experiments.kitting.config import KittingRun
+
+    config = KittingRun(data=kitting, split_seed=5).config()
+    assert config.split_seed == 5
+    runs = read_segments(kitting).runs
+    assert split_runs(runs, config.train_fraction, 5) != split_runs(runs, config.train_fraction, 0)
+
+
 @pytest.mark.slow
 def test_the_kitting_benchmark_writes_its_headline(kitting, tmp_path):
     from neural_asm.experiments.kitting.experiment import KittingReport
