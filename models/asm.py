@@ -20,7 +20,7 @@ from neural_asm.models.calibration import Calibration, calibration_key, estimate
 from neural_asm.models.config import DEFAULT_RATE_HZ, FAST, SCORING, Covariance, TPCConfig
 from neural_asm.models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_for
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.plan import PlanMemory, PlanRecaller
+from neural_asm.models.plan import PlanMemory, PlanRecaller, check_demonstrations
 from neural_asm.models.scoring import SequenceScore, StepScore, energy, quadratic, step_row
 from neural_asm.models.sequences import checked_array
 from neural_asm.models.tpc import TemporalPC, relative_precision
@@ -98,26 +98,26 @@ class NeuralASM:
     ) -> "NeuralASM":
         """Fit the normaliser, train the network and estimate precisions on the data.
 
-        ``rate_hz`` is the sequences' sampling rate, stored with the model.
-        ``context_channels`` name the observation channels that describe the episode's
-        context (where the object is, where it must go); with ``config.context_input`` their
-        first-step values drive the hidden state's prior through W_C, so that the recalled
-        plan is the one for this context rather than an average over contexts.
+        ``rate_hz`` is the sequences' sampling rate, stored with the model. ``context_channels`` name the
+        observation channels that describe the episode's context (where the object is, where it must go); with
+        ``config.context_input`` their first-step values drive the hidden state's prior through W_C, so that the
+        recalled plan is the one for this context rather than an average over contexts.
 
-        Given held-out ``validation`` sequences (raw) and ``config.keep_best_on_held_out``,
-        the weights kept are those of the epoch that recalls them best (see ``train``). ``labels`` (the skill of each
-        sequence) let observation precisions be estimated within skills. The precisions estimated here come
-        from the training sequences themselves and are optimistic; ``calibrate``
-        replaces them with estimates from held-out normal episodes.
+        Given held-out ``validation`` sequences (raw) and ``config.keep_best_on_held_out``, the weights kept are those
+        of the epoch that recalls them best (see ``train``). ``labels`` (the skill of each sequence) let observation
+        precisions be estimated within skills (and a plan memory needs 3 of each). The precisions estimated here come
+        from the training sequences themselves and are optimistic; ``calibrate`` replaces them with estimates from
+        held-out normal episodes.
         """
         data = as_sequences(sequences, len(channel_names))
+        if config.plan_memory:
+            check_demonstrations(labels)
         normaliser = Normaliser.fit(data)
         net = TemporalPC(len(channel_names), config, context_index(channel_names, context_channels, config))
         if config.observation_precision in ("demo_spread", "learned"):
             net.set_precision(channel_precision(normaliser.normalise(data), labels))
-        held_out = None
-        if validation is not None and config.keep_best_on_held_out:
-            held_out = normaliser.normalise(as_sequences(validation, len(channel_names)))
+        keep_best = validation is not None and config.keep_best_on_held_out
+        held_out = normaliser.normalise(as_sequences(validation, len(channel_names))) if keep_best else None
         history, kept = train(net, normaliser.normalise(data), progress=progress, validation=held_out)
         provenance = {**(provenance or {}), "kept_epoch": kept + 1}
         plan = None

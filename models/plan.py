@@ -37,6 +37,20 @@ from neural_asm.models.recall import Recaller
 from neural_asm.models.step_maps import apply_maps, input_features, ridge_maps, step_codes, with_one
 from neural_asm.models.tpc import TemporalPC
 
+# The maps are cross-fitted inside cross-fitted folds (`PlanMemory.fit`): with three demonstrations
+# of a skill every inner fold still holds one of it.
+MIN_DEMONSTRATIONS = 3
+
+
+def check_demonstrations(skills: Sequence[str] | None) -> None:
+    """Refuse, before any training, skills a plan memory cannot be fitted on."""
+    names, counts = np.unique(np.asarray(["all"] if skills is None else skills, dtype=str), return_counts=True)
+    few = {str(n): int(c) for n, c in zip(names, counts) if c < MIN_DEMONSTRATIONS}
+    if skills is not None and few:
+        raise ValueError(f"a plan memory needs at least {MIN_DEMONSTRATIONS} demonstrations of every skill (its maps "
+                         f"are cross-fitted); too few of: {', '.join(f'{n} ({c})' for n, c in few.items())}")
+
+
 @dataclass(frozen=True)
 class PlanMemory:
     """The maps of plan recall; K skills, D channels, C context channels, H hidden units, T

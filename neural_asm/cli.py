@@ -70,7 +70,10 @@ def train(
     if hidden is not None:
         config = config.with_(hidden_size=hidden)
     seqs = read_logs(data, mapping, skip_bad=skip_bad) if mapping else load_sequences(data)
-    memory = SkillMemory.fit(seqs, preset=config)
+    try:
+        memory = SkillMemory.fit(seqs, preset=config)
+    except ValueError as exc:  # data the preset cannot be fitted on, named before training
+        raise fail(str(exc))
     memory.save(out)
     typer.echo(f"trained on {len(seqs)} sequences at {seqs.rate_hz:g} Hz; final energy {memory.model.history[-1]:.4g}; "
                f"wrote {out}")

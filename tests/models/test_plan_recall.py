@@ -138,3 +138,26 @@ def test_without_the_networks_states_the_plan_is_the_input_pathway_alone(data, m
     z = np.random.default_rng(0).normal(size=(3, model.config.hidden_size))
     skill, t, cue = np.array([0, 1, 2]), np.array([0, 4, 20]), x[:3, 0]
     np.testing.assert_allclose(bare.read(z, t, skill, cue), bare.read(2 * z, t, skill, cue))  # states unread
+
+
+def test_a_plan_memory_with_too_few_demonstrations_of_a_skill_is_refused_before_training(data):
+    keep = np.concatenate([np.flatnonzero(data.labels != data.labels[0]), np.flatnonzero(data.labels == data.labels[0])[:2]])
+    config = CONFIG.with_(epochs=100_000)  # were it trained first, this test would not end
+    with pytest.raises(ValueError, match=f"at least 3 demonstrations of every skill.*{data.labels[0]} \\(2\\)"):
+        NeuralASM.fit(data.data[keep], data.channel_names, config, progress=False, labels=data.labels[keep])
+
+
+def test_nasm_train_refuses_a_plan_memory_preset_with_too_few_demonstrations_in_one_line(data, tmp_path):
+    from typer.testing import CliRunner
+
+    from neural_asm.cli import app
+
+    keep = np.concatenate([np.flatnonzero(data.labels != data.labels[0]), np.flatnonzero(data.labels == data.labels[0])[:1]])
+    path = tmp_path / "few.npz"
+    np.savez(path, sequences=data.data[keep], channel_names=np.array(data.channel_names),
+             skills=data.labels[keep].astype(str))
+    out = tmp_path / "model.safetensors"
+    result = CliRunner().invoke(app, ["train", str(path), "--preset", "precise", "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error")]
+    assert len(errors) == 1 and f"{data.labels[0]} (1)" in errors[0] and not out.exists()
