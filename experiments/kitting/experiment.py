@@ -41,14 +41,15 @@ def run_kitting(options: KittingRun) -> KittingReport:
 
 
 def headline(doc: dict[str, Any]) -> str:
-    """The README's cell: the featured network half a second after the onset, its weakest skill and
-    anomaly type, the strongest rival, and the whole runs through the product."""
+    """The README's cell: the featured network half a second after the onset on one split, its
+    weakest skill and anomaly type, the strongest rival, and the whole runs through the product."""
     h, delta = doc["headline"], "0.5"
     one, paired, runs = h["methods"][h["featured"]], h["paired"], h["whole_runs"]
     skill = min(one["per_skill"], key=lambda s: one["per_skill"][s]["auroc"][delta])
     kind = min(one["per_type"], key=lambda t: one["per_type"][t]["auroc_0.5"])
     rival = h["methods"][paired["baseline"]]
-    return (f"one network not told the skill, {one['trainings']} trainings, 0.5 s after the onset: mean AUROC over "
+    return (f"one network not told the skill, {one['trainings']} trainings, run-wise split "
+            f"{doc['split']['seed']} (others: docs), 0.5 s after the onset: mean AUROC over "
             f"skills {', '.join(one['per_skill'])} {one['auroc'][delta]:.2f} (skill {skill} "
             f"{one['per_skill'][skill]['auroc'][delta]:.2f}, {kind} {one['per_type'][kind]['auroc_0.5']:.2f}); "
             f"{100 * one['detected_1pct']:.0f} % detected and {100 * one['normal_flagged_1pct']:.1f} % of normal "

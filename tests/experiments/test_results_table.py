@@ -66,7 +66,7 @@ WRITTEN = {
     "robot_logs": ({"results": {"native": {"nasm_offline": {"detection_rate": {"0.01": 1.0}, "auroc": 1.0}},
                                 "bags": {"nasm_offline": {"detection_rate": {"0.01": 0.99}, "auroc": 0.999}}}},
                    ["from native: 100.0 %", "from bags: 99.0 %", "AUROC 0.999"]),
-    "kitting": ({"headline": {
+    "kitting": ({"split": {"seed": 2}, "headline": {
         "featured": "nasm_one", "paired": {"baseline": "template_told", "p_value": 1e-14},
         "whole_runs": {"flagged_within_1s": 0.33, "clean_phases_flagged": 0.0},
         "methods": {"nasm_one": {"trainings": 3, "auroc": {"0.5": 0.83}, "detected_1pct": 0.27,
@@ -74,7 +74,7 @@ WRITTEN = {
                                  "per_skill": {"3": {"auroc": {"0.5": 0.97}}, "5": {"auroc": {"0.5": 0.51}}},
                                  "per_type": {"object_slip": {"auroc_0.5": 0.96}, "no_object": {"auroc_0.5": 0.48}}},
                     "template_told": {"auroc": {"0.5": 0.97}}}}},
-                ["3 trainings", "skills 3, 5 0.83 (skill 5 0.51, no_object 0.48)", "27 % detected",
+                ["3 trainings, run-wise split 2", "skills 3, 5 0.83 (skill 5 0.51, no_object 0.48)", "27 % detected",
                  "0.5 % of normal", "template_told 0.97 (p = 1e-14)", "33 % of anomalies", "0 % of clean phases"]),
     "voraus": ({"headline": {"trainings": 3, "per_category": {"0": {}, "1": {}},
                              "auroc_mean": {"mean": 0.9, "range": [0.85, 0.95]},
