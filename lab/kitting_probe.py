@@ -321,14 +321,18 @@ def motion(sets: Sets, w: Windows, config: KittingConfig, split: Split, segs: Se
     print_table({k: v for k, v in rows.items() if "whole_skill_recognised" in v[0]})
 
 
+def setup(config: KittingConfig) -> tuple[KittingConfig, Segments, Split, Sets, Windows]:
+    """The benchmark's segments, split, sets and onset windows for ``config`` (every probe's start)."""
+    segs = read_segments(config.data)
+    split = split_runs(segs.runs, config.train_fraction, config.split_seed)
+    sets = make_sets(segs, split)
+    return config, segs, split, sets, windows(sets.test, config, config.headline_skills)
+
+
 def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering scheme' folder"),
          seeds: int = typer.Option(3, min=1), probe: str = typer.Option("rule", help="rule | motion"),
          out: Path = typer.Option(Path("."), help="where --probe motion links the test runs")) -> None:
-    config = KittingConfig(data=data, out=out, trainings=seeds)
-    segs = read_segments(data)
-    split = split_runs(segs.runs, config.train_fraction, config.split_seed)
-    sets = make_sets(segs, split)
-    w = windows(sets.test, config, config.headline_skills)
+    config, segs, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds))
     if probe == "motion":
         return motion(sets, w, config, split, segs)
     rows: dict[str, list[dict[str, float]]] = {}

@@ -44,12 +44,12 @@ from sklearn.linear_model import LogisticRegression
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from lab.kitting_probe import energies, print_table, whole_run_phases, whole_runs
+from lab.kitting_probe import energies, print_table, setup, whole_run_phases, whole_runs
+from lab.kitting_thresholds import measured
 from neural_asm.experiments.kitting.config import KittingConfig
-from neural_asm.experiments.kitting.data import PERIOD_S, read_segments, split_runs
+from neural_asm.experiments.kitting.data import PERIOD_S
 from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network, served_thresholds
-from neural_asm.experiments.kitting.metrics import Windows, method_metrics, windows
-from neural_asm.experiments.kitting.run import make_sets
+from neural_asm.experiments.kitting.metrics import Windows
 from neural_asm.logs.sources import own_steps
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration
@@ -109,21 +109,14 @@ def served_rule(model: NeuralASM, cal: Calibration, sets: Sets, w: Windows, conf
             scored[name] = energies(cal, errors, recognised[name])
     thresholds = served_thresholds(scored["threshold"], sets.threshold.lengths, config.fprs)
     cal.episode_thresholds.update(thresholds)
-    m, _ = method_metrics(Scored(scored["test"], {f: np.full(len(sets.test), t) for f, t in thresholds.items()}),
-                          sets.test, w, config, config.headline_skills)
-    return {"auroc": m["auroc"]["0.5"], "skill_5": m["per_skill"]["5"]["auroc"]["0.5"],
-            "no_object": m["per_type"]["no_object"]["auroc_0.5"], "detected": m["detected_1pct"],
-            "normal_flagged": m["normal_flagged_1pct"], "delay_ms_median": m["delay_ms_median"] or float("nan")}
+    return measured(Scored(scored["test"], {f: np.full(len(sets.test), t) for f, t in thresholds.items()}), sets, w,
+                    config)
 
 
 def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering scheme' folder"),
          seeds: int = typer.Option(3, min=1),
          out: Path = typer.Option(Path("."), help="where the test runs are linked for the whole-run phases")) -> None:
-    config = KittingConfig(data=data, out=out, trainings=seeds)
-    segs = read_segments(data)
-    split = split_runs(segs.runs, config.train_fraction, config.split_seed)
-    sets = make_sets(segs, split)
-    w = windows(sets.test, config, config.headline_skills)
+    config, _, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds))
     phases, labels = whole_run_phases(config, split, out / "kitting_probe_runs")
     phase_steps = np.array([own_steps(phases, i) for i in range(len(phases.data))])
     known = np.isin(phases.labels.astype(str), np.unique(sets.train.skills))

@@ -55,12 +55,11 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from lab.kitting_probe import MIN_SKILL_EPISODES, energies, picks, print_table, whole_run_phases, whole_runs
+from lab.kitting_probe import MIN_SKILL_EPISODES, energies, picks, print_table, setup, whole_run_phases, whole_runs
 from neural_asm.experiments.kitting.config import KittingConfig
-from neural_asm.experiments.kitting.data import Segments, read_segments, split_runs
+from neural_asm.experiments.kitting.data import Segments
 from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network
-from neural_asm.experiments.kitting.metrics import Windows, method_metrics, windows
-from neural_asm.experiments.kitting.run import make_sets
+from neural_asm.experiments.kitting.metrics import Windows, method_metrics
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration, conformal_episode_threshold
 
@@ -99,7 +98,8 @@ def out_of_fold_peaks(sets: Sets, config: KittingConfig, seed: int, folds: int) 
 def measured(scored: Scored, sets: Sets, w: Windows, config: KittingConfig) -> dict[str, float]:
     m, _ = method_metrics(scored, sets.test, w, config, config.headline_skills)
     return {"auroc": m["auroc"]["0.5"], "skill_5": m["per_skill"]["5"]["auroc"]["0.5"],
-            "detected": m["detected_1pct"], "normal_flagged": m["normal_flagged_1pct"],
+            "no_object": m["per_type"]["no_object"]["auroc_0.5"], "detected": m["detected_1pct"],
+            "normal_flagged": m["normal_flagged_1pct"],
             "delay_ms_median": m["delay_ms_median"] or float("nan")}
 
 
@@ -131,11 +131,7 @@ def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering sche
          seeds: int = typer.Option(3, min=1), folds: int = typer.Option(5, min=2),
          split_seed: int = typer.Option(0, min=0, help="the benchmark's --split-seed"),
          out: Path = typer.Option(Path("."), help="where the test runs are linked for the whole-run counts")) -> None:
-    config = KittingConfig(data=data, out=out, trainings=seeds, split_seed=split_seed)
-    segs = read_segments(data)
-    split = split_runs(segs.runs, config.train_fraction, config.split_seed)
-    sets = make_sets(segs, split)
-    w = windows(sets.test, config, config.headline_skills)
+    config, _, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds, split_seed=split_seed))
     phases, labels = whole_run_phases(config, split, out / f"kitting_probe_runs_split_{split_seed}")
     rows: dict[str, list[dict[str, float]]] = {}
     for seed in config.seeds:
