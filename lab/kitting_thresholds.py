@@ -49,7 +49,6 @@ measured beside it.
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +57,7 @@ import typer
 from lab.kitting_probe import MIN_SKILL_EPISODES, energies, picks, print_table, setup, whole_run_phases, whole_runs
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import Segments
-from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network
+from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network, out_of_fold_peaks
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration, conformal_episode_threshold
@@ -72,27 +71,6 @@ def peaks(model: NeuralASM, segs: Segments, mode: str) -> np.ndarray:
     """Each segment's peak energy over its own steps under the model's served calibration."""
     energy = model.score(segs.data, mode).energy
     return np.array([e[:n].max() for e, n in zip(energy, segs.lengths)])
-
-
-def run_folds(runs: np.ndarray, folds: int, seed: int) -> np.ndarray:
-    """Each segment's fold: its run's, the runs shuffled with ``seed`` and dealt out in turn."""
-    unique = np.array(sorted(set(runs.tolist())))
-    fold_of = dict(zip(unique[np.random.default_rng(seed).permutation(len(unique))], np.arange(len(unique)) % folds))
-    return np.array([fold_of[r] for r in runs])
-
-
-def out_of_fold_peaks(sets: Sets, config: KittingConfig, seed: int, folds: int) -> np.ndarray:
-    """Peaks of every training segment, each scored by a network trained without its run's fold."""
-    fold = run_folds(sets.train.runs, folds, config.split_seed)
-    # Offline recall's energies do not read the plan memory, which a fold with fewer than 3 segments of a
-    # skill could not be fitted on.
-    network = replace(config, network=config.network.with_(plan_memory=False))
-    out = np.empty(len(sets.train))
-    for k in range(folds):
-        model = fit_network(sets.train.take(fold != k), network, seed)
-        calibrate_served(model, sets, config.recall_mode, True, config.fprs)
-        out[fold == k] = peaks(model, sets.train.take(fold == k), config.recall_mode)
-    return out
 
 
 def measured(scored: Scored, sets: Sets, w: Windows, config: KittingConfig) -> dict[str, float]:
@@ -131,14 +109,15 @@ def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering sche
          seeds: int = typer.Option(3, min=1), folds: int = typer.Option(5, min=2),
          split_seed: int = typer.Option(0, min=0, help="the benchmark's --split-seed"),
          out: Path = typer.Option(Path("."), help="where the test runs are linked for the whole-run counts")) -> None:
-    config, _, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds, split_seed=split_seed))
+    config, _, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds, split_seed=split_seed,
+                                                    threshold_folds=folds))
     phases, labels = whole_run_phases(config, split, out / f"kitting_probe_runs_split_{split_seed}")
     rows: dict[str, list[dict[str, float]]] = {}
     for seed in config.seeds:
         model = fit_network(sets.train, config, seed)
         cal = calibrate_served(model, sets, config.recall_mode, True, config.fprs)
         held_out = peaks(model, sets.threshold, config.recall_mode)
-        oof = out_of_fold_peaks(sets, config, seed, folds)
+        oof = out_of_fold_peaks(sets, config, seed)
         pool, pool_skills = np.concatenate([held_out, oof]), np.concatenate([sets.threshold.skills, sets.train.skills])
         test_energies = model.score(sets.test.data, config.recall_mode).energy
         n = f"{len(held_out)} held-out"

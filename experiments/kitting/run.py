@@ -12,7 +12,7 @@ from tqdm import tqdm
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import Segments, Split, read_segments, split_runs
 from neural_asm.experiments.kitting.methods import (INFO, METHODS, Scored, Sets, fit_network, score_baselines, score_network,
-                                                    score_per_skill, score_told)
+                                                    score_cross_fitted, score_per_skill, score_told)
 from neural_asm.experiments.kitting.metrics import Windows, across, method_metrics, windows
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
@@ -66,6 +66,7 @@ def _one_training(sets: Sets, config: KittingConfig, seed: int, progress: tqdm) 
               "nasm_one_plan": score_network(model, sets, "plan", True, config.fprs),
               "nasm_one": score_network(model, sets, config.recall_mode, True, config.fprs)}
     scored["nasm_one_told"] = score_told(model, sets, config.recall_mode, config.fprs)
+    scored["nasm_one_cross_fitted"] = score_cross_fitted(model, sets, config, seed)
     scored["nasm_per_skill"] = score_per_skill(sets, config, seed, config.headline_skills)
     progress.update()
     scored.update(score_baselines(sets, config, seed, learned_only=seed != config.seeds[0]))

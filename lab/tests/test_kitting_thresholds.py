@@ -1,19 +1,10 @@
-"""The threshold probe's folds (by run) and its census of the normal peaks above a threshold."""
+"""The threshold probe's census of the normal peaks above a threshold."""
 
 from types import SimpleNamespace
 
 import numpy as np
 
-from lab.kitting_thresholds import above, run_folds
-
-
-def test_folds_keep_each_run_whole_and_deal_runs_evenly():
-    runs = np.array([f"2018y06m13d{h:02d}" for h in (1, 1, 2, 3, 3, 3, 4, 5, 6, 7)])
-    fold = run_folds(runs, 3, seed=0)
-    for r in set(runs):
-        assert len(set(fold[runs == r])) == 1  # one run, one fold
-    per_fold = np.bincount([fold[runs == r][0] for r in sorted(set(runs))], minlength=3)
-    assert sorted(per_fold.tolist()) == [2, 2, 3]  # 7 runs over 3 folds
+from lab.kitting_thresholds import above
 
 
 def test_above_names_day_skill_and_a_silent_left_pad():

@@ -62,6 +62,17 @@ def test_windows_end_at_onset_plus_delta_and_normals_share_their_lengths(kitting
     assert all(e in set(w.ends[0.5][:n_a]) or e == o for e, o in zip(normal_ends, own))
 
 
+def test_threshold_folds_keep_each_run_whole_and_deal_runs_evenly():
+    from neural_asm.experiments.kitting.data import run_folds
+
+    runs = np.array([f"2018y06m13d{h:02d}" for h in (1, 1, 2, 3, 3, 3, 4, 5, 6, 7)])
+    fold = run_folds(runs, 3, seed=0)
+    for r in set(runs):
+        assert len(set(fold[runs == r])) == 1  # one run, one fold
+    per_fold = np.bincount([fold[runs == r][0] for r in sorted(set(runs))], minlength=3)
+    assert sorted(per_fold.tolist()) == [2, 2, 3]  # 7 runs over 3 folds
+
+
 def test_the_split_seed_reaches_the_protocol_and_moves_runs(kitting):
     from neural_asm.experiments.kitting.config import KittingRun
 
@@ -91,6 +102,12 @@ def test_the_kitting_benchmark_writes_its_headline(kitting, tmp_path):
     assert head["methods"]["template_told"]["trainings"] == 1
     # the synthetic anomaly (a force step) is plain half a second after its onset
     assert head["methods"]["template_told"]["auroc"]["0.5"] > 0.9
+    # the cross-fitted threshold ranks as the served one (the same energies); on fewer than 99 peaks
+    # it is the highest of a pool holding the held-out ones, so it flags no more than the served one
+    crossed = head["methods"]["nasm_one_cross_fitted"]
+    assert crossed["auroc"] == one["auroc"]
+    assert document["counts"]["train_normal"] + document["counts"]["threshold_normal"] < 99
+    assert crossed["detected_1pct"] <= one["detected_1pct"] and crossed["normal_flagged_1pct"] <= one["normal_flagged_1pct"]
     assert set(head["whole_runs"]) >= {"n_runs", "n_anomalies", "skill_recognised"}
     assert head["whole_runs"]["n_runs"] > 0
     whole = json.loads((tmp_path / "fault_sweep.json").read_text())["whole_runs"]
