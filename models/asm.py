@@ -111,7 +111,7 @@ class NeuralASM:
         """
         data = as_sequences(sequences, len(channel_names))
         if config.plan_memory:
-            check_demonstrations(labels)
+            check_demonstrations(["all"] * len(data) if labels is None else labels)  # as PlanMemory.fit labels them
         normaliser = Normaliser.fit(data)
         net = TemporalPC(len(channel_names), config, context_index(channel_names, context_channels, config))
         if config.observation_precision in ("demo_spread", "learned"):

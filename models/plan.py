@@ -42,11 +42,11 @@ from neural_asm.models.tpc import TemporalPC
 MIN_DEMONSTRATIONS = 3
 
 
-def check_demonstrations(skills: Sequence[str] | None) -> None:
-    """Refuse, before any training, skills a plan memory cannot be fitted on."""
-    names, counts = np.unique(np.asarray(["all"] if skills is None else skills, dtype=str), return_counts=True)
+def check_demonstrations(skills: Sequence[str]) -> None:
+    """Refuse, before any training, skills (one per demonstration) a plan memory cannot be fitted on."""
+    names, counts = np.unique(np.asarray(skills, dtype=str), return_counts=True)
     few = {str(n): int(c) for n, c in zip(names, counts) if c < MIN_DEMONSTRATIONS}
-    if skills is not None and few:
+    if few:
         raise ValueError(f"a plan memory needs at least {MIN_DEMONSTRATIONS} demonstrations of every skill (its maps "
                          f"are cross-fitted); too few of: {', '.join(f'{n} ({c})' for n, c in few.items())}")
 

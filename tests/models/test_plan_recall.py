@@ -161,3 +161,8 @@ def test_nasm_train_refuses_a_plan_memory_preset_with_too_few_demonstrations_in_
     assert result.exit_code == 2, result.output
     errors = [line for line in result.output.splitlines() if line.startswith("error")]
     assert len(errors) == 1 and f"{data.labels[0]} (1)" in errors[0] and not out.exists()
+
+
+def test_a_plan_memory_without_skill_labels_needs_three_demonstrations(data):
+    with pytest.raises(ValueError, match=r"too few of: all \(2\)"):
+        NeuralASM.fit(data.data[:2], data.channel_names, CONFIG, progress=False)
