@@ -141,7 +141,8 @@ def test_without_the_networks_states_the_plan_is_the_input_pathway_alone(data, m
 
 
 def test_a_plan_memory_with_too_few_demonstrations_of_a_skill_is_refused_before_training(data):
-    keep = np.concatenate([np.flatnonzero(data.labels != data.labels[0]), np.flatnonzero(data.labels == data.labels[0])[:2]])
+    first = data.labels == data.labels[0]
+    keep = np.concatenate([np.flatnonzero(~first), np.flatnonzero(first)[:2]])
     config = CONFIG.with_(epochs=100_000)  # were it trained first, this test would not end
     with pytest.raises(ValueError, match=f"at least 3 demonstrations of every skill.*{data.labels[0]} \\(2\\)"):
         NeuralASM.fit(data.data[keep], data.channel_names, config, progress=False, labels=data.labels[keep])
@@ -152,7 +153,8 @@ def test_nasm_train_refuses_a_plan_memory_preset_with_too_few_demonstrations_in_
 
     from neural_asm.cli import app
 
-    keep = np.concatenate([np.flatnonzero(data.labels != data.labels[0]), np.flatnonzero(data.labels == data.labels[0])[:1]])
+    first = data.labels == data.labels[0]
+    keep = np.concatenate([np.flatnonzero(~first), np.flatnonzero(first)[:1]])
     path = tmp_path / "few.npz"
     np.savez(path, sequences=data.data[keep], channel_names=np.array(data.channel_names),
              skills=data.labels[keep].astype(str))
