@@ -57,7 +57,8 @@ import typer
 from lab.kitting_probe import MIN_SKILL_EPISODES, energies, picks, print_table, setup, whole_run_phases, whole_runs
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import Segments
-from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network, out_of_fold_peaks
+from neural_asm.experiments.kitting.methods import (Scored, Sets, calibrate_served, fit_network, out_of_fold_peaks,
+                                                    segment_peaks)
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration, conformal_episode_threshold
@@ -69,8 +70,7 @@ RATE = 0.01
 
 def peaks(model: NeuralASM, segs: Segments, mode: str) -> np.ndarray:
     """Each segment's peak energy over its own steps under the model's served calibration."""
-    energy = model.score(segs.data, mode).energy
-    return np.array([e[:n].max() for e, n in zip(energy, segs.lengths)])
+    return segment_peaks(model.score(segs.data, mode).energy, segs.lengths)
 
 
 def measured(scored: Scored, sets: Sets, w: Windows, config: KittingConfig) -> dict[str, float]:

@@ -142,16 +142,15 @@ def out_of_fold_peaks(sets: Sets, config: KittingConfig, seed: int) -> np.ndarra
     return peaks
 
 
-def score_cross_fitted(model: NeuralASM, sets: Sets, config: KittingConfig, seed: int) -> Scored:
-    """The served network and calibration (`calibrate_served`, already done) with its episode
-    thresholds from the held-out peaks and the training runs' out-of-fold peaks. With the 36
-    held-out peaks alone a 1 % threshold is their highest and promises nothing; with ~260 it is a
-    split-conformal quantile (docs/kitting.md, "Thresholds from more normal runs")."""
-    mode = config.recall_mode
-    held_out = segment_peaks(model.score(sets.threshold.data, mode).energy, sets.threshold.lengths)
+def score_cross_fitted(model: NeuralASM, served: Scored, sets: Sets, config: KittingConfig, seed: int) -> Scored:
+    """The served network's energies (``served``, from `score_network` with its served calibration)
+    with episode thresholds from the held-out peaks and the training runs' out-of-fold peaks. With
+    the 36 held-out peaks alone a 1 % threshold is their highest and promises nothing; with ~260 it
+    is a split-conformal quantile (docs/kitting.md, "Thresholds from more normal runs")."""
+    held_out = segment_peaks(model.score(sets.threshold.data, config.recall_mode).energy, sets.threshold.lengths)
     pool = np.concatenate([held_out, out_of_fold_peaks(sets, config, seed)])
     thresholds = {f: conformal_episode_threshold(pool, f) for f in config.fprs}
-    return Scored(model.score(sets.test.data, mode).energy, _broadcast(thresholds, len(sets.test)))
+    return Scored(served.energies, _broadcast(thresholds, len(sets.test)))
 
 
 def score_told(model: NeuralASM, sets: Sets, mode: str, fprs: tuple[float, ...]) -> Scored:
