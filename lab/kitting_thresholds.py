@@ -117,7 +117,7 @@ def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering sche
         model = fit_network(sets.train, config, seed)
         cal = calibrate_served(model, sets, config.recall_mode, True, config.fprs)
         held_out = peaks(model, sets.threshold, config.recall_mode)
-        oof = out_of_fold_peaks(sets, config, seed)
+        oof = out_of_fold_peaks(model, sets, config)
         pool, pool_skills = np.concatenate([held_out, oof]), np.concatenate([sets.threshold.skills, sets.train.skills])
         test_energies = model.score(sets.test.data, config.recall_mode).energy
         n = f"{len(held_out)} held-out"

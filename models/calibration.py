@@ -199,9 +199,15 @@ def set_thresholds(
     fprs: tuple[float, ...] = SCORING.fprs,
 ) -> None:
     """Thresholds from normalised errors (N, T, D) of normal episodes, weighted energy."""
-    e = calibration.energy(errors)
+    set_energy_thresholds(calibration, calibration.energy(errors), fprs)
+
+
+def set_energy_thresholds(calibration: Calibration, energies: np.ndarray,
+                          fprs: tuple[float, ...] = SCORING.fprs) -> None:
+    """Thresholds from the energies (N, T) of normal episodes (cross-fitting pools several
+    networks' energies, each under its own precisions: `models.cross_fit`)."""
     for fpr in fprs:
-        t = Thresholds.of(e, fpr)
+        t = Thresholds.of(energies, fpr)
         calibration.thresholds[fpr] = t.step
         calibration.step_thresholds[fpr] = t.per_step
         calibration.episode_thresholds[fpr] = t.episode

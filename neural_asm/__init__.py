@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from neural_asm.memory import Monitor, SkillMemory, Verdict
     from neural_asm.models.checkpoint import CheckpointError
     from neural_asm.models.config import PRESETS, TPCConfig
+    from neural_asm.models.cross_fit import CrossFit
     from neural_asm.models.scoring import SequenceScore
     from neural_asm.models.sequences import Sequences
     from neural_asm.pipelines.episodes import simulate_sequences, simulated_episodes
@@ -45,6 +46,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "SkillMemory": ("neural_asm.memory", "SkillMemory"),
     "Monitor": ("neural_asm.memory", "Monitor"),
     "Verdict": ("neural_asm.memory", "Verdict"),
+    "CrossFit": ("neural_asm.models.cross_fit", "CrossFit"),
     "Sequences": ("neural_asm.models.sequences", "Sequences"),
     "SequenceScore": ("neural_asm.models.scoring", "SequenceScore"),
     "TPCConfig": ("neural_asm.models.config", "TPCConfig"),

@@ -5,19 +5,25 @@ service serves. The thresholds are those the service's sessions decide with
 
 The precisions and the thresholds come from disjoint episodes (estimating both on the same
 ones makes the measured false-positive rate optimistic): ``--precision`` names a second set,
-or NORMAL's episodes alternate between the two roles.
+or NORMAL's episodes alternate between the two roles. ``--cross-fit DEMOS`` adds the
+out-of-fold energies of the demonstrations the checkpoint was trained on to the thresholds'
+episodes (``neural_asm.models.cross_fit``), so that a 1 % threshold rests on more than the few
+dozen episodes a lab holds out.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+from pathlib import Path, PurePath
+from typing import Literal
 
+import numpy as np
 import typer
 
 from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, read_logs, write_json
 from neural_asm.runtime.cli import fail
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
+from neural_asm.models.cross_fit import CrossFit
 from neural_asm.models.sequences import Sequences
 from neural_asm.data import load_sequences
 from neural_asm.memory import SkillMemory
@@ -35,6 +41,22 @@ def _load(source: str, mapping: Path | None, model: NeuralASM, skip_bad: bool) -
     return seqs
 
 
+Grouping = Literal["episode", "file", "folder"]
+
+
+def episode_groups(seqs: Sequences, by: Grouping) -> np.ndarray:
+    """Each episode's group for cross-fitting: itself, the file it was read from, or the name of
+    the folder holding that file (a run kept as one folder per skill groups across skills; two
+    runs in folders of one name are grouped too, which only makes the folds coarser)."""
+    if by == "episode":
+        return np.arange(len(seqs))
+    origins = seqs.provenance.get("episodes")
+    if origins is None:
+        raise ValueError(f"--groups {by} needs episodes read from files (with --mapping); these are not")
+    files = [PurePath(origin.split(" episode ")[0]) for origin in origins]
+    return np.array([str(f) if by == "file" else f.parent.name for f in files])
+
+
 def calibrate(
     model_path: Path = typer.Argument(..., help="checkpoint (.safetensors) to calibrate"),
     normal: str = typer.Argument(..., help="normal episodes the model was not trained on: logs (with --mapping), "
@@ -45,8 +67,15 @@ def calibrate(
     out: Path | None = typer.Option(None, help="checkpoint to write (default: MODEL_PATH, replaced atomically)"),
     skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
     json_out: Path | None = typer.Option(None, "--json", help="also write the thresholds as JSON here"),
+    cross_fit: str | None = typer.Option(None, help="the demonstrations the checkpoint was trained on (read as NORMAL "
+                                         "is): their out-of-fold energies join the thresholds' episodes"),
+    folds: int = typer.Option(5, min=2, help="cross-fitting's folds (each trains one network as the checkpoint was)"),
+    groups: str = typer.Option("episode", help="what cross-fitting keeps in one fold: each 'episode', each 'file', "
+                               "or each 'folder' (by name: a run recorded as one folder per skill)"),
 ) -> None:
     """Calibrate a checkpoint's precisions and fault thresholds on held-out normal episodes."""
+    if groups not in ("episode", "file", "folder"):
+        raise fail(f"--groups must be one of episode, file, folder, got {groups!r}")
     try:
         memory = SkillMemory.load(model_path)
     except checkpoint.CheckpointError as exc:
@@ -60,7 +89,11 @@ def calibrate(
         spread_seqs = _load(precision, mapping, model, skip_bad)
         source = f"precisions from {precision}, thresholds from {normal}"
     try:
-        report = memory.calibrate(seqs, spread_seqs, source=source)
+        crossing = None
+        if cross_fit is not None:
+            demos = _load(cross_fit, mapping, model, skip_bad)
+            crossing = CrossFit(demos.data, demos.labels, folds, episode_groups(demos, groups), model.config.seed)
+        report = memory.calibrate(seqs, spread_seqs, source=source, cross_fit=crossing)
     except ValueError as exc:
         raise fail(exc) from None
     target = memory.save(out or model_path)
@@ -68,8 +101,10 @@ def calibrate(
     for mode, tables in report["modes"].items():
         shown = ", ".join(f"{float(f) * 100:g} %: {t:.4g}" for f, t in tables["episode_thresholds"].items())
         typer.echo(f"{mode} recall, episode thresholds (the service's default) by false-positive rate: {shown}")
-    typer.echo(f"from {report['precision_episodes']} episodes for the precisions and {n} for the thresholds; wrote "
-               f"{target} (nasm serve loads it at its start)")
+    n += report.get("out_of_fold_episodes", 0)
+    crossed = f" ({report['out_of_fold_episodes']} of them out-of-fold, {folds} folds)" if cross_fit else ""
+    typer.echo(f"from {report['precision_episodes']} episodes for the precisions and {n} for the thresholds{crossed}; "
+               f"wrote {target} (nasm serve loads it at its start)")
     rare = [f for f in report["modes"]["offline"]["episode_thresholds"] if float(f) * n < 1]
     if rare:
         typer.secho(f"warning: with {n} threshold episodes, the thresholds at {', '.join(rare)} are the largest "

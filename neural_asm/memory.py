@@ -19,7 +19,9 @@ import numpy as np
 
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM, SkillStream, step_streams
+from neural_asm.models.calibration import set_energy_thresholds
 from neural_asm.models.config import DEFAULT_RATE_HZ, PRESETS, SCORING, TPCConfig
+from neural_asm.models.cross_fit import CrossFit
 from neural_asm.models.fault import ThresholdKind
 from neural_asm.models.scoring import SequenceScore
 from neural_asm.models.sequences import Sequences
@@ -156,11 +158,18 @@ class SkillMemory:
         *,
         fprs: tuple[float, ...] = SCORING.fprs,
         source: str = "held-out normal episodes",
+        cross_fit: CrossFit | None = None,
+        progress: bool = True,
     ) -> dict[str, Any]:
         """Set every recall mode's precisions and fault thresholds from normal episodes the memory
         was not trained on: the precisions from ``precision`` and the thresholds from ``normal``,
         or, without ``precision``, from alternate episodes of ``normal`` (estimating both on the
-        same episodes would make the false-positive rate optimistic). Returns the thresholds."""
+        same episodes would make the false-positive rate optimistic). Returns the thresholds.
+
+        With fewer than 99 threshold episodes a 1 % threshold is their highest peak and promises
+        no rate. ``cross_fit`` (the demonstrations the memory learnt, `CrossFit`) adds their
+        out-of-fold energies to the threshold episodes': each scored by a network trained as this
+        one was without its fold (`neural_asm.models.cross_fit`)."""
         if precision is None:
             held = _data(normal)
             spread, held = held[0::2], held[1::2]
@@ -171,10 +180,19 @@ class SkillMemory:
         if min(len(spread), len(held)) < MIN_CALIBRATION_EPISODES:
             raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
                              f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
+        labels = None if labels is None else [str(label) for label in labels]
+        out_of_fold: dict[str, np.ndarray] = {}
         report: dict[str, Any] = {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {}}
+        if cross_fit is not None:
+            out_of_fold = cross_fit.energies(self.model, spread, labels, held.shape[1], progress)
+            report.update(out_of_fold_episodes=len(cross_fit.demonstrations), folds=cross_fit.folds)
+            source = f"{source}; thresholds also from the out-of-fold energies of the training demonstrations " \
+                     f"({cross_fit.folds} folds)"
         for mode in self.model.recall_modes:
-            cal = self.model.calibrate(spread, held, mode, 1, fprs, source=source,
-                                       labels=None if labels is None else list(labels))
+            cal = self.model.calibrate(spread, held, mode, 1, fprs, source=source, labels=labels)
+            if mode in out_of_fold:
+                pooled = np.concatenate([cal.energy(self.model.errors(held, mode)), out_of_fold[mode]])
+                set_energy_thresholds(cal, pooled, fprs)
             report["modes"][mode] = {"episode_thresholds": {str(f): t for f, t in sorted(cal.episode_thresholds.items())},
                                      "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}
         return report

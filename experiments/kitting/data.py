@@ -118,11 +118,3 @@ def split_runs(runs: np.ndarray, train_fraction: float, seed: int) -> Split:
     n_cal = (len(unique) - n_train) // 2
     return Split(tuple(sorted(order[:n_train])), tuple(sorted(order[n_train:n_train + n_cal])),
                  tuple(sorted(order[n_train + n_cal:])), seed)
-
-
-def run_folds(runs: np.ndarray, folds: int, seed: int) -> np.ndarray:
-    """Each segment's fold (0..folds-1): its run's, the runs shuffled with ``seed`` and dealt out in
-    turn, so that no run is on both sides of a fold."""
-    unique = np.array(sorted(set(runs.tolist())))
-    fold_of = dict(zip(unique[np.random.default_rng(seed).permutation(len(unique))], np.arange(len(unique)) % folds))
-    return np.array([fold_of[r] for r in runs], dtype=int)

@@ -12,17 +12,18 @@ taken over a segment's own steps (not the samples held to pad it to the model's 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 from torch import nn
 
 from neural_asm.experiments.kitting.config import KittingConfig
-from neural_asm.experiments.kitting.data import COLUMNS, PERIOD_S, Segments, kitting_mapping, run_folds
+from neural_asm.experiments.kitting.data import COLUMNS, PERIOD_S, Segments, kitting_mapping
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration, conformal_episode_threshold, estimate
 from neural_asm.models.config import SCORING
+from neural_asm.models.cross_fit import group_folds, out_of_fold_energies
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.rivals.one_step import LinearOneStep
 from neural_asm.rivals.sequence import GRUOneStep, RecurrentConfig
@@ -126,29 +127,29 @@ def score_network(model: NeuralASM, sets: Sets, mode: str, centred: bool, fprs: 
     return Scored(energies, _broadcast({f: cal.episode_thresholds[f] for f in fprs}, len(sets.test)))
 
 
-def out_of_fold_peaks(sets: Sets, config: KittingConfig, seed: int) -> np.ndarray:
-    """Each training segment's peak energy under a network fitted without its run's fold (of
-    ``config.threshold_folds``) and calibrated as served."""
-    folds = min(config.threshold_folds, len(set(sets.train.runs.tolist())))
-    fold = run_folds(sets.train.runs, folds, config.split_seed)
-    # Offline energies do not read the plan memory, which a fold with < 3 segments of a skill cannot fit.
-    without_plan = replace(config, network=config.network.with_(plan_memory=False))
-    peaks = np.empty(len(sets.train))
-    for k in range(folds):
-        model = fit_network(sets.train.take(fold != k), without_plan, seed)
-        calibrate_served(model, sets, config.recall_mode, True, config.fprs)
-        left_out = sets.train.take(fold == k)
-        peaks[fold == k] = segment_peaks(model.score(left_out.data, config.recall_mode).energy, left_out.lengths)
-    return peaks
+def training_energies_out_of_fold(model: NeuralASM, sets: Sets, config: KittingConfig) -> np.ndarray:
+    """(N, T) energies of the training segments, each under a network fitted as ``model`` was
+    without its run's fold (of ``config.threshold_folds``), calibrated as it is served: the
+    product's cross-fitting (`models.cross_fit`, what `nasm calibrate --cross-fit` runs)."""
+    fold = group_folds(sets.train.runs, min(config.threshold_folds, len(set(sets.train.runs.tolist()))),
+                       config.split_seed)
+    mode = config.recall_mode
+    return out_of_fold_energies(model, sets.train.data, sets.train.skills, sets.precision.data,
+                                list(sets.precision.skills), (mode,), fold, progress=False)[mode]
 
 
-def score_cross_fitted(model: NeuralASM, served: Scored, sets: Sets, config: KittingConfig, seed: int) -> Scored:
+def out_of_fold_peaks(model: NeuralASM, sets: Sets, config: KittingConfig) -> np.ndarray:
+    """Each training segment's peak energy out of fold (`training_energies_out_of_fold`)."""
+    return segment_peaks(training_energies_out_of_fold(model, sets, config), sets.train.lengths)
+
+
+def score_cross_fitted(model: NeuralASM, served: Scored, sets: Sets, config: KittingConfig) -> Scored:
     """The served network's energies (``served``, from `score_network` with its served calibration)
     with episode thresholds from the held-out peaks and the training runs' out-of-fold peaks. With
     the 36 held-out peaks alone a 1 % threshold is their highest and promises nothing; with ~260 it
     is a split-conformal quantile (docs/kitting.md, "Thresholds from more normal runs")."""
     held_out = segment_peaks(model.score(sets.threshold.data, config.recall_mode).energy, sets.threshold.lengths)
-    pool = np.concatenate([held_out, out_of_fold_peaks(sets, config, seed)])
+    pool = np.concatenate([held_out, out_of_fold_peaks(model, sets, config)])
     thresholds = {f: conformal_episode_threshold(pool, f) for f in config.fprs}
     return Scored(served.energies, _broadcast(thresholds, len(sets.test)))
 

@@ -66,7 +66,7 @@ def _one_training(sets: Sets, config: KittingConfig, seed: int, progress: tqdm) 
               "nasm_one_plan": score_network(model, sets, "plan", True, config.fprs),
               "nasm_one": score_network(model, sets, config.recall_mode, True, config.fprs)}
     scored["nasm_one_told"] = score_told(model, sets, config.recall_mode, config.fprs)
-    scored["nasm_one_cross_fitted"] = score_cross_fitted(model, scored["nasm_one"], sets, config, seed)
+    scored["nasm_one_cross_fitted"] = score_cross_fitted(model, scored["nasm_one"], sets, config)
     scored["nasm_per_skill"] = score_per_skill(sets, config, seed, config.headline_skills)
     progress.update()
     scored.update(score_baselines(sets, config, seed, learned_only=seed != config.seeds[0]))

@@ -62,17 +62,6 @@ def test_windows_end_at_onset_plus_delta_and_normals_share_their_lengths(kitting
     assert all(e in set(w.ends[0.5][:n_a]) or e == o for e, o in zip(normal_ends, own))
 
 
-def test_threshold_folds_keep_each_run_whole_and_deal_runs_evenly():
-    from neural_asm.experiments.kitting.data import run_folds
-
-    runs = np.array([f"2018y06m13d{h:02d}" for h in (1, 1, 2, 3, 3, 3, 4, 5, 6, 7)])
-    fold = run_folds(runs, 3, seed=0)
-    for r in set(runs):
-        assert len(set(fold[runs == r])) == 1  # one run, one fold
-    per_fold = np.bincount([fold[runs == r][0] for r in sorted(set(runs))], minlength=3)
-    assert sorted(per_fold.tolist()) == [2, 2, 3]  # 7 runs over 3 folds
-
-
 def test_the_split_seed_reaches_the_protocol_and_moves_runs(kitting):
     from neural_asm.experiments.kitting.config import KittingRun
 
@@ -144,3 +133,4 @@ def test_nasm_faults_kitting_refuses_a_wrong_folder(args, tmp_path):
     result = CliRunner().invoke(app, [*args, "--data", str(tmp_path), "--out", str(tmp_path / "o")])
     assert result.exit_code == 2 and "successful_skills" in result.output
     assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+

@@ -189,6 +189,23 @@ def test_calibrate_writes_the_thresholds_evaluate_and_the_service_use(cli_model,
     assert result.exit_code == 0 and "episode threshold at 1 % FPR, as the service decides" in result.output
 
 
+def test_calibrate_cross_fits_on_the_demonstrations_it_was_trained_on(cli_model, logs, tmp_path):
+    out, report = tmp_path / "crossed.safetensors", tmp_path / "crossed.json"
+    result = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--out", out, "--json", report,
+                   "--cross-fit", logs["demos"], "--folds", 3)
+    assert result.exit_code == 0, result.output
+    doc, model = json.loads(report.read_text()), checkpoint.load(out)
+    assert doc["out_of_fold_episodes"] == model.provenance["sequences"] and doc["folds"] == 3
+    assert "out-of-fold" in model.calibration("offline", 1).source
+    assert f"for the thresholds ({doc['out_of_fold_episodes']} of them out-of-fold, 3 folds)" in result.output
+    refused = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--out", tmp_path / "x",
+                    "--cross-fit", logs["normal"])
+    assert refused.exit_code == 2 and "cross-fitting was given 2" in refused.output and not (tmp_path / "x").exists()
+    refused = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--cross-fit", logs["demos"],
+                    "--groups", "day")
+    assert refused.exit_code == 2 and "--groups must be one of episode, file, folder, got 'day'" in refused.output
+
+
 def test_calibrate_an_npz_set(cli_model, logs, tmp_path):
     seqs = read_mapped(logs["held_out"], parse_mapping(bag_mapping("marker"), "m"))
     np.savez(tmp_path / "normal.npz", sequences=seqs.data, channel_names=np.array(seqs.channel_names))
@@ -197,6 +214,9 @@ def test_calibrate_an_npz_set(cli_model, logs, tmp_path):
     np.savez(tmp_path / "other.npz", sequences=seqs.data[..., :3], channel_names=np.array(seqs.channel_names[:3]))
     result = _nasm("calibrate", cli_model, tmp_path / "other.npz", "--out", tmp_path / "n.safetensors")
     assert result.exit_code == 2 and "the model expects" in result.output
+    result = _nasm("calibrate", cli_model, tmp_path / "normal.npz", "--cross-fit", tmp_path / "normal.npz", "--groups",
+                   "folder", "--out", tmp_path / "o.safetensors")
+    assert result.exit_code == 2 and "--groups folder needs episodes read from files" in result.output
 
 
 def test_evaluate_flags_what_the_service_flags(served, logs, tmp_path):
