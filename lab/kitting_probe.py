@@ -235,12 +235,14 @@ def whole_run_phases(config: KittingConfig, split: Split, folder: Path) -> tuple
 
 def whole_runs(model: NeuralASM, phases: Sequences, labels: dict[str, RunLabels],
                config: KittingConfig, table: np.ndarray | None = None,
-               recognised: np.ndarray | None = None) -> dict[str, float]:
+               recognised: np.ndarray | None = None, scales: np.ndarray | None = None) -> dict[str, float]:
     """The benchmark's whole-run counts (`count_whole_runs`) from the model's served offline
     calibration scoring each phase in process (what the served sessions answer: the benchmark's
     tests hold them equal), each phase over its own steps; with ``table``, each step held to the
     threshold of the skill recognised at it (the last entry: no skill recognised yet); with
-    ``recognised`` (N, T), the skills (indices, -1 none) that centre each step instead of the served ones."""
+    ``recognised`` (N, T), the skills (indices, -1 none) that centre each step instead of the served ones;
+    with ``scales`` (T',), each step's energy divided by its scale (the last one past T': a time-varying
+    threshold, the calibration's episode threshold then its q)."""
     cal = model.calibration("offline", 1)
     errors = model.errors(phases.data, "offline")
     if recognised is None:
@@ -249,6 +251,8 @@ def whole_runs(model: NeuralASM, phases: Sequences, labels: dict[str, RunLabels]
         energies_, picks_ = energies(cal, errors.astype(np.float64), recognised), recognised
     if table is not None:
         energies_, cal = energies_ / table[picks_], replace(cal, episode_thresholds={0.01: 1.0})
+    if scales is not None:
+        energies_ = energies_ / scales[np.minimum(np.arange(energies_.shape[1]), len(scales) - 1)]
     prov = phases.provenance
     answered = [PhaseAnswer(run_of(prov["episodes"][i]), str(phases.labels[i]), float(prov["starts_s"][i]),
                             is_fault(energies_[i, :n], cal.episode_thresholds[0.01]),

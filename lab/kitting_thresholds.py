@@ -60,8 +60,10 @@ from neural_asm.experiments.kitting.data import Segments
 from neural_asm.experiments.kitting.methods import (Scored, Sets, calibrate_served, fit_network, out_of_fold_peaks,
                                                     segment_peaks)
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics
+from neural_asm.experiments.kitting.whole_runs import RunLabels
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration, conformal_episode_threshold
+from neural_asm.models.sequences import Sequences
 
 
 LEFT_PAD = 4
@@ -105,13 +107,20 @@ def above(segs: Segments, peak: np.ndarray, threshold: float) -> Counter:
                    for i in rows)
 
 
+def fold_setup(data: Path, seeds: int, folds: int, split_seed: int,
+               out: Path) -> tuple[KittingConfig, Sets, Windows, Sequences, dict[str, RunLabels]]:
+    """A cross-fitting probe's start: the benchmark's sets and windows, and the test runs' phases."""
+    config, _, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds, split_seed=split_seed,
+                                                    threshold_folds=folds))
+    phases, labels = whole_run_phases(config, split, out / f"kitting_probe_runs_split_{split_seed}")
+    return config, sets, w, phases, labels
+
+
 def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering scheme' folder"),
          seeds: int = typer.Option(3, min=1), folds: int = typer.Option(5, min=2),
          split_seed: int = typer.Option(0, min=0, help="the benchmark's --split-seed"),
          out: Path = typer.Option(Path("."), help="where the test runs are linked for the whole-run counts")) -> None:
-    config, _, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds, split_seed=split_seed,
-                                                    threshold_folds=folds))
-    phases, labels = whole_run_phases(config, split, out / f"kitting_probe_runs_split_{split_seed}")
+    config, sets, w, phases, labels = fold_setup(data, seeds, folds, split_seed, out)
     rows: dict[str, list[dict[str, float]]] = {}
     for seed in config.seeds:
         model = fit_network(sets.train, config, seed)
