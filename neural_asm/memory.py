@@ -181,18 +181,18 @@ class SkillMemory:
             raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
                              f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
         labels = None if labels is None else [str(label) for label in labels]
-        out_of_fold: dict[str, np.ndarray] = {}
         report: dict[str, Any] = {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {}}
-        if cross_fit is not None:
+        calibrations = {mode: self.model.calibrate(spread, held, mode, 1, fprs, source=source, labels=labels)
+                        for mode in self.model.recall_modes}
+        if cross_fit is not None:  # the fold networks are calibrated as these calibrations are
             out_of_fold = cross_fit.energies(self.model, spread, labels, held.shape[1], progress)
             report.update(out_of_fold_episodes=len(cross_fit.demonstrations), folds=cross_fit.folds)
-            source = f"{source}; thresholds also from the out-of-fold energies of the training demonstrations " \
-                     f"({cross_fit.folds} folds)"
-        for mode in self.model.recall_modes:
-            cal = self.model.calibrate(spread, held, mode, 1, fprs, source=source, labels=labels)
-            if mode in out_of_fold:
+            for mode, cal in calibrations.items():
                 pooled = np.concatenate([cal.energy(self.model.errors(held, mode)), out_of_fold[mode]])
                 set_energy_thresholds(cal, pooled, fprs)
+                cal.source = f"{source}; thresholds also from the out-of-fold energies of the training " \
+                             f"demonstrations ({cross_fit.folds} folds)"
+        for mode, cal in calibrations.items():
             report["modes"][mode] = {"episode_thresholds": {str(f): t for f, t in sorted(cal.episode_thresholds.items())},
                                      "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}
         return report
