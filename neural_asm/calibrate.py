@@ -108,6 +108,8 @@ def calibrate(
     rare = [f for f in report["modes"]["offline"]["episode_thresholds"] if float(f) * n < 1]
     if rare:
         typer.secho(f"warning: with {n} threshold episodes, the thresholds at {', '.join(rare)} are the largest "
-                    f"normal peak; rates below 1/{n} need more normal episodes to mean anything", fg="yellow", err=True)
+                    f"normal peak; rates below 1/{n} need more normal episodes to mean anything"
+                    + ("" if cross_fit else " (or --cross-fit DEMOS: the training demonstrations, out of fold)"),
+                    fg="yellow", err=True)
     if json_out is not None:
         write_json(json_out, {"checkpoint": str(target), "source": source, **report})

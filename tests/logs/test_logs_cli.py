@@ -185,6 +185,7 @@ def test_calibrate_writes_the_thresholds_evaluate_and_the_service_use(cli_model,
         cal = model.calibration(mode, 1)
         assert cal.episode_thresholds[0.01] == doc["modes"][mode]["episode_thresholds"]["0.01"] > 0
     assert "the thresholds at 0.01, 0.02, 0.03, 0.04, 0.05 are the largest normal peak" in result.output
+    assert "or --cross-fit DEMOS" in result.output
     result = _nasm("evaluate", out, logs["normal"], logs["faults"], "--mapping", logs["mapping"])
     assert result.exit_code == 0 and "episode threshold at 1 % FPR, as the service decides" in result.output
 
