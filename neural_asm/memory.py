@@ -173,14 +173,14 @@ class SkillMemory:
         if precision is None:
             held = _data(normal)
             spread, held = held[0::2], held[1::2]
-            labels = normal.labels[0::2] if isinstance(normal, Sequences) else None
+            skills = normal.labels[0::2] if isinstance(normal, Sequences) else None
         else:
             spread, held = _data(precision), _data(normal)
-            labels = precision.labels if isinstance(precision, Sequences) else None
+            skills = precision.labels if isinstance(precision, Sequences) else None
         if min(len(spread), len(held)) < MIN_CALIBRATION_EPISODES:
             raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
                              f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
-        labels = None if labels is None else [str(label) for label in labels]
+        labels = None if skills is None else [str(skill) for skill in skills]  # of the precision episodes
         report: dict[str, Any] = {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {}}
         calibrations = {mode: self.model.calibrate(spread, held, mode, 1, fprs, source=source, labels=labels)
                         for mode in self.model.recall_modes}
