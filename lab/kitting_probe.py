@@ -236,15 +236,16 @@ def whole_run_phases(config: KittingConfig, split: Split, folder: Path) -> tuple
 def whole_runs(model: NeuralASM, phases: Sequences, labels: dict[str, RunLabels],
                config: KittingConfig, table: np.ndarray | None = None,
                recognised: np.ndarray | None = None, scales: np.ndarray | None = None) -> dict[str, float]:
-    """The benchmark's whole-run counts (`count_whole_runs`) from the model's served offline
-    calibration scoring each phase in process (what the served sessions answer: the benchmark's
-    tests hold them equal), each phase over its own steps; with ``table``, each step held to the
-    threshold of the skill recognised at it (the last entry: no skill recognised yet); with
-    ``recognised`` (N, T), the skills (indices, -1 none) that centre each step instead of the served ones;
-    with ``scales`` (T',), each step's energy divided by its scale (the last one past T': a time-varying
-    threshold, the calibration's episode threshold then its q)."""
-    cal = model.calibration("offline", 1)
-    errors = model.errors(phases.data, "offline")
+    """The benchmark's whole-run counts (`count_whole_runs`) from the model's served calibration in
+    ``config.recall_mode`` (offline in every probe but one) scoring each phase in process (what the
+    served sessions answer: the benchmark's tests hold them equal), each phase over its own steps.
+    With ``table``, each step held to the threshold of the skill recognised at it (the last entry:
+    no skill recognised yet); with ``recognised`` (N, T), the skills (indices, -1 none) that centre
+    each step instead of the served ones; with ``scales`` (T',), each step's energy divided by its
+    scale (the last one past T': a time-varying threshold, the calibration's episode threshold then
+    its q)."""
+    cal = model.calibration(config.recall_mode, 1)
+    errors = model.errors(phases.data, config.recall_mode)
     if recognised is None:
         energies_, picks_ = cal.energy(errors), cal.recognised(errors.astype(np.float64))
     else:

@@ -80,7 +80,7 @@ def measured(scored: Scored, sets: Sets, w: Windows, config: KittingConfig) -> d
     return {"auroc": m["auroc"]["0.5"], "skill_5": m["per_skill"]["5"]["auroc"]["0.5"],
             "no_object": m["per_type"]["no_object"]["auroc_0.5"], "detected": m["detected_1pct"],
             "normal_flagged": m["normal_flagged_1pct"],
-            "delay_ms_median": m["delay_ms_median"] or float("nan")}
+            "delay_ms_median": float("nan") if m["delay_ms_median"] is None else m["delay_ms_median"]}
 
 
 def skill_table(cal: Calibration, pool: np.ndarray, skills: np.ndarray) -> np.ndarray:
@@ -107,11 +107,11 @@ def above(segs: Segments, peak: np.ndarray, threshold: float) -> Counter:
                    for i in rows)
 
 
-def fold_setup(data: Path, seeds: int, folds: int, split_seed: int,
-               out: Path) -> tuple[KittingConfig, Sets, Windows, Sequences, dict[str, RunLabels]]:
+def fold_setup(data: Path, seeds: int, folds: int, split_seed: int, out: Path,
+               mode: str = "offline") -> tuple[KittingConfig, Sets, Windows, Sequences, dict[str, RunLabels]]:
     """A cross-fitting probe's start: the benchmark's sets and windows, and the test runs' phases."""
     config, _, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds, split_seed=split_seed,
-                                                    threshold_folds=folds))
+                                                    threshold_folds=folds, recall_mode=mode))
     phases, labels = whole_run_phases(config, split, out / f"kitting_probe_runs_split_{split_seed}")
     return config, sets, w, phases, labels
 
