@@ -97,8 +97,8 @@ def headline(doc: dict[str, Any]) -> str:
             f"segments flagged at the served 1 % threshold; strongest rival {paired['baseline']} "
             f"{rival['auroc'][delta]:.2f} (p = {paired['p_value']:.2g}); whole runs through `nasm replay` to `nasm serve`: "
             f"{100 * runs['flagged_within_1s']:.0f} % of anomalies flagged within 1 s, "
-            f"{100 * runs['clean_phases_flagged']:.0f} % of clean phases flagged. Targets missed (why: the report's "
-            f"\"Against the targets\"): " + "; ".join(_misses(h)))
+            f"{100 * runs['clean_phases_flagged']:.0f} % of clean phases flagged. Targets missed (why, and the "
+            f"experiments that show it: the report's \"Against the targets\"): " + "; ".join(_misses(h)))
 
 
 def _misses(h: dict[str, Any]) -> list[str]:
