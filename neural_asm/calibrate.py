@@ -13,8 +13,8 @@ dozen episodes a lab holds out.
 
 from __future__ import annotations
 
-from pathlib import Path, PurePath
-from typing import Literal
+import re
+from pathlib import Path
 
 import numpy as np
 import typer
@@ -41,20 +41,37 @@ def _load(source: str, mapping: Path | None, model: NeuralASM, skip_bad: bool) -
     return seqs
 
 
-Grouping = Literal["episode", "file", "folder"]
+EPISODE_SUFFIX = re.compile(r",? episode [^/]*$")  # "bag b.mcap, episode 3", "runs/t.csv episode 7"
 
 
-def episode_groups(seqs: Sequences, by: Grouping) -> np.ndarray:
-    """Each episode's group for cross-fitting: itself, the file it was read from, or the name of
-    the folder holding that file (a run kept as one folder per skill groups across skills; two
-    runs in folders of one name are grouped too, which only makes the folds coarser)."""
+def grouping(value: str) -> str | re.Pattern[str]:
+    """``--groups``: 'episode', 'file', or a regular expression (a ValueError if it is none)."""
+    if value in ("episode", "file"):
+        return value
+    try:
+        return re.compile(value)
+    except re.error as exc:
+        raise ValueError(f"--groups must be 'episode', 'file' or a regular expression; {value!r} is none: {exc}") \
+            from None
+
+
+def episode_groups(seqs: Sequences, by: str | re.Pattern[str]) -> np.ndarray:
+    """Each episode's group for cross-fitting: itself, the file it was read from, or the first
+    match of a pattern in where it was read from (a run's stamp in its folders' and files' names)."""
     if by == "episode":
         return np.arange(len(seqs))
     origins = seqs.provenance.get("episodes")
     if origins is None:
-        raise ValueError(f"--groups {by} needs episodes read from files (with --mapping); these are not")
-    files = [PurePath(origin.split(" episode ")[0]) for origin in origins]
-    return np.array([str(f) if by == "file" else f.parent.name for f in files])
+        raise ValueError("--groups other than 'episode' needs episodes read from files (with --mapping); these are not")
+    if by == "file":
+        return np.array([EPISODE_SUFFIX.sub("", origin) for origin in origins])
+    assert isinstance(by, re.Pattern)
+    matches = [by.search(origin) for origin in origins]
+    unmatched = [origin for origin, match in zip(origins, matches) if match is None]
+    if unmatched:
+        raise ValueError(f"--groups {by.pattern!r} matches nothing in {unmatched[0]!r} "
+                         f"({len(unmatched)} of {len(origins)} episodes)")
+    return np.array([match.group(0) for match in matches if match is not None])
 
 
 def calibrate(
@@ -69,13 +86,20 @@ def calibrate(
     json_out: Path | None = typer.Option(None, "--json", help="also write the thresholds as JSON here"),
     cross_fit: str | None = typer.Option(None, help="the demonstrations the checkpoint was trained on (read as NORMAL "
                                          "is): their out-of-fold energies join the thresholds' episodes"),
-    folds: int = typer.Option(5, min=2, help="cross-fitting's folds (each trains one network as the checkpoint was)"),
+    folds: int = typer.Option(5, help="cross-fitting's folds (each trains one network as the checkpoint was)"),
     groups: str = typer.Option("episode", help="what cross-fitting keeps in one fold: each 'episode', each 'file', "
-                               "or each 'folder' (by name: a run recorded as one folder per skill)"),
+                               "or the episodes whose origins share a regular expression's match (a run's stamp: "
+                               "'experiment_at_\\w+')"),
 ) -> None:
     """Calibrate a checkpoint's precisions and fault thresholds on held-out normal episodes."""
-    if groups not in ("episode", "file", "folder"):
-        raise fail(f"--groups must be one of episode, file, folder, got {groups!r}")
+    if cross_fit is None and (folds != 5 or groups != "episode"):
+        raise fail("--folds and --groups set how --cross-fit cuts the demonstrations; give --cross-fit DEMOS")
+    if folds < 2:
+        raise fail(f"--folds must be at least 2, got {folds}")
+    try:
+        by = grouping(groups)
+    except ValueError as exc:
+        raise fail(exc) from None
     try:
         memory = SkillMemory.load(model_path)
     except checkpoint.CheckpointError as exc:
@@ -92,7 +116,7 @@ def calibrate(
         crossing = None
         if cross_fit is not None:
             demos = _load(cross_fit, mapping, model, skip_bad)
-            crossing = CrossFit(demos.data, demos.labels, folds, episode_groups(demos, groups), model.config.seed)
+            crossing = CrossFit(demos.data, demos.labels, folds, episode_groups(demos, by), model.config.seed)
         report = memory.calibrate(seqs, spread_seqs, source=source, cross_fit=crossing)
     except ValueError as exc:
         raise fail(exc) from None

@@ -182,16 +182,22 @@ class SkillMemory:
                              f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
         labels = None if skills is None else [str(skill) for skill in skills]  # of the precision episodes
         report: dict[str, Any] = {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {}}
-        calibrations = {mode: self.model.calibrate(spread, held, mode, 1, fprs, source=source, labels=labels)
-                        for mode in self.model.recall_modes}
-        if cross_fit is not None:  # the fold networks are calibrated as these calibrations are
-            out_of_fold = cross_fit.energies(self.model, spread, labels, held.shape[1], progress)
-            report.update(out_of_fold_episodes=len(cross_fit.demonstrations), folds=cross_fit.folds)
-            for mode, cal in calibrations.items():
-                pooled = np.concatenate([cal.energy(self.model.errors(held, mode)), out_of_fold[mode]])
-                set_energy_thresholds(cal, pooled, fprs)
-                cal.source = f"{source}; thresholds also from the out-of-fold energies of the training " \
-                             f"demonstrations ({cross_fit.folds} folds)"
+        fold = None if cross_fit is None else cross_fit.folds_for(self.model, held.shape[1])  # before any change
+        before = dict(self.model.calibrations)
+        try:
+            calibrations = {mode: self.model.calibrate(spread, held, mode, 1, fprs, source=source, labels=labels)
+                            for mode in self.model.recall_modes}
+            if cross_fit is not None and fold is not None:  # fold networks calibrated as these calibrations are
+                out_of_fold = cross_fit.energies(self.model, spread, labels, fold, progress)
+                report.update(out_of_fold_episodes=len(fold), folds=cross_fit.folds)
+                for mode, cal in calibrations.items():
+                    pooled = np.concatenate([cal.energy(self.model.errors(held, mode)), out_of_fold[mode]])
+                    set_energy_thresholds(cal, pooled, fprs)
+                    cal.source = f"{source}; thresholds also from the out-of-fold energies of the training " \
+                                 f"demonstrations ({cross_fit.folds} folds)"
+        except BaseException:
+            self.model.calibrations = before  # a failed calibration leaves the memory as it was
+            raise
         for mode, cal in calibrations.items():
             report["modes"][mode] = {"episode_thresholds": {str(f): t for f, t in sorted(cal.episode_thresholds.items())},
                                      "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}

@@ -201,10 +201,12 @@ def test_calibrate_cross_fits_on_the_demonstrations_it_was_trained_on(cli_model,
     assert f"for the thresholds ({doc['out_of_fold_episodes']} of them out-of-fold, 3 folds)" in result.output
     refused = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--out", tmp_path / "x",
                     "--cross-fit", logs["normal"])
-    assert refused.exit_code == 2 and "cross-fitting was given 2" in refused.output and not (tmp_path / "x").exists()
-    refused = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--cross-fit", logs["demos"],
-                    "--groups", "day")
-    assert refused.exit_code == 2 and "--groups must be one of episode, file, folder, got 'day'" in refused.output
+    assert refused.exit_code == 2 and "these 2 are not" in refused.output and not (tmp_path / "x").exists()
+    for args, message in ((("--cross-fit", logs["demos"], "--groups", "["), "'[' is none"),
+                          (("--cross-fit", logs["demos"], "--folds", 1), "--folds must be at least 2, got 1"),
+                          (("--folds", 3), "--folds and --groups set how --cross-fit cuts the demonstrations")):
+        refused = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], *args)
+        assert refused.exit_code == 2 and message in refused.output and len(refused.output.strip().splitlines()) == 1
 
 
 def test_calibrate_an_npz_set(cli_model, logs, tmp_path):
@@ -216,8 +218,8 @@ def test_calibrate_an_npz_set(cli_model, logs, tmp_path):
     result = _nasm("calibrate", cli_model, tmp_path / "other.npz", "--out", tmp_path / "n.safetensors")
     assert result.exit_code == 2 and "the model expects" in result.output
     result = _nasm("calibrate", cli_model, tmp_path / "normal.npz", "--cross-fit", tmp_path / "normal.npz", "--groups",
-                   "folder", "--out", tmp_path / "o.safetensors")
-    assert result.exit_code == 2 and "--groups folder needs episodes read from files" in result.output
+                   "file", "--out", tmp_path / "o.safetensors")
+    assert result.exit_code == 2 and "--groups other than 'episode' needs episodes read from files" in result.output
 
 
 def test_evaluate_flags_what_the_service_flags(served, logs, tmp_path):
