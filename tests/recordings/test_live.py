@@ -63,6 +63,20 @@ def capture(out: Path, connect_to: str | None = None) -> Iterator[str]:
         proc.wait(30)
 
 
+def late_capture(out: Path, url: str, steps: int, timeout_s: float = 60.0) -> None:
+    """Save to ``out`` what a viewer connecting to ``url`` receives, captured for longer each time
+    until every one of ``steps`` steps of its flag has arrived (or ``timeout_s``): on a loaded
+    machine the replay to a late viewer takes a while."""
+    deadline, dwell = time.monotonic() + timeout_s, 0.5
+    while True:
+        with capture(out, connect_to=url):
+            time.sleep(dwell)
+        arrived = len(read_rrd_series(out, bp.FLAG)[0]) if out.exists() else 0
+        if arrived >= steps or time.monotonic() > deadline:
+            return
+        dwell *= 2
+
+
 def entities(path: Path) -> dict[str, set[str]]:
     """Each recording's entity paths (with data, not only static styles)."""
     reader = RrdReader(path)
@@ -91,9 +105,9 @@ def test_a_served_view_on_loopback_gives_a_late_viewer_what_the_file_has(tmp_pat
                              live=viewer, joints=[0, 1]) as rec:
             for record in steps(12, flagged_from=8):
                 rec.log_step(record)
-        with capture(tmp_path / "late.rrd", connect_to=viewer.url):  # connects after the episode ended
-            web = viewer.how.split("open ")[1].split(" ")[0]
-            assert web.startswith("http://127.0.0.1:") and httpx.get(web, timeout=30).status_code == 200
+        web = viewer.how.split("open ")[1].split(" ")[0]
+        assert web.startswith("http://127.0.0.1:") and httpx.get(web, timeout=30).status_code == 200
+        late_capture(tmp_path / "late.rrd", viewer.url, steps=12)  # connects after the episode ended
     finally:
         viewer.close()
     received = entities(tmp_path / "late.rrd")
