@@ -13,6 +13,7 @@ import subprocess
 import time
 from pathlib import Path
 from typing import Iterator
+from urllib.parse import urlsplit
 
 import httpx
 import numpy as np
@@ -42,6 +43,17 @@ def free_port() -> int:
 def listening(port: int) -> bool:
     with socket.socket() as s:
         return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def wait_listening(port: int, timeout_s: float = 60.0) -> bool:
+    """Whether something listens on ``port`` within ``timeout_s`` (a served viewer's web server
+    starts a while after its gRPC one)."""
+    deadline = time.monotonic() + timeout_s
+    while not listening(port):
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
 
 
 @contextlib.contextmanager
@@ -105,9 +117,10 @@ def test_a_served_view_on_loopback_gives_a_late_viewer_what_the_file_has(tmp_pat
                              live=viewer, joints=[0, 1]) as rec:
             for record in steps(12, flagged_from=8):
                 rec.log_step(record)
-        web = viewer.how.split("open ")[1].split(" ")[0]
-        assert web.startswith("http://127.0.0.1:") and httpx.get(web, timeout=30).status_code == 200
         late_capture(tmp_path / "late.rrd", viewer.url, steps=12)  # connects after the episode ended
+        web = viewer.how.split("open ")[1].split(" ")[0]
+        assert web.startswith("http://127.0.0.1:") and wait_listening(urlsplit(web).port or 80)
+        assert httpx.get(web, timeout=30).status_code == 200
     finally:
         viewer.close()
     received = entities(tmp_path / "late.rrd")
