@@ -31,8 +31,8 @@ import typer
 from lab.kitting_probe import TACTILE, print_table, setup
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import Segments
-from neural_asm.experiments.kitting.methods import (Scored, calibrate_served, fit_network, segment_peaks,
-                                                    training_energies_out_of_fold)
+from neural_asm.experiments.kitting.methods import (Scored, calibrate_served, fit_network, network_peaks,
+                                                    out_of_fold_peaks)
 from neural_asm.experiments.kitting.metrics import _flagged
 from neural_asm.models.calibration import conformal_episode_threshold
 
@@ -60,8 +60,7 @@ def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering sche
     for seed in config.seeds:
         model = fit_network(sets.train, config, seed)
         calibrate_served(model, sets, mode, True, config.fprs)
-        peaks = np.concatenate([segment_peaks(model.score(sets.threshold.data, mode).energy, sets.threshold.lengths),
-                                segment_peaks(training_energies_out_of_fold(model, sets, config), sets.train.lengths)])
+        peaks = np.concatenate([network_peaks(model, sets.threshold, mode), out_of_fold_peaks(model, sets, config)])
         working = ~np.concatenate([silent(sets.threshold), silent(sets.train)])
         energies = model.score(sets.test.data, mode).energy
         for name, pool in (("every normal peak (cross-fitted)", peaks), ("working pads' peaks only", peaks[working])):

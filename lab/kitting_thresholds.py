@@ -57,8 +57,8 @@ import typer
 from lab.kitting_probe import MIN_SKILL_EPISODES, energies, picks, print_table, setup, whole_run_phases, whole_runs
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import Segments
-from neural_asm.experiments.kitting.methods import (Scored, Sets, calibrate_served, fit_network, out_of_fold_peaks,
-                                                    segment_peaks)
+from neural_asm.experiments.kitting.methods import (Scored, Sets, calibrate_served, fit_network, network_peaks,
+                                                    out_of_fold_peaks)
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics
 from neural_asm.experiments.kitting.whole_runs import RunLabels
 from neural_asm.models.asm import NeuralASM
@@ -68,11 +68,6 @@ from neural_asm.models.sequences import Sequences
 
 LEFT_PAD = 4
 RATE = 0.01
-
-
-def peaks(model: NeuralASM, segs: Segments, mode: str) -> np.ndarray:
-    """Each segment's peak energy over its own steps under the model's served calibration."""
-    return segment_peaks(model.score(segs.data, mode).energy, segs.lengths)
 
 
 def measured(scored: Scored, sets: Sets, w: Windows, config: KittingConfig) -> dict[str, float]:
@@ -125,7 +120,7 @@ def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering sche
     for seed in config.seeds:
         model = fit_network(sets.train, config, seed)
         cal = calibrate_served(model, sets, config.recall_mode, True, config.fprs)
-        held_out = peaks(model, sets.threshold, config.recall_mode)
+        held_out = network_peaks(model, sets.threshold, config.recall_mode)
         oof = out_of_fold_peaks(model, sets, config)
         pool, pool_skills = np.concatenate([held_out, oof]), np.concatenate([sets.threshold.skills, sets.train.skills])
         test_energies = model.score(sets.test.data, config.recall_mode).energy

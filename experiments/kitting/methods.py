@@ -84,6 +84,11 @@ def segment_peaks(energies: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     return np.array([e[:n].max() for e, n in zip(energies, lengths)])
 
 
+def network_peaks(model: NeuralASM, segs: Segments, mode: str) -> np.ndarray:
+    """Each segment's peak energy over its own steps under the model's calibration of ``mode``."""
+    return segment_peaks(model.score(segs.data, mode).energy, segs.lengths)
+
+
 def served_thresholds(energies: np.ndarray, lengths: np.ndarray, fprs: tuple[float, ...]) -> dict[float, float]:
     """Episode thresholds of normal segments' peak energies over their own steps (the served rule's)."""
     peaks = segment_peaks(energies, lengths)
@@ -148,7 +153,7 @@ def score_cross_fitted(model: NeuralASM, served: Scored, sets: Sets, config: Kit
     with episode thresholds from the held-out peaks and the training runs' out-of-fold peaks. With
     the 36 held-out peaks alone a 1 % threshold is their highest and promises nothing; with ~260 it
     is a split-conformal quantile (docs/kitting.md, "Thresholds from more normal runs")."""
-    held_out = segment_peaks(model.score(sets.threshold.data, config.recall_mode).energy, sets.threshold.lengths)
+    held_out = network_peaks(model, sets.threshold, config.recall_mode)
     pool = np.concatenate([held_out, out_of_fold_peaks(model, sets, config)])
     thresholds = {f: conformal_episode_threshold(pool, f) for f in config.fprs}
     return Scored(served.energies, _broadcast(thresholds, len(sets.test)))
