@@ -7,7 +7,8 @@ them with (``/models``: its channels, and for a model trained from logs the unit
 its mapping), as ``nasm score`` checks them against a checkpoint: a mapping at another step period
 would otherwise give false alarms, not an error. The steps the mapping resamples an episode to
 may differ from the training mapping's (a session lasts as long as its episode), and a table
-episode padded to them is streamed without its padding.
+episode padded to them is streamed without its padding. Each session states the mapping's rate,
+which the service holds to the model's.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ def replay_logs(seqs: Sequences, episodes: list[int], connection: Connection, op
         raise ValueError("a replay streams to a running service: give its URL")
     served = served_model(connection.url, connection.api_key, model)
     check_model(seqs, tuple(served.get("channel_names", [])), served.get("provenance") or {}, same_length=False)
-    options = replace(options, session={**options.session, "model": served["name"]})
+    options = replace(options, session={**options.session, "model": served["name"], "rate_hz": seqs.rate_hz})
     picks = [episode_position(seqs, n) for n in episodes] if episodes else list(range(len(seqs.data)))
     summaries = []
     for i in picks:

@@ -8,7 +8,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from neural_asm.client.world import world_trace
-from neural_asm.logs.sources import own_steps
 from neural_asm.models.sequences import Sequences
 from neural_asm.recordings.records import WorldRecord
 from neural_asm.sim.episode import Episode
@@ -49,8 +48,8 @@ def simulated(ep: Episode, number: int, outcome: Outcome | None = None) -> Strea
 
 
 def logged(seqs: Sequences, i: int) -> StreamedEpisode:
-    """Episode ``i`` (0-based position) of logged sequences at the mapping's step period, its own
-    steps only (not the samples held to pad a short table episode), numbered as in its source."""
-    number = seqs.provenance.get("episode_numbers", list(range(len(seqs.data))))[i]
-    return StreamedEpisode(number, str(seqs.labels[i]), i, seqs.data[i, : own_steps(seqs, i)], seqs.channel_names,
-                           float(seqs.provenance["mapping"]["timing"]["period_s"]))
+    """Episode ``i`` (0-based position) of logged sequences at their rate, its own steps only (not
+    the samples held to pad a short table episode), numbered as in its source."""
+    facts = seqs.episodes[i]
+    return StreamedEpisode(facts.number, str(seqs.labels[i]), i, seqs.data[i, : facts.steps], seqs.channel_names,
+                           1.0 / seqs.rate_hz)

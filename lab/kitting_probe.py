@@ -52,7 +52,7 @@ from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_serve
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics, windows
 from neural_asm.experiments.kitting.run import make_sets
 from neural_asm.experiments.kitting.whole_runs import PhaseAnswer, RunLabels, count_whole_runs, run_labels
-from neural_asm.logs.sources import own_steps, read_mapped
+from neural_asm.logs.sources import read_mapped
 from neural_asm.logs.tables import phase_keys
 from neural_asm.models import asm
 from neural_asm.models.asm import NeuralASM
@@ -254,11 +254,10 @@ def whole_runs(model: NeuralASM, phases: Sequences, labels: dict[str, RunLabels]
         energies_, cal = energies_ / table[picks_], replace(cal, episode_thresholds={0.01: 1.0})
     if scales is not None:
         energies_ = energies_ / scales[np.minimum(np.arange(energies_.shape[1]), len(scales) - 1)]
-    prov = phases.provenance
-    answered = [PhaseAnswer(run_of(prov["episodes"][i]), str(phases.labels[i]), float(prov["starts_s"][i]),
+    answered = [PhaseAnswer(run_of(phases.episodes[i].origin), str(phases.labels[i]), phases.episodes[i].start_s,
                             is_fault(energies_[i, :n], cal.episode_thresholds[0.01]),
                             tuple(None if k < 0 else cal.skills[k] for k in picks_[i, :n]))
-                for i in range(len(phases.data)) for n in (own_steps(phases, i),)]
+                for i in range(len(phases.data)) for n in (phases.own_steps(i),)]
     counts = count_whole_runs(answered, labels, cal.skills, config.not_anomalies)
     clean = [a for a in answered if not _holds_onset(a, labels[a.run], config)]
     counts["clean_recognised"] = count_whole_runs(clean, labels, cal.skills, config.not_anomalies)["skill_recognised"]

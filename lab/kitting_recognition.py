@@ -50,7 +50,6 @@ from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import PERIOD_S
 from neural_asm.experiments.kitting.methods import Scored, Sets, calibrate_served, fit_network, served_thresholds
 from neural_asm.experiments.kitting.metrics import Windows
-from neural_asm.logs.sources import own_steps
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import Calibration
 from neural_asm.models.recall import Recaller
@@ -118,7 +117,7 @@ def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering sche
          out: Path = typer.Option(Path("."), help="where the test runs are linked for the whole-run phases")) -> None:
     config, _, split, sets, w = setup(KittingConfig(data=data, out=out, trainings=seeds))
     phases, labels = whole_run_phases(config, split, out / "kitting_probe_runs")
-    phase_steps = np.array([own_steps(phases, i) for i in range(len(phases.data))])
+    phase_steps = np.array([phases.own_steps(i) for i in range(len(phases.data))])
     known = np.isin(phases.labels.astype(str), np.unique(sets.train.skills))
     phase_skills, phase_ends = phases.labels.astype(str)[known], phase_steps[known] - 1
     test = sets.test

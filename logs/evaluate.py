@@ -24,12 +24,11 @@ def _flags(model: NeuralASM, seqs: Sequences, mode: str, cal: Calibration, fpr: 
     result = model.score(seqs.data, mode, 1, True)
     flags, _ = flag_steps(result.energy, cal, fpr, kind)
     weighted = cal.weigh(result.errors)
-    numbers = seqs.provenance.get("episode_numbers", list(range(len(seqs.data))))
     rows = []
     for i, e in enumerate(result.energy):
         above = np.flatnonzero(flags[i])
         first = int(above[0]) if len(above) else None
-        rows.append({"episode": seqs.provenance["episodes"][i], "number": numbers[i], "skill": str(seqs.labels[i]),
+        rows.append({"episode": seqs.episodes[i].origin, "number": seqs.episodes[i].number, "skill": str(seqs.labels[i]),
                      "peak_energy": float(e.max()), "first_flag_step": first, "steps_flagged": len(above),
                      "isolated_joint": None if first is None else isolate(weighted[i, first], model.channel_names)[0]})
     return rows

@@ -1,8 +1,9 @@
 """A bag, a dataset or a lab's tables, read through a mapping, as the project's ``Sequences``.
 
-The provenance keeps the source, the mapping file and the whole validated mapping, so a
-checkpoint trained from logs says where its data came from and how it was mapped, and later
-data can be checked against it (``logs.mapping.check_checkpoint``).
+The sequences carry the mapping's clock (``rate_hz``) and each episode's facts (``episodes``).
+The provenance keeps where they came from: the source, the mapping file, the whole validated
+mapping and the warnings, so a checkpoint trained from logs says how its data were mapped, and
+later data can be checked against it (``logs.mapping.check_checkpoint``).
 """
 
 from __future__ import annotations
@@ -13,9 +14,9 @@ import numpy as np
 
 from neural_asm.logs import lerobot, rosbag, tables
 from neural_asm.logs.errors import LogError
-from neural_asm.logs.mapping import Kind, Mapping, check_checkpoint, load_mapping, parse_mapping
+from neural_asm.logs.mapping import Kind, Mapping, Timing, check_checkpoint, load_mapping, parse_mapping
 from neural_asm.logs.recorded import Recorded
-from neural_asm.models.sequences import Sequences
+from neural_asm.models.sequences import EpisodeFacts, Sequences
 
 
 def source_kind(source: Path) -> Kind:
@@ -23,9 +24,10 @@ def source_kind(source: Path) -> Kind:
 
 
 def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", skip_bad: bool = False) -> Sequences:
-    """Every episode of ``source`` under ``mapping``; a bad or missing one is an error, or with
-    ``skip_bad`` a warning. Warnings go into the provenance, and ``episode_numbers`` keeps each
-    episode's number in the source, so that a skipped one shifts no other."""
+    """Every episode of ``source`` under ``mapping``, on the mapping's clock (``rate_hz``), each with
+    its facts (``Sequences.episodes``: its number in the source, so that a skipped one shifts no
+    other, its origin, own steps, start, anomaly and onset); a bad or missing one is an error, or
+    with ``skip_bad`` a warning kept in the provenance."""
     path = Path(source)
     if not path.exists():
         raise LogError(f"no bag, dataset or table at {path}")
@@ -42,15 +44,18 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
         raise LogError(f"{path} holds no episode" + (f" ({'; '.join(warnings)})" if warnings else ""))
     episodes.sort(key=lambda e: e.number)
     provenance = {"source": str(path), "format": kind, "mapping_file": mapping_file, "mapping": mapping.to_dict(),
-                  "episodes": [e.origin for e in episodes], "episode_numbers": [e.number for e in episodes],
                   "warnings": warnings}
-    if kind == "table":
-        provenance["anomalies"] = [e.anomaly for e in episodes]
-        provenance["onsets_s"] = [e.onset_s for e in episodes]
-        provenance["lengths_s"] = [e.length_s for e in episodes]
-        provenance["starts_s"] = [e.start_s for e in episodes]
     return Sequences(np.stack([e.data for e in episodes]), np.array([e.label for e in episodes]),
-                     mapping.channel_names, provenance=provenance)
+                     mapping.channel_names, provenance=provenance, rate_hz=1.0 / mapping.timing.period_s,
+                     episodes=tuple(_facts(e, mapping.timing) for e in episodes))
+
+
+def _facts(episode: Recorded, timing: Timing) -> EpisodeFacts:
+    """A read episode's facts: its own steps are all of them unless it was padded (``timing.shorter = "hold"``)."""
+    steps = len(episode.data)
+    if episode.length_s is not None:
+        steps = min(int(round(episode.length_s / timing.period_s)) + 1, steps)
+    return EpisodeFacts(episode.number, episode.origin, steps, episode.start_s, episode.anomaly, episode.onset_s)
 
 
 def load_log_sequences(source: str | Path, mapping_file: str | Path, skip_bad: bool = False) -> Sequences:
@@ -62,24 +67,13 @@ def load_log_sequences(source: str | Path, mapping_file: str | Path, skip_bad: b
 
 def episode_position(seqs: Sequences, number: int) -> int:
     """Where episode ``number`` of the source is in ``seqs``, or a LogError saying why it is not there."""
-    numbers = list(seqs.provenance.get("episode_numbers", range(len(seqs.data))))
+    numbers = [e.number for e in seqs.episodes] if seqs.episodes else list(range(len(seqs.data)))
     if number in numbers:
         return numbers.index(number)
     skipped = [w for w in seqs.provenance.get("warnings", []) if f"episode {number}" in w]
     have = f"{numbers[0]}..{numbers[-1]}" if numbers == list(range(numbers[0], numbers[-1] + 1)) else str(numbers)
     raise LogError(f"episode {number} is not among the episodes read from {seqs.provenance.get('source')}"
                    + (f": {skipped[0]}" if skipped else f" (it has episodes {have})"))
-
-
-def own_steps(seqs: Sequences, i: int) -> int:
-    """How many of episode ``i``'s steps are its own: a table episode shorter than the mapping's
-    steps is padded by holding its last sample (``timing.shorter = "hold"``), other episodes are whole."""
-    lengths = seqs.provenance.get("lengths_s")
-    steps = seqs.data.shape[1]
-    if not lengths or lengths[i] is None:
-        return steps
-    period = float(seqs.provenance["mapping"]["timing"]["period_s"])
-    return min(int(round(lengths[i] / period)) + 1, steps)
 
 
 def check_model(seqs: Sequences, channel_names: tuple[str, ...], provenance: dict, same_length: bool = True) -> None:

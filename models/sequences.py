@@ -29,6 +29,20 @@ def checked_array(data: Any, what: str = "sequences", width: int | None = None,
 
 
 @dataclass(frozen=True)
+class EpisodeFacts:
+    """What a reader knows of one episode beside its values and skill: which one it is in its
+    source, where it was read, how much of it is its own, and (where the lab labelled it) its
+    anomaly and when that began."""
+
+    number: int  # its number in the source, kept when another episode is skipped
+    origin: str  # where it was read (a file, a bag's episode), for messages and grouping
+    steps: int  # its own steps; fewer than T when a short episode was padded to T
+    start_s: float  # its first sample, on the source's clock
+    anomaly: str | None = None  # the lab's anomaly label; None: a normal episode
+    onset_s: float | None = None  # the anomaly's onset, s after start_s
+
+
+@dataclass(frozen=True)
 class Sequences:
     """(N, T, D) sequences in original units, the skill of each, and the names of their D
     channels: what every training, calibration and scoring call takes."""
@@ -37,8 +51,9 @@ class Sequences:
     labels: np.ndarray  # (N,) skill of each sequence: a name, or an index into a skill list
     channel_names: tuple[str, ...]
     seeds: np.ndarray | None = None  # (N,) simulation seeds, where the sequences were simulated
-    provenance: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)  # where the data came from, not facts of an episode
     rate_hz: float = DEFAULT_RATE_HZ  # observations per second along T
+    episodes: tuple[EpisodeFacts, ...] = ()  # (N,) each sequence's facts, where a reader knows them
 
     def __post_init__(self) -> None:
         if self.data.ndim != 3:
@@ -49,6 +64,10 @@ class Sequences:
             raise ValueError(f"{len(self.channel_names)} channel names for {self.data.shape[2]} channels")
         if self.seeds is not None and len(self.seeds) != len(self.data):
             raise ValueError(f"{len(self.seeds)} seeds for {len(self.data)} sequences")
+        if self.episodes and len(self.episodes) != len(self.data):
+            raise ValueError(f"facts of {len(self.episodes)} episodes for {len(self.data)} sequences")
+        if any(not 1 <= e.steps <= self.data.shape[1] for e in self.episodes):
+            raise ValueError(f"an episode's own steps must be 1..{self.data.shape[1]}")
 
     def __len__(self) -> int:
         return len(self.data)
@@ -56,4 +75,9 @@ class Sequences:
     def take(self, index: np.ndarray) -> Sequences:
         """The sequences at ``index`` (integer indices or a boolean mask), same channels."""
         seeds = None if self.seeds is None else self.seeds[index]
-        return replace(self, data=self.data[index], labels=self.labels[index], seeds=seeds)
+        episodes = tuple(self.episodes[i] for i in np.arange(len(self.episodes))[index])
+        return replace(self, data=self.data[index], labels=self.labels[index], seeds=seeds, episodes=episodes)
+
+    def own_steps(self, i: int) -> int:
+        """How many of sequence ``i``'s steps are its own (not samples held to pad it to T)."""
+        return self.episodes[i].steps if self.episodes else self.data.shape[1]

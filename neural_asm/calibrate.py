@@ -60,8 +60,8 @@ def episode_groups(seqs: Sequences, by: str | re.Pattern[str]) -> np.ndarray:
     match of a pattern in where it was read from (a run's stamp in its folders' and files' names)."""
     if by == "episode":
         return np.arange(len(seqs))
-    origins = seqs.provenance.get("episodes")
-    if origins is None:
+    origins = [e.origin for e in seqs.episodes]
+    if not origins:
         raise ValueError("--groups other than 'episode' needs episodes read from files (with --mapping); these are not")
     if by == "file":
         return np.array([EPISODE_SUFFIX.sub("", origin) for origin in origins])

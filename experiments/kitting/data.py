@@ -15,7 +15,7 @@ import numpy as np
 
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.mapping import Mapping, parse_mapping
-from neural_asm.logs.sources import own_steps, read_mapped
+from neural_asm.logs.sources import read_mapped
 
 PERIOD_S = 0.05
 STEPS = 120
@@ -92,11 +92,12 @@ def read_segments(scheme: Path) -> Segments:
     """Every normal (successful_skills) and anomalous (unsuccessful_skills) segment of the clone."""
     parts = [read_mapped(scheme / kind, kitting_mapping(), "kitting") for kind in ("successful_skills", "unsuccessful_skills")]
     data = np.concatenate([p.data for p in parts])
-    prov = {k: sum((p.provenance[k] for p in parts), []) for k in ("anomalies", "onsets_s", "lengths_s", "episodes")}
-    onsets = np.array([-1 if o is None else int(round(o / PERIOD_S)) for o in prov["onsets_s"]])
-    lengths = np.array([own_steps(p, i) for p in parts for i in range(len(p.data))])
-    return Segments(data, np.concatenate([p.labels for p in parts]).astype(str), np.array(prov["anomalies"], dtype=object),
-                    onsets, lengths, np.array([run_of(o) for o in prov["episodes"]]), prov["episodes"])
+    facts = [e for p in parts for e in p.episodes]
+    onsets = np.array([-1 if e.onset_s is None else int(round(e.onset_s / PERIOD_S)) for e in facts])
+    origins = [e.origin for e in facts]
+    return Segments(data, np.concatenate([p.labels for p in parts]).astype(str),
+                    np.array([e.anomaly for e in facts], dtype=object), onsets, np.array([e.steps for e in facts]),
+                    np.array([run_of(o) for o in origins]), origins)
 
 
 @dataclass(frozen=True)

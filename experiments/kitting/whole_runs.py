@@ -43,6 +43,7 @@ from neural_asm.logs.tables import phase_keys
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import SCORING
+from neural_asm.models.sequences import EpisodeFacts
 from neural_asm.runtime.serving import serving
 
 MODEL_NAME = "kitting"
@@ -96,14 +97,13 @@ def replay_runs(runs: list[Path], model: NeuralASM, folder: Path, mode: str) -> 
                                "--json", str(summaries)], stdout=log, stderr=subprocess.STDOUT)
     if done.returncode != 0:
         raise RuntimeError(f"nasm replay exited with {done.returncode}; see {folder / 'replay.log'}")
-    return answers(json.loads(summaries.read_text()), read_mapped(source, whole_runs_mapping()).provenance)
+    return answers(json.loads(summaries.read_text()), read_mapped(source, whole_runs_mapping()).episodes)
 
 
-def answers(summaries: list[dict[str, Any]], provenance: dict[str, Any]) -> list[PhaseAnswer]:
+def answers(summaries: list[dict[str, Any]], episodes: Sequence[EpisodeFacts]) -> list[PhaseAnswer]:
     """The replay's summaries (``nasm replay --json``) joined to the episodes they streamed (by
     their number in the source): each episode's run and first sample's time."""
-    where = {n: (run_of(o), float(s)) for n, o, s in
-             zip(provenance["episode_numbers"], provenance["episodes"], provenance["starts_s"])}
+    where = {e.number: (run_of(e.origin), e.start_s) for e in episodes}
     out = []
     for s in summaries:
         if not s["completed"]:

@@ -93,9 +93,8 @@ class VorausResult:
 
 
 def _training(seqs, anomalies: np.ndarray, parts: dict[str, np.ndarray], config: VorausConfig, seed: int) -> dict[str, Any]:
-    rate = 1 / seqs.provenance["mapping"]["timing"]["period_s"]
     model = NeuralASM.fit(seqs.data[parts["train"]], seqs.channel_names, config.network.with_(seed=seed), progress=False,
-                          rate_hz=rate)
+                          rate_hz=seqs.rate_hz)
     cal = model.calibrate(seqs.data[parts["precision"]], seqs.data[parts["threshold"]], "offline", 1)
     thresholds = {f: conformal_episode_threshold(model.score(seqs.data[parts["threshold"]]).energy.max(1), f)
                   for f in config.fprs}
@@ -125,7 +124,7 @@ def run(config: VorausConfig) -> VorausResult:
     if config.data is None:
         raise LogError("no --data: give voraus-AD's parquet file")
     seqs = read_mapped(config.data, parse_mapping(voraus_mapping_doc(), "the voraus mapping"), "voraus")
-    anomalies = np.array(seqs.provenance["anomalies"], dtype=object)
+    anomalies = np.array([e.anomaly for e in seqs.episodes], dtype=object)
     normal = np.flatnonzero(anomalies == None)  # noqa: E711
     order = normal[np.random.default_rng(config.split_seed).permutation(len(normal))]
     n_train, n_cal = int(0.6 * len(order)), int(0.2 * len(order))
@@ -142,6 +141,6 @@ def run(config: VorausConfig) -> VorausResult:
                 "per_category": {c: {"n": trainings[0]["per_category"][c]["n"],
                                      "auroc": float(np.mean([t["per_category"][c]["auroc"] for t in trainings]))}
                                  for c in trainings[0]["per_category"]}}
-    split = {k: [seqs.provenance["episodes"][i] for i in v] for k, v in parts.items()}
+    split = {k: [seqs.episodes[i].origin for i in v] for k, v in parts.items()}
     return VorausResult({"samples": len(seqs), "normal": len(normal), "anomalous": len(seqs) - len(normal)},
                         {**split, "seed": config.split_seed}, trainings, headline, round(time.perf_counter() - start, 1))

@@ -16,7 +16,7 @@ from neural_asm.experiments.kitting.whole_runs import PhaseAnswer, RunLabels, co
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.label_pickle import Anomaly, Phase
 from neural_asm.logs.mapping import check_checkpoint, parse_mapping
-from neural_asm.logs.sources import own_steps, read_mapped
+from neural_asm.logs.sources import read_mapped
 from neural_asm.models.fault import is_fault
 
 T0 = 1_526_716_000.0
@@ -33,8 +33,8 @@ def test_a_whole_run_is_one_episode_per_tagged_phase(tmp_path):
          (-1, T0 + 4.92, T0 + 5)]))
     seqs = read_mapped(tmp_path, whole_runs_mapping())
     assert seqs.labels.tolist() == ["3", "4"]
-    np.testing.assert_allclose(seqs.provenance["starts_s"], [T0 + 1.0, T0 + 3.0], atol=1e-6)
-    assert [own_steps(seqs, i) for i in range(2)] == [31, 39]
+    np.testing.assert_allclose([e.start_s for e in seqs.episodes], [T0 + 1.0, T0 + 3.0], atol=1e-6)
+    assert [seqs.own_steps(i) for i in range(2)] == [31, 39]
     assert seqs.data[0, 0, 0] == 20.0 and seqs.data[1, 38, 0] == 98.0  # rows 20..50 and 60..98
     assert (seqs.data[1, 39:, 0] == 98.0).all()  # held to the mapping's length
 
@@ -108,7 +108,7 @@ def test_test_runs_through_nasm_serve_and_nasm_replay_answer_as_the_model_does(t
     seqs = read_mapped(tmp_path / "out" / "whole_runs" / "runs", whole_runs_mapping())
     assert len(answered) == len(seqs.data) == 3 * len(folders)
     for i, answer in enumerate(answered):
-        x = seqs.data[i, : own_steps(seqs, i)]
+        x = seqs.data[i, : seqs.own_steps(i)]
         assert len(answer.flags) == len(x) and answer.skill == seqs.labels[i]
         errors = model.errors(x[None], "offline", 1)
         np.testing.assert_array_equal(answer.flags, is_fault(cal.energy(errors)[0], cal.episode_thresholds[0.01]))

@@ -125,7 +125,7 @@ def test_one_bag_at_mixed_rates_gives_the_episodes_back(bag, native, episodes, s
 def test_a_folder_of_rosbag2_bags_is_one_episode_per_bag(episodes, native, tmp_path):
     folder = write_bag_folders(episodes, tmp_path / "bags", jitter_s=0.002)
     seqs = read_mapped(folder, parse_mapping(bag_mapping("file"), "m"))
-    assert len(seqs.data) == 4 and seqs.provenance["episodes"][0] == "bag episode_0000, episode 0"
+    assert len(seqs.data) == 4 and seqs.episodes[0].origin == "bag episode_0000, episode 0"
     joints = slice(0, 7)
     assert np.abs(seqs.data[..., joints] - native[..., joints]).max() < 0.01  # 2 ms of jitter on moving joints
     assert np.abs(seqs.data[..., joints] - native[..., joints]).max() > 0  # ... which the resampling sees
@@ -297,7 +297,7 @@ def test_a_dropout_is_an_error_or_skipped_by_number(episodes, native, tmp_path):
     with pytest.raises(LogError, match=r"bag episode_0001, episode 1, topic /.*: no sample between .*--skip-bad"):
         read_mapped(folder, mapping)
     seqs = read_mapped(folder, mapping, skip_bad=True)
-    assert seqs.provenance["episode_numbers"] == [0, 2]
+    assert [e.number for e in seqs.episodes] == [0, 2]
     assert seqs.provenance["warnings"][0].startswith("skipped episode 1: bag episode_0001, episode 1")
     np.testing.assert_allclose(seqs.data, native[[0, 2]], atol=1e-9)
     assert episode_position(seqs, 2) == 1
@@ -374,7 +374,7 @@ def test_a_lerobot_dataset_missing_an_episode_is_an_error_or_skipped_by_number(e
     with pytest.raises(LogError, match=message):
         read_mapped(root, mapping)
     seqs = read_mapped(root, mapping, skip_bad=True)
-    assert seqs.provenance["episode_numbers"] == [0, 1, 3]
+    assert [e.number for e in seqs.episodes] == [0, 1, 3]
     assert "episode 2" in seqs.provenance["warnings"][0]
     np.testing.assert_allclose(seqs.data, native[[0, 1, 3]], rtol=1e-6, atol=1e-6)
 

@@ -41,12 +41,12 @@ def test_baxter_folders_give_skills_labels_and_onsets(kitting):
     seqs = read_mapped(kitting / "unsuccessful_skills", load_mapping(BAXTER))
     assert seqs.data.shape == (2, 120, 6)
     assert set(seqs.labels) == {"5"}
-    assert seqs.provenance["anomalies"] == ["no_object", "no_object"]
+    assert [e.anomaly for e in seqs.episodes] == ["no_object", "no_object"]
     # the onset is half-way through each synthetic segment (60-90 steps of 0.05 s)
-    assert all(1.4 < o < 2.3 for o in seqs.provenance["onsets_s"])
+    assert all(1.4 < o < 2.3 for o in [e.onset_s for e in seqs.episodes])
     normal = read_mapped(kitting / "successful_skills", load_mapping(BAXTER))
-    assert sorted(set(normal.labels)) == ["3", "4", "5"] and set(normal.provenance["anomalies"]) == {None}
-    assert all(length < 6.0 for length in normal.provenance["lengths_s"])
+    assert sorted(set(normal.labels)) == ["3", "4", "5"] and {e.anomaly for e in normal.episodes} == {None}
+    assert all(e.steps < normal.data.shape[1] for e in normal.episodes)  # shorter than 6 s: padded
 
 
 def test_the_csv_values_arrive_on_the_model_clock(kitting):
@@ -62,8 +62,8 @@ def test_voraus_parquet_with_an_episode_column(tmp_path):
     path = write_voraus(tmp_path / "v.parquet", samples=8, row_group=300)
     seqs = read_mapped(path, load_mapping(VORAUS))
     assert seqs.data.shape == (8, 100, 26)
-    assert seqs.provenance["anomalies"] == [None, None, None, "0", None, None, None, "1"]
-    assert seqs.provenance["episodes"][3].endswith("episode 3")
+    assert [e.anomaly for e in seqs.episodes] == [None, None, None, "0", None, None, None, "1"]
+    assert seqs.episodes[3].origin.endswith("episode 3")
 
 
 @pytest.mark.parametrize("fmt,sep", [("tsv", "\t"), ("whitespace", "   ")])

@@ -93,15 +93,16 @@ def test_a_plan_memory_with_too_few_demonstrations_in_a_fold_is_refused_before_t
 
 def test_groups_from_where_episodes_were_read():
     from neural_asm.calibrate import episode_groups, grouping
-    from neural_asm.models.sequences import Sequences
+    from neural_asm.models.sequences import EpisodeFacts, Sequences
 
     origins = ["skill 3/No.0 successful skill from experiment_at_2018y05m19d15H48M03S/a.csv",
                "skill 4/No.1 successful skill from experiment_at_2018y05m19d15H48M03S/b.csv",
                "skill 4/No.1 successful skill from experiment_at_2018y05m20d10H00M00S/c.csv",
                "bag d.mcap, episode 3", "bag d.mcap, episode 4", "runs/t.csv episode 7"]
-    seqs = Sequences(np.zeros((6, 2, 1)), np.zeros(6), ("x",), provenance={"episodes": origins})
+    facts = tuple(EpisodeFacts(i, origin, 2, 0.0) for i, origin in enumerate(origins))
+    seqs = Sequences(np.zeros((6, 2, 1)), np.zeros(6), ("x",), episodes=facts)
     assert episode_groups(seqs, grouping("file")).tolist()[3:] == ["bag d.mcap", "bag d.mcap", "runs/t.csv"]
-    baxter = Sequences(np.zeros((3, 2, 1)), np.zeros(3), ("x",), provenance={"episodes": origins[:3]})
+    baxter = Sequences(np.zeros((3, 2, 1)), np.zeros(3), ("x",), episodes=facts[:3])
     runs = episode_groups(baxter, grouping(r"experiment_at_\w+"))
     assert runs[0] == runs[1] != runs[2]  # one run's skills in one group, though their folders differ
     with pytest.raises(ValueError, match="matches nothing in 'bag d.mcap, episode 3' \\(3 of 6 episodes\\)"):
