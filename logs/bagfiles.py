@@ -28,9 +28,9 @@ from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_
 from rosbags.typesys.store import Typestore
 
 from neural_asm.logs.errors import LogError
+from neural_asm.logs.formats import BAG_METADATA as METADATA
+from neural_asm.logs.formats import BAG_SUFFIXES as SUFFIXES
 
-METADATA = "metadata.yaml"  # rosbag2's description of a bag folder
-SUFFIXES = (".mcap", ".db3", ".bag")
 STORAGES = {"mcap": ".mcap", "sqlite3": ".db3"}
 DEFAULT_STORE = Stores.ROS2_HUMBLE  # messages of bags that store no definitions (Humble's sqlite3)
 DEFAULT_STORE_ROS1 = Stores.ROS1_NOETIC

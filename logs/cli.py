@@ -1,28 +1,53 @@
-"""``nasm evaluate``: fault detection measured on a robot's logs, decided as the service decides;
-and ``read_logs``, the one way every command reads logs (errors as one line, exit 2)."""
+"""What every command reads logs with: ``read_logs`` (errors as one line, exit 2), the options'
+help, a command class whose help names the registered log formats; and ``nasm evaluate``, fault
+detection measured on a robot's logs, decided as the service decides.
+
+Only light modules are imported here: each command imports the readers and models it runs."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import typer
 
-from neural_asm.logs.errors import LogError
-from neural_asm.logs.sources import check_model, load_log_sequences
-from neural_asm.models import checkpoint
-from neural_asm.models.asm import NeuralASM
-from neural_asm.models.fault import THRESHOLD_KINDS
-from neural_asm.models.sequences import Sequences
-from neural_asm.runtime.cli import fail
+from neural_asm.runtime.cli import Command, fail
 
-MAPPING_HELP = "channel mapping (.toml or .yaml): which topic or feature becomes which channel"
+if TYPE_CHECKING:
+    from neural_asm.models.asm import NeuralASM
+    from neural_asm.models.sequences import Sequences
+
+FORMATS = "{formats}"  # in a DataCommand's help: the registered log formats, named when the command is built
+MAPPING_HELP = "channel mapping (.toml or .yaml): which topic, feature or column becomes which channel"
 SKIP_BAD_HELP = "skip bad or missing episodes with a warning naming each (default: refuse the source)"
+
+
+def mapping_help(argument: str) -> str:
+    """``--mapping``'s help in a command whose data argument is ``argument``."""
+    return f"{MAPPING_HELP}; {argument} is then {FORMATS}"
+
+
+class DataCommand(Command):
+    """A command that reads data: its help names the log formats registered when the help is
+    shown (``logs.formats``), so a format added is a format listed."""
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        from neural_asm.logs.formats import described
+
+        named = described()
+        for param in self.params:
+            if getattr(param, "help", None):
+                param.help = param.help.replace(FORMATS, named)  # type: ignore[attr-defined]
+        super().format_help(ctx, formatter)
 
 
 def read_logs(source: str, mapping: Path, model: NeuralASM | None = None, skip_bad: bool = False) -> Sequences:
     """Sequences from logs, checked against ``model`` if given, with their warnings printed;
     any LogError ends the command with its message before anything is written."""
+    from neural_asm.logs.errors import LogError
+    from neural_asm.logs.sources import check_model, load_log_sequences
+
     try:
         seqs = load_log_sequences(source, mapping, skip_bad)
         if model is not None:
@@ -45,7 +70,7 @@ def evaluate(
     model_path: Path = typer.Argument(..., help="checkpoint (.safetensors), calibrated (nasm calibrate)"),
     normal: str = typer.Argument(..., help="logs of normal episodes the model was not trained or calibrated on"),
     faults: str = typer.Argument(..., help="logs of faulty episodes"),
-    mapping: Path = typer.Option(..., help=MAPPING_HELP),
+    mapping: Path = typer.Option(..., help=mapping_help("NORMAL (and FAULTS)")),
     mode: str = typer.Option("offline", help="recall mode: offline or online"),
     fpr: float = typer.Option(0.01, help="false-positive rate of the calibrated threshold"),
     threshold: str = typer.Option("episode", help="threshold kind, as a service session's: episode (the service's "
@@ -54,7 +79,10 @@ def evaluate(
     json_out: Path | None = typer.Option(None, "--json", help="also write the per-episode results as JSON here"),
 ) -> None:
     """Faults-style evaluation on logs: faulty episodes detected, normal ones flagged, AUROC."""
+    from neural_asm.logs.errors import LogError
     from neural_asm.logs.evaluate import evaluate as run
+    from neural_asm.models import checkpoint
+    from neural_asm.models.fault import THRESHOLD_KINDS
 
     if threshold not in THRESHOLD_KINDS:
         raise fail(f"--threshold must be one of {', '.join(THRESHOLD_KINDS)}, got {threshold!r}")

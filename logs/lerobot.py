@@ -25,21 +25,17 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from neural_asm.logs.errors import LogError
+from neural_asm.logs.formats import LEROBOT_INFO as INFO
 from neural_asm.logs.mapping import Channel, Mapping
 from neural_asm.logs.recorded import Recorded
 from neural_asm.logs.resample import EpisodeResampler, Group
 
-INFO = Path("meta/info.json")
 TASKS_V2 = Path("meta/tasks.jsonl")
 TASKS_V3 = Path("meta/tasks.parquet")
 EPISODES_V2 = Path("meta/episodes.jsonl")
 EPISODES_V3 = Path("meta/episodes")
 READABLE = ("v2.", "v3.")
 NON_NUMERIC = ("video", "image", "string")
-
-
-def is_dataset(source: Path) -> bool:
-    return (source / INFO).is_file()
 
 
 def read_info(root: Path) -> dict[str, Any]:

@@ -1,27 +1,31 @@
-"""The channel mapping file: which topic field or dataset feature element becomes which model
-channel, in which units, at which step period, and which channels are joints; for a lab's
-tables (CSV/TSV, whitespace text, Parquet), which files, which column is time and where each
-episode's skill, anomaly label and onset come from (``[table]``).
+"""The channel mapping file: which topic field, dataset feature element or table column becomes
+which model channel, in which units, at which step period, and which channels are joints; and
+the ``[source]`` section of the source's format, told apart by its ``kind`` (a discriminated
+union of the registered formats' sections, ``logs.formats``): for bags, how a bag is cut into
+episodes; for a lab's tables, which files, which column is time and where each episode's
+skill, anomaly label and onset come from.
 
 A mapping is TOML (``.toml``, read with tomllib) or YAML (``.yaml``/``.yml``); both hold the
 same tables, checked here with one schema so that a typo is refused with the table, the
-channel and the reason rather than turning into a silently wrong model. See
+channel and the reason rather than turning into a silently wrong model. Mappings written
+before ``[source]`` (an ``[episodes]`` or ``[table]`` section, or neither) read as before. See
 ``examples/panda_ros2.toml`` and docs/robot_logs.md.
 """
 
 from __future__ import annotations
 
+import functools
 import tomllib
 from pathlib import Path
-from typing import Any, Literal, Sequence
+from typing import Annotated, Any, ClassVar, Literal, Sequence, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, model_validator
 
 from neural_asm.logs.errors import LogError
 from neural_asm.models.fault import JOINT_PREFIX
 
-Kind = Literal["rosbag", "lerobot", "table"]
+Address = Literal["topic", "feature", "column"]
 TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}  # seconds per unit
 
 
@@ -44,9 +48,20 @@ class Timing(_Strict):
         return self.period_s if self.max_gap_s is None else self.max_gap_s
 
 
-class Episodes(_Strict):
+class Section(_Strict):
+    """The mapping's ``[source]`` section of one format: ``kind`` names the format; ``address`` is
+    the field its channels are read by; ``pads`` whether ``timing.shorter = "hold"`` applies."""
+
+    kind: str
+    address: ClassVar[Address]
+    pads: ClassVar[bool] = False
+
+
+class Episodes(Section):
     """How a bag is cut into episodes and where their time stamps and skill names come from."""
 
+    kind: Literal["rosbag"] = "rosbag"
+    address: ClassVar[Address] = "topic"
     split: Literal["file", "marker", "gap"] = Field("file", description="file: one episode per bag; marker: "
                                                     "one per message on marker_topic; gap: a silence longer than gap_s")
     marker_topic: str | None = None
@@ -91,9 +106,19 @@ class Value(_Strict):
         return self
 
 
-class Table(_Strict):
+class Dataset(Section):
+    """A LeRobot dataset: nothing to set, its episodes come from episode_index."""
+
+    kind: Literal["lerobot"] = "lerobot"
+    address: ClassVar[Address] = "feature"
+
+
+class Table(Section):
     """A lab's tables: which files, their format, the time column and where labels come from."""
 
+    kind: Literal["table"] = "table"
+    address: ClassVar[Address] = "column"
+    pads: ClassVar[bool] = True
     files: str = Field("**/*", description="glob of the tables under the source folder (a source that "
                        "is a file is read alone)")
     format: Literal["auto", "csv", "tsv", "whitespace", "parquet"] = Field(
@@ -152,6 +177,11 @@ class Channel(_Strict):
         return self
 
     @property
+    def address(self) -> Address:
+        """The field the channel is read by."""
+        return "topic" if self.topic is not None else "feature" if self.feature is not None else "column"
+
+    @property
     def source(self) -> str:
         """Where the channel is read, for messages."""
         if self.column is not None:
@@ -162,9 +192,25 @@ class Channel(_Strict):
 class Mapping(_Strict):
     description: str = ""
     timing: Timing
-    episodes: Episodes | None = Field(None, description="bags only")
-    table: Table | None = Field(None, description="tables only")
+    source: Section = Field(description="the format's section; its kind names the format")
     channels: list[Channel] = Field(min_length=1)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _sections_before_source(cls, raw: Any) -> Any:
+        """A mapping written before ``[source]``: ``[table]`` or ``[episodes]`` is its section, or
+        without either, the channels' address names the format (features: a LeRobot dataset)."""
+        if not isinstance(raw, dict) or "source" in raw:
+            return raw
+        raw = dict(raw)
+        for key, kind in (("table", "table"), ("episodes", "rosbag")):
+            if isinstance(raw.get(key), dict):
+                raw["source"] = {"kind": kind, **raw.pop(key)}
+                return raw
+        channels = raw.get("channels")
+        first = channels[0] if isinstance(channels, list) and channels and isinstance(channels[0], dict) else {}
+        raw["source"] = {"kind": "lerobot" if "feature" in first else "table" if "column" in first else "rosbag"}
+        return raw
 
     @model_validator(mode="after")
     def _consistent(self) -> "Mapping":
@@ -172,16 +218,14 @@ class Mapping(_Strict):
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
             raise ValueError(f"channel names must be unique; repeated: {repeated}")
-        kinds = {_kind(c) for c in self.channels}
-        if len(kinds) > 1:
-            raise ValueError("channels mix topics, features and columns: one mapping reads one kind of source")
-        if ("table" in kinds) != (self.table is not None):
-            raise ValueError("column channels need a [table] section, and only they")
-        if self.timing.shorter == "hold" and "table" not in kinds:
-            raise ValueError("timing.shorter = 'hold' is for tables")
-        if "lerobot" in kinds and self.episodes is not None:
-            raise ValueError("[episodes] is for bags; a LeRobot dataset's episodes come from episode_index")
-        ep = self.episodes
+        address = self.source.address
+        other = next((c for c in self.channels if c.address != address), None)
+        if other is not None:
+            raise ValueError(f"a {self.kind} source's channels each name a {address}; channel {other.name!r} "
+                             f"names a {other.address}: one mapping reads one kind of source")
+        if self.timing.shorter == "hold" and not self.source.pads:
+            raise ValueError(f"timing.shorter = 'hold' is for tables, not a {self.kind} source")
+        ep = self.source if isinstance(self.source, Episodes) else None
         if ep is not None and ep.split == "gap" and ep.gap_s is not None and ep.gap_s <= self.timing.gap_limit_s:
             raise ValueError(f"episodes.gap_s ({ep.gap_s}) must exceed timing.max_gap_s ({self.timing.gap_limit_s}): "
                              "a silence that splits episodes cannot also be allowed inside one")
@@ -191,27 +235,32 @@ class Mapping(_Strict):
         return self
 
     @property
-    def kind(self) -> Kind:
-        return _kind(self.channels[0])
+    def kind(self) -> str:
+        """The source's format, a key of the reader registry (``logs.formats``)."""
+        return self.source.kind
 
     @property
     def channel_names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.channels)
 
-    @property
-    def split(self) -> Episodes:
-        return self.episodes or Episodes()
-
     def to_dict(self) -> dict[str, Any]:
         return self.model_dump(mode="json", exclude_none=True)
 
 
-def _kind(channel: Channel) -> Kind:
-    return "rosbag" if channel.topic is not None else "lerobot" if channel.feature is not None else "table"
+@functools.lru_cache(maxsize=8)
+def _schema(sections: tuple[type[Section], ...]) -> type[Mapping]:
+    """The mapping whose ``source`` is one of ``sections``, told apart by ``kind``."""
+    union = Annotated[Union[sections], Field(discriminator="kind")]  # type: ignore[valid-type]
+    return create_model("Mapping", __base__=Mapping, source=(union, ...))
 
 
 def _where(loc: tuple[Any, ...], raw: Any) -> str:
-    """``channels[3] ('joint4').topic`` from a pydantic location."""
+    """``channels[3] ('joint4').topic`` from a pydantic location; in the source section, without the
+    union's tag, and named as the file names it (``table``, ``episodes`` in a mapping without ``[source]``)."""
+    if loc[:1] == ("source",):
+        legacy = next((k for k in ("table", "episodes") if isinstance(raw, dict) and "source" not in raw and k in raw),
+                      "source")
+        loc = (legacy, *loc[2:])
     text, node = "", raw
     for item in loc:
         if isinstance(item, int):
@@ -225,9 +274,11 @@ def _where(loc: tuple[Any, ...], raw: Any) -> str:
 
 
 def parse_mapping(raw: Any, where: str) -> Mapping:
-    """Validate a mapping document; every problem in one message."""
+    """Validate a mapping document against the registered formats; every problem in one message."""
+    from neural_asm.logs.formats import readers  # the registry knows this module's sections
+
     try:
-        return Mapping.model_validate(raw)
+        return _schema(tuple(r.section for r in readers())).model_validate(raw)
     except ValidationError as exc:
         problems = [f"  {_where(e['loc'], raw)}: {e['msg'].removeprefix('Value error, ')}" for e in exc.errors()]
         raise LogError(f"{where} is not a valid channel mapping:\n" + "\n".join(problems)) from None

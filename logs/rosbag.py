@@ -20,7 +20,7 @@ import numpy as np
 from neural_asm.logs.bagfiles import Bag, BagRead, Decode, find_bags, read_messages
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.fields import NS, extractor, header_stamp
-from neural_asm.logs.mapping import Mapping
+from neural_asm.logs.mapping import Episodes, Mapping
 from neural_asm.logs.recorded import Recorded
 from neural_asm.logs.resample import EpisodeResampler, Group
 
@@ -62,7 +62,8 @@ class _BagEpisodes:
     """One bag's messages in, its episodes (Recorded) and warnings (str) out."""
 
     def __init__(self, bag: Bag, mapping: Mapping, first_number: int, skip_bad: bool) -> None:
-        self.bag, self.mapping, self.split, self.skip_bad = bag, mapping, mapping.split, skip_bad
+        assert isinstance(mapping.source, Episodes)
+        self.bag, self.mapping, self.split, self.skip_bad = bag, mapping, mapping.source, skip_bad
         self.groups = topic_groups(mapping)
         self.group_of = {g.source.removeprefix("topic "): i for i, g in enumerate(self.groups)}
         self.number = first_number

@@ -12,15 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
-from neural_asm.logs import lerobot, rosbag, tables
+from neural_asm.logs import formats
 from neural_asm.logs.errors import LogError
-from neural_asm.logs.mapping import Kind, Mapping, Timing, check_checkpoint, load_mapping, parse_mapping
+from neural_asm.logs.mapping import Mapping, Timing, check_checkpoint, load_mapping, parse_mapping
 from neural_asm.logs.recorded import Recorded
 from neural_asm.models.sequences import EpisodeFacts, Sequences
-
-
-def source_kind(source: Path) -> Kind:
-    return "lerobot" if lerobot.is_dataset(source) else "rosbag"
 
 
 def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", skip_bad: bool = False) -> Sequences:
@@ -30,20 +26,20 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
     with ``skip_bad`` a warning kept in the provenance."""
     path = Path(source)
     if not path.exists():
-        raise LogError(f"no bag, dataset or table at {path}")
-    kind = "table" if mapping.kind == "table" else source_kind(path)
-    if kind != mapping.kind:
-        raise LogError(f"{path} is a {'LeRobot dataset' if kind == 'lerobot' else 'bag source'} but the "
-                       f"mapping's channels read {'features' if mapping.kind == 'lerobot' else 'topics'}")
-    reader = {"lerobot": lerobot.read_episodes, "rosbag": rosbag.read_episodes, "table": tables.read_episodes}[kind]
+        raise LogError(f"nothing at {path}: no {formats.described()}")
+    reader = formats.reader(mapping.kind)
+    if not reader.recognises(path):
+        other = formats.recognised(path)
+        if other is not None:
+            raise LogError(f"{path} is {other.named}, but the mapping reads {reader.named}")
     episodes: list[Recorded] = []
     warnings: list[str] = []
-    for item in reader(path, mapping, skip_bad):
+    for item in reader.read(path, mapping, skip_bad):
         (warnings if isinstance(item, str) else episodes).append(item)  # type: ignore[arg-type]
     if not episodes:
         raise LogError(f"{path} holds no episode" + (f" ({'; '.join(warnings)})" if warnings else ""))
     episodes.sort(key=lambda e: e.number)
-    provenance = {"source": str(path), "format": kind, "mapping_file": mapping_file, "mapping": mapping.to_dict(),
+    provenance = {"source": str(path), "format": mapping.kind, "mapping_file": mapping_file, "mapping": mapping.to_dict(),
                   "warnings": warnings}
     return Sequences(np.stack([e.data for e in episodes]), np.array([e.label for e in episodes]),
                      mapping.channel_names, provenance=provenance, rate_hz=1.0 / mapping.timing.period_s,
@@ -59,7 +55,7 @@ def _facts(episode: Recorded, timing: Timing) -> EpisodeFacts:
 
 
 def load_log_sequences(source: str | Path, mapping_file: str | Path, skip_bad: bool = False) -> Sequences:
-    """Every episode of a bag source or LeRobot dataset as ``Sequences``, read through the
+    """Every episode of a source in a registered format (``logs.formats``) as ``Sequences``, read through the
     channel mapping file ``mapping_file`` (TOML or YAML); a ``LogError`` names what is wrong, or
     with ``skip_bad`` a bad episode is left out with a warning in the provenance."""
     return read_mapped(source, load_mapping(mapping_file), str(mapping_file), skip_bad)

@@ -26,12 +26,12 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from neural_asm.logs.errors import LogError
+from neural_asm.logs.formats import TABLE_SUFFIXES as SUFFIXES
 from neural_asm.logs.label_pickle import Phase, read_anomaly, read_phases
 from neural_asm.logs.mapping import TIME_UNITS, Mapping, Table, Value
 from neural_asm.logs.recorded import Recorded
 from neural_asm.logs.resample import EpisodeResampler, Group
 
-SUFFIXES = {".csv": "csv", ".tsv": "tsv", ".txt": "whitespace", ".dat": "whitespace", ".parquet": "parquet"}
 BATCH_ROWS = 65_536
 Block = dict[str, np.ndarray]
 
@@ -152,8 +152,8 @@ class TableEpisodes:
     """The episodes of one mapping's tables, read file by file."""
 
     def __init__(self, source: Path, mapping: Mapping) -> None:
-        assert mapping.table is not None
-        self.source, self.mapping, self.table = source, mapping, mapping.table
+        assert isinstance(mapping.source, Table)
+        self.source, self.mapping, self.table = source, mapping, mapping.source
         self.group = Group("table rows", tuple(mapping.channels), tuple(range(len(mapping.channels))))
         self.number = 0
 
@@ -308,9 +308,9 @@ def phase_keys(t: np.ndarray, phases: list[Phase]) -> np.ndarray:
 
 def read_episodes(source: Path, mapping: Mapping, skip_bad: bool = False) -> Iterator[Recorded | str]:
     """Every episode of the source's tables; strings are warnings (``skip_bad``)."""
-    assert mapping.table is not None
+    assert isinstance(mapping.source, Table)
     reader = TableEpisodes(source, mapping)
-    for path in table_files(source, mapping.table):
+    for path in table_files(source, mapping.source):
         try:
             yield from reader.read(path)
         except LogError as exc:

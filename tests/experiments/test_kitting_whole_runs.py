@@ -41,7 +41,7 @@ def test_a_whole_run_is_one_episode_per_tagged_phase(tmp_path):
 
 def test_phases_and_an_episode_column_are_refused_together():
     doc = {**whole_runs_mapping().to_dict()}
-    doc["table"] = {**doc["table"], "episode_column": "run"}
+    doc["source"] = {**doc["source"], "episode_column": "run"}
     with pytest.raises(LogError, match="episode_column or phases, not both"):
         parse_mapping(doc, "m")
 

@@ -52,7 +52,7 @@ def _mapping(**changes):
 
 def test_example_mapping_parses_and_marks_the_joints():
     m = load_mapping(EXAMPLE)
-    assert m.kind == "rosbag" and m.split.split == "gap" and m.split.stamp == "header"
+    assert m.kind == "rosbag" and m.source.split == "gap" and m.source.stamp == "header"
     assert [c.name for c in m.channels if c.joint] == [f"joint{i}" for i in range(1, 8)]
     assert {c.units for c in m.channels} == {"rad", "m", "N", "N m"}
 
@@ -119,7 +119,7 @@ def test_one_bag_at_mixed_rates_gives_the_episodes_back(bag, native, episodes, s
     assert seqs.labels.tolist() == [e.skill for e in episodes]  # from the /episode marker's text
     np.testing.assert_allclose(seqs.data, native, atol=1e-9)
     assert seqs.provenance["format"] == "rosbag" and seqs.provenance["warnings"] == []
-    assert seqs.provenance["mapping"]["episodes"]["split"] == split
+    assert seqs.provenance["mapping"]["source"]["split"] == split
 
 
 def test_a_folder_of_rosbag2_bags_is_one_episode_per_bag(episodes, native, tmp_path):
@@ -352,7 +352,7 @@ def test_unknown_features_and_names_are_refused(episodes, tmp_path):
     doc["channels"][0]["key"] = "shoulder"
     with pytest.raises(LogError, match="no element named 'shoulder'; its names: \\['panda_joint1'"):
         read_mapped(root, parse_mapping(doc, "m"))
-    with pytest.raises(LogError, match="mapping's channels read topics"):
+    with pytest.raises(LogError, match="is a LeRobot dataset, but the mapping reads a ROS bag source"):
         read_mapped(root, _mapping())
 
 

@@ -140,7 +140,7 @@ def test_bad_tables_are_one_line_exit_2_and_skippable(tmp_path, what, message):
 
 
 def test_mapping_refuses_mixed_kinds_and_missing_table():
-    with pytest.raises(LogError, match=r"column channels need a \[table\]"):
+    with pytest.raises(LogError, match=r"source.time_column: Field required"):
         parse_mapping({"timing": {"period_s": 1, "steps": 2}, "channels": [{"name": "a", "units": "1", "column": "a"}]}, "m")
     with pytest.raises(LogError, match="give one of column, folder, sidecar or value"):
         _mapping(skill={"column": "x", "folder": 1})
