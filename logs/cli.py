@@ -8,13 +8,14 @@ from pathlib import Path
 
 import typer
 
+from typing import TYPE_CHECKING
+
 from neural_asm.logs.errors import LogError
-from neural_asm.logs.sources import check_model, load_log_sequences
-from neural_asm.models import checkpoint
-from neural_asm.models.asm import NeuralASM
-from neural_asm.models.fault import THRESHOLD_KINDS
-from neural_asm.models.sequences import Sequences
 from neural_asm.runtime.cli import fail
+
+if TYPE_CHECKING:  # the readers and the network load when a command runs, not with the command line
+    from neural_asm.models.asm import NeuralASM
+    from neural_asm.models.sequences import Sequences
 
 MAPPING_HELP = "channel mapping (.toml or .yaml): which topic or feature becomes which channel"
 SKIP_BAD_HELP = "skip bad or missing episodes with a warning naming each (default: refuse the source)"
@@ -23,6 +24,8 @@ SKIP_BAD_HELP = "skip bad or missing episodes with a warning naming each (defaul
 def read_logs(source: str, mapping: Path, model: NeuralASM | None = None, skip_bad: bool = False) -> Sequences:
     """Sequences from logs, checked against ``model`` if given, with their warnings printed;
     any LogError ends the command with its message before anything is written."""
+    from neural_asm.logs.sources import check_model, load_log_sequences
+
     try:
         seqs = load_log_sequences(source, mapping, skip_bad)
         if model is not None:
@@ -55,6 +58,8 @@ def evaluate(
 ) -> None:
     """Faults-style evaluation on logs: faulty episodes detected, normal ones flagged, AUROC."""
     from neural_asm.logs.evaluate import evaluate as run
+    from neural_asm.models import checkpoint
+    from neural_asm.models.fault import THRESHOLD_KINDS
 
     if threshold not in THRESHOLD_KINDS:
         raise fail(f"--threshold must be one of {', '.join(THRESHOLD_KINDS)}, got {threshold!r}")
