@@ -55,9 +55,10 @@ def cli_markdown() -> str:
     from neural_asm.cli import app
 
     root: Any = typer.main.get_command(app)
+    ctx = typer.Context(root)
     lines = ["# The `nasm` command", "", "Generated from the command line itself; `nasm COMMAND --help` prints the same.", ""]
-    for name, command in sorted(root.commands.items()):
-        lines += _command_section(f"nasm {name}", command, 2)
+    for name in sorted(root.list_commands(ctx)):  # each command loaded, as when it runs
+        lines += _command_section(f"nasm {name}", root.get_command(ctx, name), 2)
     return "\n".join(lines)
 
 

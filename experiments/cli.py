@@ -150,3 +150,7 @@ def results_table(
 
 for _experiment in EXPERIMENTS:
     run_app.command(_experiment.name, cls=ExperimentCommand)(derive(_experiment, f"experiments run {_experiment.name}"))
+
+# `nasm correction` and `nasm contextual`: short for `nasm experiments run NAME`.
+correction = click_command(EXPERIMENTS["correction"], "correction")
+contextual = click_command(EXPERIMENTS["contextual"], "contextual")

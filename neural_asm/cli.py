@@ -8,44 +8,64 @@ import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 import json
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
 
-from neural_asm.runtime.cli import Command, Group, fail
-from neural_asm.client.cli import client, replay
-from neural_asm.experiments.catalogue import EXPERIMENTS
-from neural_asm.experiments.cli import ExperimentCommand, derive
-from neural_asm.experiments.cli import app as experiments_app
-from neural_asm.experiments.fault_sweep.cli import PASS_ON, faults
-from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, evaluate, read_logs
-from neural_asm.models import checkpoint
-from neural_asm.models.asm import NeuralASM
+from neural_asm.data import SYNTHETIC
+from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, read_logs
 from neural_asm.models.config import PRESETS
-from neural_asm.models.recall import RECALL_MODES
-from neural_asm.calibrate import calibrate
-from neural_asm.data import SYNTHETIC, load_sequences
-from neural_asm.memory import SkillMemory
-from neural_asm.recordings.cli import app as recordings_app
-from neural_asm.recordings.cli import view
+from neural_asm.runtime.cli import Command, Lazy, fail, lazy_group
 from neural_asm.runtime.home import home, home_path
-from neural_asm.service.cli import serve
-from neural_asm.sim.cli import demos
 
-app = typer.Typer(cls=Group, help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
+if TYPE_CHECKING:
+    from neural_asm.models.asm import NeuralASM
+
+
+# Every other command, imported when it runs (`nasm --help` loads neither torch nor MuJoCo):
+# name -> where it is and the line the listing shows.
+COMMANDS = {
+    "faults": Lazy("neural_asm.experiments.fault_sweep.cli:faults", "The fault benchmark of --task; the other options "
+                   "are the task's (nasm faults --task TASK --help).", pass_on=True),
+    "demos": Lazy("neural_asm.sim.cli:demos", "Simulate episode sets and write <out>/<set>.mcap and <set>.npz."),
+    "serve": Lazy("neural_asm.service.cli:serve", "Serve the models in --models-dir over HTTP and websocket (OpenAPI "
+                  "docs at /docs)."),
+    "client": Lazy("neural_asm.client.cli:client", "Simulate Panda episodes, stream them to the Neural ASM service and "
+                   "record them."),
+    "view": Lazy("neural_asm.recordings.cli:view", "Open a run's client and service recordings together in the Rerun "
+                 "viewer, or screenshot them."),
+    "replay": Lazy("neural_asm.client.cli:replay", "Stream recorded episodes to a running service exactly as the live "
+                   "robot client does, after the same checks as ``nasm score`` against the served model."),
+    "evaluate": Lazy("neural_asm.logs.cli:evaluate", "Faults-style evaluation on logs: faulty episodes detected, normal "
+                     "ones flagged, AUROC."),
+    "calibrate": Lazy("neural_asm.calibrate:calibrate", "Calibrate a checkpoint's precisions and fault thresholds on "
+                      "held-out normal episodes."),
+    "correction": Lazy("neural_asm.experiments.cli:correction", "the memory's reactive correction of a falling-object "
+                       "hit, stiff and compliant arms"),
+    "contextual": Lazy("neural_asm.experiments.cli:contextual", "contextual inference (after Sheahan et al. 2016) against "
+                       "BPTT-trained RNNs"),
+    "recordings": Lazy("neural_asm.recordings.cli:app", "Tools for the .rrd and .mcap recordings."),
+    "experiments": Lazy("neural_asm.experiments.cli:app", "The paper's experiments and our benchmarks: list them, run "
+                        "one."),
+}
+
+app = typer.Typer(cls=lazy_group(COMMANDS), help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
                   "models, stream the client and run the experiments.", no_args_is_help=True,
                   pretty_exceptions_show_locals=False)
 
 
 def _load_model(path: Path) -> NeuralASM:
+    from neural_asm.models import checkpoint
+
     try:
         return checkpoint.load(path)
     except checkpoint.CheckpointError as exc:
         raise fail(str(exc))
-        raise
 
 
 def _check_mode(mode: str) -> None:
+    from neural_asm.models.recall import RECALL_MODES
+
     if mode not in RECALL_MODES:
         raise fail(f"--mode must be one of {', '.join(RECALL_MODES)}, got {mode!r}")
 
@@ -62,6 +82,9 @@ def train(
     skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
 ) -> None:
     """Train a Neural ASM on demonstrations and write a checkpoint."""
+    from neural_asm.data import load_sequences
+    from neural_asm.memory import SkillMemory
+
     if preset not in PRESETS:
         raise fail(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}")
     config = PRESETS[preset].with_(seed=seed)
@@ -86,6 +109,8 @@ def recall(
     cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
 ) -> None:
     """Offline recall from the first observations; prints the error of each recalled sequence."""
+    from neural_asm.data import load_sequences
+
     model = _load_model(model_path)
     seqs = load_sequences(data)
     steps = seqs.data.shape[1]
@@ -110,6 +135,10 @@ def score(
     skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
 ) -> None:
     """Energy of every step of every sequence, and the channel with the largest error."""
+    import numpy as np
+
+    from neural_asm.data import load_sequences
+
     _check_mode(mode)
     model = _load_model(model_path)
     seqs = read_logs(data, mapping, model, skip_bad) if mapping else load_sequences(data)
@@ -153,14 +182,6 @@ def info(model_path: Path | None = typer.Argument(None, help="checkpoint (.safet
     }
     typer.echo(json.dumps(summary, indent=2, default=str))
 
-
-app.command(cls=Command, context_settings=PASS_ON)(faults)
-for command in (demos, serve, client, view, replay, evaluate, calibrate):  # each package owns its commands
-    app.command(cls=Command)(command)
-for alias in ("correction", "contextual"):  # short for `nasm experiments run NAME`
-    app.command(alias, cls=ExperimentCommand)(derive(EXPERIMENTS[alias], alias))
-app.add_typer(recordings_app, name="recordings")
-app.add_typer(experiments_app, name="experiments")
 
 if __name__ == "__main__":
     app()

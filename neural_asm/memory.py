@@ -74,10 +74,11 @@ class SkillMemory:
     """A Neural ASM: a temporal predictive coding network that has learnt several skills, with
     the normaliser, calibrations and provenance it needs to face raw sensorimotor data.
 
-    >>> memory = SkillMemory.fit(demos)          # (N, T, D) array or Sequences
-    >>> memory.calibrate(normal)                 # held-out normal episodes
-    >>> monitor = memory.monitor(fpr=0.01)
-    >>> verdict = monitor.step(observation)      # verdict.fault, verdict.isolated_joint
+    Examples:
+        >>> memory = SkillMemory.fit(demos)          # (N, T, D) array or Sequences
+        >>> memory.calibrate(normal)                 # held-out normal episodes
+        >>> monitor = memory.monitor(fpr=0.01)
+        >>> verdict = monitor.step(observation)      # verdict.fault, verdict.isolated_joint
     """
 
     def __init__(self, model: NeuralASM) -> None:

@@ -16,7 +16,6 @@ from neural_asm.sim.cli import Task
 
 # The alias parses --task only and hands every other argument, --help too, to the task's command
 # (the `nasm` command line registers it with these settings).
-PASS_ON = {"allow_extra_args": True, "ignore_unknown_options": True, "help_option_names": []}
 
 
 class FaultTask(str, Enum):
