@@ -14,7 +14,7 @@ from neural_asm.client.replay import replay_logs
 from neural_asm.client.run import MODES, SHOWCASE_FAULT, SimulatedRun, falling_object, fault_spec, run_client
 from neural_asm.client.stream import Connection, StreamOptions
 from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost
-from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, read_logs, write_json
+from neural_asm.logs.cli import FORMATS, SKIP_BAD_HELP, data_command, mapping_help, read_logs, write_json
 from neural_asm.logs.errors import LogError
 from neural_asm.models.recall import RECALL_MODES
 from neural_asm.pipelines.default_model import RATE_MODES
@@ -134,8 +134,8 @@ def _serve_until_interrupted(viewer: LiveViewer) -> None:
 
 
 def replay(
-    source: str = typer.Argument(..., help="bag (.mcap, .db3, .bag, rosbag2 folder, folder of bags) or LeRobot dataset"),
-    mapping: Path = typer.Option(..., help=MAPPING_HELP),
+    source: str = typer.Argument(..., help=f"the logs: {FORMATS}"),
+    mapping: Path = typer.Option(..., help=mapping_help("SOURCE")),
     url: str = typer.Option(..., help="URL of a running service (nasm serve)"),
     model: str | None = typer.Option(None, help="name of the served model to score with (default: the service's default)"),
     episode: list[int] = typer.Option([], help="episode number in the source (repeatable) (default: every episode)"),
@@ -166,6 +166,7 @@ def replay(
         raise typer.Exit(3)
 
 
+replay_command = data_command(replay)
 app = typer.Typer(cls=Group, add_completion=False, pretty_exceptions_enable=False)
 app.command(cls=Command, help=client.__doc__)(client)
 

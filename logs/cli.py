@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import typer
+import typer.main
 
 from neural_asm.runtime.cli import Command, fail
 
@@ -36,10 +37,21 @@ class DataCommand(Command):
         from neural_asm.logs.formats import described
 
         named = described()
-        for param in self.params:
-            if getattr(param, "help", None):
-                param.help = param.help.replace(FORMATS, named)  # type: ignore[attr-defined]
-        super().format_help(ctx, formatter)
+        templates = [(param, param.help) for param in self.params if getattr(param, "help", None)]
+        for param, text in templates:
+            param.help = text.replace(FORMATS, named)  # type: ignore[attr-defined]
+        try:
+            super().format_help(ctx, formatter)
+        finally:
+            for param, text in templates:
+                param.help = text  # type: ignore[attr-defined]
+
+
+def data_command(function: Callable[..., None]) -> DataCommand:
+    """``function`` as a DataCommand, for a command the ``nasm`` app loads when it runs."""
+    single = typer.Typer(add_completion=False)
+    single.command(cls=DataCommand)(function)
+    return typer.main.get_command(single)  # type: ignore[return-value]
 
 
 def read_logs(source: str, mapping: Path, model: NeuralASM | None = None, skip_bad: bool = False) -> Sequences:
@@ -101,3 +113,6 @@ def evaluate(
                f"({mode} recall, {threshold} threshold at {100 * fpr:g} % FPR, as the service decides)")
     if json_out is not None:
         write_json(json_out, result)
+
+
+evaluate_command = data_command(evaluate)

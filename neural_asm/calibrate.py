@@ -19,26 +19,13 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, read_logs, write_json
+from neural_asm.logs.cli import SKIP_BAD_HELP, data_command, mapping_help, write_json
 from neural_asm.runtime.cli import fail
 from neural_asm.models import checkpoint
-from neural_asm.models.asm import NeuralASM
 from neural_asm.models.cross_fit import CrossFit
 from neural_asm.models.sequences import Sequences
-from neural_asm.data import load_sequences
+from neural_asm.data import read_data
 from neural_asm.memory import SkillMemory
-
-
-def _load(source: str, mapping: Path | None, model: NeuralASM, skip_bad: bool) -> Sequences:
-    if mapping is not None:
-        return read_logs(source, mapping, model, skip_bad)
-    try:
-        seqs = load_sequences(source)
-    except (OSError, ValueError) as exc:
-        raise fail(exc) from None
-    if tuple(seqs.channel_names) != model.channel_names:
-        raise fail(f"{source} has channels {list(seqs.channel_names)}; the model expects {list(model.channel_names)}")
-    return seqs
 
 
 EPISODE_SUFFIX = re.compile(r",? episode [^/]*$")  # "bag b.mcap, episode 3", "runs/t.csv episode 7"
@@ -78,7 +65,7 @@ def calibrate(
     model_path: Path = typer.Argument(..., help="checkpoint (.safetensors) to calibrate"),
     normal: str = typer.Argument(..., help="normal episodes the model was not trained on: logs (with --mapping), "
                                  "an .npz or an .mcap episode set"),
-    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; NORMAL is then a bag source or LeRobot dataset"),
+    mapping: Path | None = typer.Option(None, help=mapping_help("NORMAL")),
     precision: str | None = typer.Option(None, help="other normal episodes for the precisions (default: every "
                                          "other episode of NORMAL; the rest set the thresholds)"),
     out: Path | None = typer.Option(None, help="checkpoint to write (default: MODEL_PATH, replaced atomically)"),
@@ -105,17 +92,17 @@ def calibrate(
     except checkpoint.CheckpointError as exc:
         raise fail(exc) from None
     model = memory.model
-    seqs = _load(normal, mapping, model, skip_bad)
+    seqs = read_data(normal, mapping, skip_bad, model)
     if precision is None:
         spread_seqs = None
         source = f"{normal}: episodes alternate between precisions and thresholds"
     else:
-        spread_seqs = _load(precision, mapping, model, skip_bad)
+        spread_seqs = read_data(precision, mapping, skip_bad, model)
         source = f"precisions from {precision}, thresholds from {normal}"
     try:
         crossing = None
         if cross_fit is not None:
-            demos = _load(cross_fit, mapping, model, skip_bad)
+            demos = read_data(cross_fit, mapping, skip_bad, model)
             crossing = CrossFit(demos.data, demos.labels, folds, episode_groups(demos, by), model.config.seed)
         report = memory.calibrate(seqs, spread_seqs, source=source, cross_fit=crossing)
     except ValueError as exc:
@@ -137,3 +124,6 @@ def calibrate(
                     fg="yellow", err=True)
     if json_out is not None:
         write_json(json_out, {"checkpoint": str(target), "source": source, **report})
+
+
+calibrate_command = data_command(calibrate)

@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from neural_asm.data import SYNTHETIC
-from neural_asm.logs.cli import MAPPING_HELP, SKIP_BAD_HELP, read_logs
+from neural_asm.data import DATA_HELP, SYNTHETIC
+from neural_asm.logs.cli import SKIP_BAD_HELP, DataCommand, mapping_help
 from neural_asm.models.config import PRESETS
 from neural_asm.runtime.cli import Command, Lazy, fail, lazy_group
 from neural_asm.runtime.home import home, home_path
@@ -34,16 +34,17 @@ COMMANDS = {
                    "record them."),
     "view": Lazy("neural_asm.recordings.cli:view", "Open a run's client and service recordings together in the Rerun "
                  "viewer, or screenshot them."),
-    "replay": Lazy("neural_asm.client.cli:replay", "Stream recorded episodes to a running service exactly as the live "
+    "replay": Lazy("neural_asm.client.cli:replay_command", "Stream recorded episodes to a running service exactly as the live "
                    "robot client does, after the same checks as ``nasm score`` against the served model."),
-    "evaluate": Lazy("neural_asm.logs.cli:evaluate", "Faults-style evaluation on logs: faulty episodes detected, normal "
+    "evaluate": Lazy("neural_asm.logs.cli:evaluate_command", "Faults-style evaluation on logs: faulty episodes detected, normal "
                      "ones flagged, AUROC."),
-    "calibrate": Lazy("neural_asm.calibrate:calibrate", "Calibrate a checkpoint's precisions and fault thresholds on "
+    "calibrate": Lazy("neural_asm.calibrate:calibrate_command", "Calibrate a checkpoint's precisions and fault thresholds on "
                       "held-out normal episodes."),
     "correction": Lazy("neural_asm.experiments.cli:correction", "the memory's reactive correction of a falling-object "
                        "hit, stiff and compliant arms"),
     "contextual": Lazy("neural_asm.experiments.cli:contextual", "contextual inference (after Sheahan et al. 2016) against "
                        "BPTT-trained RNNs"),
+    "logs": Lazy("neural_asm.logs_cli:app", "A robot's logs: what the commands would read from them."),
     "recordings": Lazy("neural_asm.recordings.cli:app", "Tools for the .rrd and .mcap recordings."),
     "experiments": Lazy("neural_asm.experiments.cli:app", "The paper's experiments and our benchmarks: list them, run "
                         "one."),
@@ -70,19 +71,19 @@ def _check_mode(mode: str) -> None:
         raise fail(f"--mode must be one of {', '.join(RECALL_MODES)}, got {mode!r}")
 
 
-@app.command(cls=Command)
+@app.command(cls=DataCommand)
 def train(
-    data: str = typer.Argument(SYNTHETIC, help="'synthetic', an .npz of sequences, or an .mcap episode set"),
+    data: str = typer.Argument(SYNTHETIC, help=DATA_HELP),
     out: Path = typer.Option(home_path("models", "model.safetensors"), help="checkpoint to write"),
     preset: str = typer.Option("fast", help=f"hyper-parameter preset: {', '.join(PRESETS)}"),
     epochs: int | None = typer.Option(None, help="override the preset's epochs"),
     hidden: int | None = typer.Option(None, help="override the preset's hidden size"),
     seed: int = typer.Option(0, help="seed of the weights and the training order"),
-    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS bag or LeRobot dataset"),
+    mapping: Path | None = typer.Option(None, help=mapping_help("DATA")),
     skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
 ) -> None:
     """Train a Neural ASM on demonstrations and write a checkpoint."""
-    from neural_asm.data import load_sequences
+    from neural_asm.data import read_data
     from neural_asm.memory import SkillMemory
 
     if preset not in PRESETS:
@@ -92,7 +93,7 @@ def train(
         config = config.with_(epochs=epochs)
     if hidden is not None:
         config = config.with_(hidden_size=hidden)
-    seqs = read_logs(data, mapping, skip_bad=skip_bad) if mapping else load_sequences(data)
+    seqs = read_data(data, mapping, skip_bad)
     try:
         memory = SkillMemory.fit(seqs, preset=config)
     except ValueError as exc:  # data the preset cannot be fitted on, named before training
@@ -102,17 +103,19 @@ def train(
                f"wrote {out}")
 
 
-@app.command(cls=Command)
+@app.command(cls=DataCommand)
 def recall(
     model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"),
-    data: str = typer.Argument(SYNTHETIC, help="sequences to cue from and compare with"),
+    data: str = typer.Argument(SYNTHETIC, help=f"sequences to cue from and compare with: {DATA_HELP}"),
     cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
+    mapping: Path | None = typer.Option(None, help=mapping_help("DATA")),
+    skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
 ) -> None:
     """Offline recall from the first observations; prints the error of each recalled sequence."""
-    from neural_asm.data import load_sequences
+    from neural_asm.data import read_data
 
     model = _load_model(model_path)
-    seqs = load_sequences(data)
+    seqs = read_data(data, mapping, skip_bad, model)
     steps = seqs.data.shape[1]
     plan = model.recall(seqs.data[:, :cue_steps], steps)
     err = model.normaliser.normalise(plan) - model.normaliser.normalise(seqs.data)
@@ -123,25 +126,25 @@ def recall(
     typer.echo(f"{'all':>16}: recall MSE {mse.mean():.4f}")
 
 
-@app.command(cls=Command)
+@app.command(cls=DataCommand)
 def score(
     model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"),
-    data: str = typer.Argument(SYNTHETIC, help="sequences to score"),
+    data: str = typer.Argument(SYNTHETIC, help=f"sequences to score: {DATA_HELP}"),
     mode: str = typer.Option("offline", help="recall mode: offline or online"),
     cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
     weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)"),
     as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON"),
-    mapping: Path | None = typer.Option(None, help=f"{MAPPING_HELP}; DATA is then a ROS bag or LeRobot dataset"),
+    mapping: Path | None = typer.Option(None, help=mapping_help("DATA")),
     skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
 ) -> None:
     """Energy of every step of every sequence, and the channel with the largest error."""
     import numpy as np
 
-    from neural_asm.data import load_sequences
+    from neural_asm.data import read_data
 
     _check_mode(mode)
     model = _load_model(model_path)
-    seqs = read_logs(data, mapping, model, skip_bad) if mapping else load_sequences(data)
+    seqs = read_data(data, mapping, skip_bad, model)
     try:
         result = model.score(seqs.data, mode, cue_steps, weighted)
     except (KeyError, ValueError) as exc:

@@ -1,34 +1,38 @@
-"""Where the command line finds sequences: the built-in synthetic skills, an .npz
-file of arrays, an MCAP episode set written by ``nasm demos``, or, with a channel mapping, a
-robot's ROS 2 bags or LeRobot dataset (``logs``)."""
+"""Where the command line finds sequences, and the one way every command that takes data reads
+it (``read_data``): the built-in synthetic skills, an .npz file of arrays, an MCAP episode set
+written by ``nasm demos``, or, with a channel mapping, a robot's logs in any registered format
+(``logs.formats``: ROS bags, LeRobot datasets, a lab's tables)."""
 
 from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from neural_asm.logs.cli import FORMATS
 from neural_asm.models.sequences import Sequences
 from neural_asm.models.synthetic import make_skills
 
+if TYPE_CHECKING:
+    from neural_asm.models.asm import NeuralASM
+
 SYNTHETIC = "synthetic"
+DATA_HELP = f"'{SYNTHETIC}', an .npz of sequences, an .mcap episode set, or (with --mapping) {FORMATS}"
 
 
-def load_sequences(source: str, mapping: str | Path | None = None) -> Sequences:
+def load_sequences(source: str) -> Sequences:
     """``synthetic``, ``file.npz`` (arrays ``sequences``, ``channel_names``, optional
-    ``skills``) or an episode set ``file.mcap`` from the simulator; given a ``mapping`` file,
-    ROS 2 bags or a LeRobot dataset read through it."""
-    if mapping is not None:
-        from neural_asm.logs.sources import load_log_sequences  # the log readers are only needed for logs
-
-        return load_log_sequences(source, mapping)
+    ``skills``) or an episode set ``file.mcap`` from the simulator; a ValueError (or
+    FileNotFoundError) names what is wrong."""
     if source == SYNTHETIC:
         s = make_skills()
         return replace(s, labels=np.array([f"skill{k}" for k in s.labels]))
     path = Path(source)
     if not path.exists():
-        raise FileNotFoundError(f"no data at {path} (expected '{SYNTHETIC}', an .npz or an .mcap file)")
+        raise FileNotFoundError(f"no data at {path} (expected '{SYNTHETIC}', an .npz or an .mcap file; logs need "
+                                "--mapping)")
     if path.suffix == ".npz":
         with np.load(path, allow_pickle=False) as f:
             if "sequences" not in f or "channel_names" not in f:
@@ -45,4 +49,25 @@ def load_sequences(source: str, mapping: str | Path | None = None) -> Sequences:
         if not episodes:
             raise ValueError(f"{path} holds no episodes")
         return as_sequences(episodes, provenance={"source": str(path)})
-    raise ValueError(f"unsupported data file {path}: use .npz or .mcap")
+    raise ValueError(f"unsupported data file {path}: use .npz or .mcap, or logs with --mapping")
+
+
+def read_data(source: str, mapping: Path | None = None, skip_bad: bool = False,
+              model: NeuralASM | None = None) -> Sequences:
+    """The data of every command that takes some: logs through ``mapping`` (``logs.cli.read_logs``,
+    its warnings printed), else ``load_sequences``; checked against ``model``'s channels (and for
+    logs its mapping's units and clock) if given. Any problem ends the command in one line (exit 2)."""
+    from neural_asm.logs.cli import read_logs
+    from neural_asm.runtime.cli import fail
+
+    if mapping is not None:
+        return read_logs(source, mapping, model, skip_bad)
+    if skip_bad:
+        raise fail("--skip-bad skips bad episodes of logs: give --mapping")
+    try:
+        seqs = load_sequences(source)
+    except (OSError, ValueError) as exc:
+        raise fail(exc) from None
+    if model is not None and tuple(seqs.channel_names) != model.channel_names:
+        raise fail(f"{source} has channels {list(seqs.channel_names)}; the model expects {list(model.channel_names)}")
+    return seqs
