@@ -75,7 +75,7 @@ class Sequences:
     def take(self, index: np.ndarray) -> Sequences:
         """The sequences at ``index`` (integer indices or a boolean mask), same channels."""
         seeds = None if self.seeds is None else self.seeds[index]
-        episodes = tuple(self.episodes[i] for i in np.arange(len(self.episodes))[index])
+        episodes = tuple(self.episodes[i] for i in np.arange(len(self))[index]) if self.episodes else ()
         return replace(self, data=self.data[index], labels=self.labels[index], seeds=seeds, episodes=episodes)
 
     def own_steps(self, i: int) -> int:

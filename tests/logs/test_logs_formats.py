@@ -137,3 +137,13 @@ def test_a_model_trains_from_a_registered_format(toy, tmp_path):
                                  "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "trained on 6 sequences at 20 Hz" in result.output and out.exists()
+
+
+def test_taking_sequences_takes_their_facts():
+    from neural_asm.models.sequences import EpisodeFacts, Sequences
+
+    facts = tuple(EpisodeFacts(n, f"e{n}", 3, 0.0) for n in (4, 7, 9))
+    seqs = Sequences(np.zeros((3, 3, 1)), np.array(["a", "b", "a"]), ("x",), episodes=facts)
+    assert [e.number for e in seqs.take(np.array([True, False, True])).episodes] == [4, 9]
+    assert [e.number for e in seqs.take(np.array([1])).episodes] == [7]
+    assert Sequences(np.zeros((3, 3, 1)), np.zeros(3), ("x",)).take(np.array([True, False, True])).episodes == ()
