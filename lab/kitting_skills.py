@@ -21,3 +21,159 @@ tactile pad, per-skill spreads from 7-14 segments; ε and the shrinkage fixed be
 
     python -m lab.kitting_skills "$SCHEME" --splits 0 1 2 --seeds 3 --cache /work/data/cache/kitting_skills
 """
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import typer
+
+from lab.kitting_probe import setup
+from neural_asm.experiments.kitting.config import KittingConfig
+from neural_asm.experiments.kitting.data import COLUMNS, kitting_mapping
+from neural_asm.experiments.kitting.methods import (RATE_HZ, Scored, Sets, calibrated_energies, fit_network,
+                                                    score_network)
+from neural_asm.experiments.kitting.metrics import Windows, method_metrics
+from neural_asm.models import checkpoint
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.skill_context import SkillMemory
+from neural_asm.rivals.templates import PerSkillZScore
+
+# Each row: (terms, course: "recalled" by the network or the demonstrations' "mean", rule, forgetting).
+VARIANTS = {
+    "skill memory (course + dynamics)": (("course", "dynamics"), "recalled", "surprise", 0.01),
+    "its course alone": (("course",), "recalled", "surprise", 0.01),
+    "its dynamics alone": (("dynamics",), "recalled", "surprise", 0.01),
+    "mean course + its dynamics": (("course", "dynamics"), "mean", "surprise", 0.01),
+    "skill memory, most probable skill's energy": (("course", "dynamics"), "recalled", "most_probable", 0.01),
+}
+# The report's likelihood template: each skill's mean course and own spreads, the most probable skill.
+TEMPLATE_LIKELIHOOD = (("course",), "mean", "most_probable", 0.0)
+COLUMNS_OUT = ("auroc", "skill_5", "no_object", "detected", "normal_flagged", "delay_ms")
+
+
+def cached(path: Path, fit) -> NeuralASM:
+    """A network from ``path``, or trained by ``fit()`` and saved there (whole, or not at all)."""
+    if path.exists():
+        return checkpoint.load(path)
+    model = fit()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    checkpoint.save(model, path.with_suffix(".part"))
+    path.with_suffix(".part").rename(path)
+    return model
+
+
+def skill_memory(sets: Sets, config: KittingConfig, seed: int, cache: Path) -> SkillMemory:
+    train = sets.train
+    skills = np.array(sorted(set(train.skills.tolist())))
+    model = cached(cache / f"seed{seed}_skill.safetensors", lambda: SkillMemory.fit(
+        train.data, tuple(COLUMNS), train.skills, config.network.with_(seed=seed, plan_memory=False), rate_hz=RATE_HZ,
+        provenance={"benchmark": "kitting", "seed": seed, "mapping": kitting_mapping().to_dict()}).model)
+    starts = np.stack([train.data[train.skills == s, 0].mean(axis=0) for s in skills])
+    return SkillMemory(model, starts)
+
+
+def mean_courses(memory: SkillMemory, sets: Sets) -> np.ndarray:
+    """(K, T, D) each skill's mean training course, in the memory's normalised units."""
+    x = memory.normalise(sets.train.data)
+    return np.stack([x[sets.train.skills == s].mean(axis=0) for s in memory.skills])
+
+
+def metrics(scored: Scored, sets: Sets, w: Windows, config: KittingConfig) -> dict[str, float]:
+    m, _ = method_metrics(scored, sets.test, w, config, config.headline_skills)
+    return {"auroc": m["auroc"]["0.5"], "skill_5": m["per_skill"]["5"]["auroc"]["0.5"],
+            "no_object": m["per_type"]["no_object"]["auroc_0.5"], "detected": m["detected_1pct"],
+            "normal_flagged": m["normal_flagged_1pct"], "delay_ms": m["delay_ms_median"] or float("nan"),
+            "per_type": {t: v["auroc_0.5"] for t, v in m["per_type"].items()}}
+
+
+def memory_rows(memory: SkillMemory, sets: Sets, w: Windows, config: KittingConfig,
+                variants: dict[str, tuple]) -> dict[str, dict[str, float]]:
+    """Each variant's metrics, not told and told the skill (``(told)`` in the row's name)."""
+    out = {}
+    n = len(sets.test)
+    for name, (terms, course, rule, forgetting) in variants.items():
+        cal = memory.calibrate(sets.precision.data, sets.precision.skills, sets.threshold.data,
+                               sets.threshold.skills, sets.threshold.lengths, terms,
+                               mean_courses(memory, sets) if course == "mean" else None, config.fprs, forgetting, rule)
+        inferred, _ = memory.score(sets.test.data)
+        told, _ = memory.score(sets.test.data, told=sets.test.skills)
+        index = np.array([memory.index(s) for s in sets.test.skills])
+        out[f"{name}, not told"] = metrics(Scored(inferred, {f: np.full(n, cal.inferred[f]) for f in config.fprs}),
+                                           sets, w, config)
+        out[f"{name}, told"] = metrics(Scored(told, {f: cal.told[f][index] for f in config.fprs}), sets, w, config)
+    return out
+
+
+def template_told(sets: Sets, config: KittingConfig) -> Scored:
+    """The benchmark's told template (`score_baselines`' template_told)."""
+    normaliser = Normaliser.fit(sets.train.data)
+    template = PerSkillZScore().fit(normaliser.normalise(sets.train.data), sets.train.skills, [], 0)
+    return calibrated_energies(lambda s: normaliser.normalise(s.data) - template.expected(normaliser.normalise(s.data),
+                                                                                         s.skills), sets, config.fprs)
+
+
+def one_split(config: KittingConfig, cache: Path) -> dict[str, list[dict[str, float]]]:
+    config, _, _, sets, w = setup(config)
+    rows: dict[str, list[dict[str, float]]] = {}
+    for seed in config.seeds:
+        start = time.perf_counter()
+        memory = skill_memory(sets, config, seed, cache)
+        one = cached(cache / f"seed{seed}_one.safetensors", lambda: fit_network(sets.train, config, seed))
+        for name, row in memory_rows(memory, sets, w, config, VARIANTS).items():
+            rows.setdefault(name, []).append(row)
+        if seed == config.seeds[0]:
+            for name, row in memory_rows(memory, sets, w, config, {"template_likelihood": TEMPLATE_LIKELIHOOD}).items():
+                if name.endswith("not told"):
+                    rows["template_likelihood (rival), not told"] = [row]
+            rows["template_told (rival), told"] = [metrics(template_told(sets, config), sets, w, config)]
+        for mode, name in (("online", "nasm_one_online"), ("offline", "nasm_one")):
+            rows.setdefault(f"{name} (benchmark), not told", []).append(
+                metrics(score_network(one, sets, mode, True, config.fprs), sets, w, config))
+        print(f"split {config.split_seed} seed {seed}: {time.perf_counter() - start:.0f} s", flush=True)
+    return rows
+
+
+def cell(runs: list[dict[str, float]], key: str) -> str:
+    values = np.array([r[key] for r in runs], float)
+    pct = key in ("detected", "normal_flagged")
+    fmt = (lambda v: f"{100 * v:.0f} %") if pct else (lambda v: f"{v:.0f}") if key == "delay_ms" else (lambda v: f"{v:.2f}")
+    if len(values) == 1 or np.ptp(values) == 0:
+        return fmt(values.mean())
+    return f"{fmt(values.mean())} ({fmt(values.min())}-{fmt(values.max())})"
+
+
+def table(by_split: dict[int, dict[str, list[dict[str, float]]]]) -> str:
+    lines = ["| split | method | mean AUROC 3-5 | skill 5 | no_object | detected 1 % | normal flagged 1 % | delay median (ms) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for split, rows in by_split.items():
+        lines += [f"| {split} | {name} | " + " | ".join(cell(runs, k) for k in COLUMNS_OUT) + " |"
+                  for name, runs in rows.items()]
+    types = sorted(next(iter(next(iter(by_split.values())).values()))[0]["per_type"])
+    lines += ["", "| split | method | " + " | ".join(types) + " |", "|---|---|" + "---|" * len(types)]
+    for split, rows in by_split.items():
+        lines += [f"| {split} | {name} | " + " | ".join(
+            f"{np.mean([r['per_type'][t] for r in runs]):.2f}" for t in types) + " |" for name, runs in rows.items()]
+    return "\n".join(lines)
+
+
+def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering scheme' folder"),
+         splits: list[int] = typer.Option([0, 1, 2]), seeds: int = typer.Option(3, min=1),
+         cache: Path = typer.Option(Path("/work/data/cache/kitting_skills"), help="trained networks, per split and seed"),
+         out: Path | None = typer.Option(None, help="also write the table here")) -> None:
+    by_split = {}
+    for split in splits:
+        config = KittingConfig(data=data, out=cache, trainings=seeds, split_seed=split)
+        by_split[split] = one_split(config, cache / f"split{split}")
+        print(table({split: by_split[split]}), flush=True)
+    text = table(by_split)
+    print(text)
+    if out is not None:
+        out.write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    typer.run(main)
