@@ -61,7 +61,7 @@ class SkillSpreads:
         residuals against its expectation, shrunk towards the RMS over every episode's own skill,
         counted as ``prior_episodes`` episodes."""
         labels = np.asarray(labels).astype(str)
-        unknown = sorted(set(labels) - set(skills))
+        unknown = sorted(set(labels.tolist()) - set(skills))
         if unknown:
             raise ValueError(f"calibration episodes of skill(s) {unknown} the memory does not know: {list(skills)}")
         index = np.array([list(skills).index(s) for s in labels])
