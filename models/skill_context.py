@@ -29,7 +29,7 @@ is the served step.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Literal, Sequence
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, 
 
 CUE_PREFIX = "skill:"
 TERMS = ("course", "dynamics")
+Course = Literal["recalled", "mean"]
 
 
 def cue_names(skills: Sequence[str]) -> tuple[str, ...]:
@@ -58,6 +59,12 @@ def with_cue(x: np.ndarray, skill: np.ndarray, skills: int) -> np.ndarray:
     return np.concatenate([x, cue], axis=-1)
 
 
+def mean_courses(sequences: np.ndarray, labels: Sequence[str], skills: Sequence[str]) -> np.ndarray:
+    """(K, T, D) each skill's mean course of its raw demonstrations (N, T, D)."""
+    labels = np.asarray(labels).astype(str)
+    return np.stack([np.asarray(sequences, np.float64)[labels == s].mean(axis=0) for s in skills])
+
+
 @dataclass
 class SkillCalibration:
     """What scoring a memory's sessions needs beyond the network: the terms scored, each skill's
@@ -70,28 +77,38 @@ class SkillCalibration:
     spreads: dict[str, SkillSpreads]
     forgetting: float = FORGETTING
     rule: Rule = "surprise"
+    recognised_by: tuple[str, ...] = ()  # the terms whose likelihood updates the posterior (none: every term)
     inferred: dict[float, float] = field(default_factory=dict)
     told: dict[float, np.ndarray] = field(default_factory=dict)  # fpr -> (K,)
 
-    def energies(self, residuals: dict[str, np.ndarray], steps: np.ndarray,
-                 rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+    def energies(self, residuals: dict[str, np.ndarray], steps: np.ndarray, rows: np.ndarray | slice = slice(None),
+                 terms: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The energies (..., R, S) of residuals per term (..., R, S, D) against the skills ``rows``
-        (all K by default) at ``steps``, and those skills' log normalisers (R, S)."""
-        energy = sum(self.spreads[t].energy(residuals[t], steps, rows) for t in self.terms)
-        return energy, sum(self.spreads[t].log_normaliser(steps, rows) for t in self.terms)
+        (all K by default) at ``steps``, and those skills' log normalisers (R, S), summed over
+        ``terms`` (None: every term scored)."""
+        terms = self.terms if terms is None else terms
+        energy = sum(self.spreads[t].energy(residuals[t], steps, rows) for t in terms)
+        return energy, sum(self.spreads[t].log_normaliser(steps, rows) for t in terms)
+
+    def evidence(self, residuals: dict[str, np.ndarray], steps: np.ndarray,
+                 rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray] | None:
+        """What updates the posterior, where it is not the scored energies (`recognised_by`)."""
+        if not self.recognised_by or set(self.recognised_by) == set(self.terms):
+            return None
+        return self.energies(residuals, steps, rows, self.recognised_by)
 
 
 class SkillMemory:
     """One network told the skill by a cue, with each skill's course, spreads and thresholds."""
 
-    def __init__(self, model: NeuralASM, starts: np.ndarray) -> None:
+    def __init__(self, model: NeuralASM, means: np.ndarray) -> None:
         self.skills = skills_of(model)
         if not self.skills:
             raise ValueError("a skill memory needs a model trained with skill cues (SkillMemory.fit)")
-        if starts.shape != (len(self.skills), model.obs_size - len(self.skills)):
-            raise ValueError(f"starts have shape {starts.shape} for {len(self.skills)} skills")
+        if means.ndim != 3 or means.shape[::2] != (len(self.skills), model.obs_size - len(self.skills)):
+            raise ValueError(f"mean courses have shape {means.shape} for {len(self.skills)} skills")
         self.model = model
-        self.starts = np.asarray(starts, np.float64)  # (K, D) each skill's mean first observation, raw
+        self.means = np.asarray(means, np.float64)  # (K, T, D) each skill's mean course of its demonstrations, raw
         self.calibration: SkillCalibration | None = None
 
     @classmethod
@@ -109,8 +126,7 @@ class SkillMemory:
         model = NeuralASM.fit(with_cue(np.asarray(sequences, np.float64), index, len(skills)),
                               (*channel_names, *cues), config.with_(context_input=True), progress=progress,
                               provenance=provenance, labels=labels, context_channels=cues, rate_hz=rate_hz)
-        starts = np.stack([np.asarray(sequences, np.float64)[index == k, 0].mean(axis=0) for k in range(len(skills))])
-        return cls(model, starts)
+        return cls(model, mean_courses(sequences, labels, skills))
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -118,7 +134,7 @@ class SkillMemory:
 
     @property
     def width(self) -> int:
-        return len(self.starts[0])
+        return self.means.shape[2]
 
     def index(self, skill: str) -> int:
         """The skill's row, or a ValueError naming it and the skills known."""
@@ -131,9 +147,14 @@ class SkillMemory:
         return ((np.asarray(x, np.float64) - self.model.normaliser.mean[: self.width])
                 / self.model.normaliser.std[: self.width])
 
-    def recalled_courses(self, steps: int) -> np.ndarray:
-        """(K, steps, D) normalised: each skill's offline recall from its own start and cue."""
-        cue = with_cue(self.starts[:, None], np.arange(len(self.skills)), len(self.skills))
+    def courses(self, course: Course, steps: int) -> np.ndarray:
+        """(K, steps, D) normalised: each skill's offline recall from its own start (its mean first
+        observation) and cue ("recalled"), or its demonstrations' mean course ("mean")."""
+        if course == "mean":
+            return self.normalise(self.means[:, np.minimum(np.arange(steps), self.means.shape[1] - 1)])
+        if course != "recalled":
+            raise ValueError(f"course must be 'recalled' or 'mean', got {course!r}")
+        cue = with_cue(self.means[:, :1], np.arange(len(self.skills)), len(self.skills))
         return self.model.normaliser.normalise(self.model.recall(cue, steps))[..., : self.width].astype(np.float64)
 
     def residuals(self, sequences: np.ndarray, courses: np.ndarray, terms: Sequence[str] = TERMS) -> dict[str, np.ndarray]:
@@ -152,23 +173,24 @@ class SkillMemory:
 
     def calibrate(self, precision: np.ndarray, precision_skills: Sequence[str], threshold: np.ndarray,
                   threshold_skills: Sequence[str], threshold_lengths: np.ndarray | None = None,
-                  terms: Sequence[str] = TERMS, courses: np.ndarray | None = None,
+                  terms: Sequence[str] = TERMS, course: Course = "recalled", recognised_by: Sequence[str] = (),
                   fprs: tuple[float, ...] = SCORING.fprs, forgetting: float = FORGETTING,
                   rule: Rule = "surprise") -> SkillCalibration:
         """Spreads per skill on one set of normal episodes (raw, with their skills), episode
         thresholds on another, their peaks taken over each episode's own steps (``threshold_lengths``;
-        None: every step). ``courses`` (K, T, D) replace the recalled ones (an ablation: a
-        template's)."""
-        unknown = [t for t in terms if t not in TERMS]
+        None: every step). ``terms`` are scored, ``recognised_by`` update the posterior (none: the
+        scored ones); ``course``: see `courses`."""
+        unknown = [t for t in (*terms, *recognised_by) if t not in TERMS]
         if unknown or not terms:
-            raise ValueError(f"terms must be among {TERMS}, got {list(terms)}")
+            raise ValueError(f"terms must be among {TERMS}, got {list(terms)} and {list(recognised_by)}")
+        needed = tuple(dict.fromkeys((*terms, *recognised_by)))  # every term used gets its spreads
         for skill in {*map(str, precision_skills), *map(str, threshold_skills)}:
             self.index(skill)
-        courses = self.recalled_courses(np.asarray(precision).shape[1]) if courses is None else courses
+        courses = self.courses(course, np.asarray(precision).shape[1])
         floor = SCORING.spread_floor(self.model.rate_hz)
-        residuals = self.residuals(precision, courses, terms)
-        spreads = {t: SkillSpreads.estimate(residuals[t], precision_skills, self.skills, floor) for t in terms}
-        cal = SkillCalibration(tuple(terms), courses, spreads, forgetting, rule)
+        residuals = self.residuals(precision, courses, needed)
+        spreads = {t: SkillSpreads.estimate(residuals[t], precision_skills, self.skills, floor) for t in needed}
+        cal = SkillCalibration(tuple(terms), courses, spreads, forgetting, rule, tuple(recognised_by))
         lengths = np.full(len(threshold), np.asarray(threshold).shape[1]) if threshold_lengths is None else threshold_lengths
         told = np.array([self.index(str(s)) for s in threshold_skills])
         inferred, by_skill = self._energies(cal, threshold, told)
@@ -184,19 +206,21 @@ class SkillMemory:
 
     def _energies(self, cal: SkillCalibration, sequences: np.ndarray, told: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, T) not told and told energies of raw episodes, each told its skill in ``told`` (N,)."""
-        energies, norm = cal.energies(self.residuals(sequences, cal.courses, cal.terms),
-                                      np.arange(np.asarray(sequences).shape[1]))
-        inferred, _ = infer(energies, norm, cal.forgetting, cal.rule)
+        steps = np.arange(np.asarray(sequences).shape[1])
+        residuals = self.residuals(sequences, cal.courses, tuple(cal.spreads))
+        energies, norm = cal.energies(residuals, steps)
+        inferred, _ = infer(energies, norm, cal.forgetting, cal.rule, cal.evidence(residuals, steps))
         return inferred, energies[np.arange(len(told)), told]
 
     def score(self, sequences: np.ndarray, told: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Raw episodes' (N, T, D) fault energies (N, T) and posteriors after each step (N, K, T):
         not told (``told`` None) as a session infers them, or each told its skill."""
         cal = self._calibrated()
-        energies, norm = cal.energies(self.residuals(sequences, cal.courses, cal.terms),
-                                      np.arange(np.asarray(sequences).shape[1]))
+        steps = np.arange(np.asarray(sequences).shape[1])
+        residuals = self.residuals(sequences, cal.courses, tuple(cal.spreads))
+        energies, norm = cal.energies(residuals, steps)
         if told is None:
-            return infer(energies, norm, cal.forgetting, cal.rule)
+            return infer(energies, norm, cal.forgetting, cal.rule, cal.evidence(residuals, steps))
         index = np.array([self.index(str(s)) for s in told])
         posterior = np.zeros(energies.shape)
         posterior[np.arange(len(index)), index] = 1.0
@@ -238,7 +262,7 @@ class SkillSession:
         if fpr not in thresholds:
             raise ValueError(f"no threshold at false-positive rate {fpr}; calibrated at {sorted(thresholds)}")
         self.threshold = float(thresholds[fpr])
-        self.recaller = memory.model.recaller(len(self.rows), "online") if "dynamics" in cal.terms else None
+        self.recaller = memory.model.recaller(len(self.rows), "online") if "dynamics" in cal.spreads else None
         self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
         self.t = 0
 
@@ -250,16 +274,17 @@ class SkillSession:
                              f"got {raw.tolist()}")
         x = memory.normalise(raw)
         residuals = {}
-        if "course" in cal.terms:
+        if "course" in cal.spreads:
             residuals["course"] = (x - cal.courses[self.rows, min(self.t, cal.courses.shape[1] - 1)])[:, None]
         if self.recaller is not None:
             cued = with_cue(np.repeat(raw[None], len(self.rows), axis=0), self.rows, len(memory.skills))
             expected = self.recaller.step(memory.model.normaliser.normalise(cued))
             residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
-        energies, norm = cal.energies(residuals, t, self.rows)  # (R, 1) each
-        energies, norm = energies[:, 0], norm[:, 0]
+        energies, norm = (a[:, 0] for a in cal.energies(residuals, t, self.rows))  # (R,) each
         if self.told is None:
-            energy = float(self.posterior.step(energies[None], norm, cal.rule, first=self.t == 0)[0])
+            evidence = cal.evidence(residuals, t, self.rows)
+            seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
+            energy = float(self.posterior.step(energies[None], norm, cal.rule, self.t == 0, seen)[0])
             p = self.posterior.probabilities[0]
             skill, probability = memory.skills[int(p.argmax())], float(p.max())
         else:

@@ -110,16 +110,18 @@ class SkillPosterior:
         weights = weights - logsumexp(weights, axis=1, keepdims=True)
         return -2 * logsumexp(weights - energies / 2, axis=1)
 
-    def step(self, energies: np.ndarray, log_normaliser: np.ndarray, rule: Rule = "surprise",
-             first: bool = False) -> np.ndarray:
-        """(B,) a step's fault energy (`energy`), the posterior then updated by it. With
-        ``rule="most_probable"`` the first step (``first``), which nothing came before, is scored
-        against the skill most probable after it."""
+    def step(self, energies: np.ndarray, log_normaliser: np.ndarray, rule: Rule = "surprise", first: bool = False,
+             evidence: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """(B,) a step's fault energy (`energy`), the posterior then updated by the step's
+        ``evidence`` (energies and log normalisers of the terms that recognise the skill; None:
+        the scored ones). With ``rule="most_probable"`` the first step (``first``), which nothing
+        came before, is scored against the skill most probable after it."""
+        evidence = (energies, log_normaliser) if evidence is None else evidence
         if first and rule == "most_probable":
-            self.update(energies, log_normaliser)
+            self.update(*evidence)
             return energies[np.arange(len(energies)), self.log_p.argmax(axis=1)]
         energy = self.energy(energies, log_normaliser, rule)
-        self.update(energies, log_normaliser)
+        self.update(*evidence)
         return energy
 
     def update(self, energies: np.ndarray, log_normaliser: np.ndarray) -> None:
@@ -133,9 +135,10 @@ class SkillPosterior:
 
 
 def infer(energies: np.ndarray, log_normaliser: np.ndarray, forgetting: float = FORGETTING,
-          rule: Rule = "surprise") -> tuple[np.ndarray, np.ndarray]:
+          rule: Rule = "surprise", evidence: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Whole episodes' fault energies (N, T) and posteriors after each step (N, K, T), from each
-    skill's energies (N, K, T) and log normalisers (K, T), as a session infers them step by step.
+    skill's energies (N, K, T) and log normalisers (K, T), as a session infers them step by step;
+    ``evidence``: the energies and log normalisers the posterior is updated by, if not those.
 
     With ``rule="most_probable"`` a step's energy is that of the skill most probable before it
     (at the first step, after it: nothing came before)."""
@@ -143,6 +146,7 @@ def infer(energies: np.ndarray, log_normaliser: np.ndarray, forgetting: float = 
     posterior = SkillPosterior(n, k, forgetting)
     out, after = np.empty((n, steps)), np.empty((n, k, steps))
     for t in range(steps):
-        out[:, t] = posterior.step(energies[:, :, t], log_normaliser[:, t], rule, first=t == 0)
+        seen = None if evidence is None else (evidence[0][:, :, t], evidence[1][:, t])
+        out[:, t] = posterior.step(energies[:, :, t], log_normaliser[:, t], rule, t == 0, seen)
         after[:, :, t] = posterior.probabilities
     return out, after

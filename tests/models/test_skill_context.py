@@ -120,3 +120,20 @@ def test_the_likelihood_template_picks_each_steps_skill_by_its_own_course_and_sp
     assert (picked[:, 5:] == truth[:, None]).all()  # told nothing, it names each episode's skill
     np.testing.assert_allclose(template.expected(test, np.full(len(test), "3"))[:, 5:],
                                template.expected(test, truth)[:, 5:])  # and ignores the skill it is given
+
+
+def test_the_skill_can_be_recognised_by_the_course_alone_while_both_terms_are_scored(memory):
+    x, _ = episodes(1, SKILLS, 11)
+    calibrating = (*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
+    try:
+        memory.calibrate(*calibrating, terms=("course",))
+        _, by_course = memory.score(x)
+        memory.calibrate(*calibrating, recognised_by=("course",))
+        _, posterior = memory.score(x)
+        both, _ = memory.score(x, told=["3", "4", "5"])  # scored by both terms: at least the course's energy
+        np.testing.assert_allclose(posterior, by_course)  # the dynamics term does not move the posterior
+        assert (both >= memory.calibration.spreads["course"].energy(
+            memory.residuals(x, memory.calibration.courses, ("course",))["course"], np.arange(STEPS))[
+            np.arange(3), [0, 1, 2]] - 1e-9).all()
+    finally:
+        memory.calibrate(*calibrating)
