@@ -54,6 +54,10 @@ VARIANTS = {
     "skill memory, recognised by its course": (("course", "dynamics"), "recalled", ("course",), "surprise", 0.01),
     "mean course + its dynamics, recognised by the course": (("course", "dynamics"), "mean", ("course",), "surprise",
                                                              0.01),
+    # written after split 0's second run: what the rule and what the dynamics term cost against the template
+    "mean course alone": (("course",), "mean", (), "surprise", 0.01),
+    "mean course + its dynamics, the template's rule": (("course", "dynamics"), "mean", ("course",), "most_probable",
+                                                        0.0),
 }
 # The report's likelihood template: each skill's mean course and own spreads, the most probable skill.
 TEMPLATE_LIKELIHOOD = (("course",), "mean", (), "most_probable", 0.0)

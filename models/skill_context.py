@@ -8,8 +8,10 @@ observes its visual cue, and it drives the prior as the tPC's context input,
 `z_prior = W_H f(zhat) + W_C c` (`TPCConfig.context_input`). Each skill k then gives two
 expectations of step t:
 
-- its **course**: the skill's offline recall from the skill's own start (its demonstrations' mean
-  first observation, with its cue), which does not depend on the episode's cue;
+- its **course**, which does not depend on the episode's cue: the network's offline recall from the
+  skill's own start (its demonstrations' mean first observation, with its cue), or the
+  demonstrations' mean course of the skill, kept with the memory (on the kitting data the
+  recall drifts from the skill's course over 6 s and the mean does better: docs/kitting.md);
 - its **dynamics**: online recall under the skill's cue (z inferred from every step), which
   expects the next step from the last.
 
