@@ -58,6 +58,10 @@ VARIANTS = {
     "mean course alone": (("course",), "mean", (), "surprise", 0.01),
     "mean course + its dynamics, the template's rule": (("course", "dynamics"), "mean", ("course",), "most_probable",
                                                         0.0),
+    # written after every split's third run: whether the forgetting is what lets no_object pass
+    "mean course alone, no forgetting": (("course",), "mean", (), "surprise", 0.0),
+    "mean course + its dynamics, recognised by the course, no forgetting": (("course", "dynamics"), "mean", ("course",),
+                                                                            "surprise", 0.0),
 }
 # The report's likelihood template: each skill's mean course and own spreads, the most probable skill.
 TEMPLATE_LIKELIHOOD = (("course",), "mean", (), "most_probable", 0.0)
@@ -128,14 +132,15 @@ def template_told(sets: Sets, config: KittingConfig) -> Scored:
                                                                                          s.skills), sets, config.fprs)
 
 
-def one_split(config: KittingConfig, cache: Path) -> dict[str, list[dict[str, float]]]:
+def one_split(config: KittingConfig, cache: Path, only: str = "") -> dict[str, list[dict[str, float]]]:
     config, _, _, sets, w = setup(config)
     rows: dict[str, list[dict[str, float]]] = {}
     for seed in config.seeds:
         start = time.perf_counter()
         memory = skill_memory(sets, config, seed, cache)
         one = cached(cache / f"seed{seed}_one.safetensors", lambda: fit_network(sets.train, config, seed))
-        for name, row in memory_rows(memory, sets, w, config, VARIANTS).items():
+        variants = {k: v for k, v in VARIANTS.items() if only in k}
+        for name, row in memory_rows(memory, sets, w, config, variants).items():
             rows.setdefault(name, []).append(row)
         if seed == config.seeds[0]:
             for name, row in memory_rows(memory, sets, w, config, {"template_likelihood": TEMPLATE_LIKELIHOOD}).items():
@@ -177,11 +182,12 @@ def table(by_split: dict[int, dict[str, list[dict[str, float]]]]) -> str:
 def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering scheme' folder"),
          splits: list[int] = typer.Option([0, 1, 2]), seeds: int = typer.Option(3, min=1),
          cache: Path = typer.Option(Path("/work/data/cache/kitting_skills"), help="trained networks, per split and seed"),
-         out: Path | None = typer.Option(None, help="also write the table here")) -> None:
+         out: Path | None = typer.Option(None, help="also write the table here"),
+         only: str = typer.Option("", help="only the memory's variants whose name holds this text")) -> None:
     by_split = {}
     for split in splits:
         config = KittingConfig(data=data, out=cache, trainings=seeds, split_seed=split)
-        by_split[split] = one_split(config, cache / f"split{split}")
+        by_split[split] = one_split(config, cache / f"split{split}", only)
         print(table({split: by_split[split]}), flush=True)
     text = table(by_split)
     print(text)
