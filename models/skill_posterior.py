@@ -35,7 +35,6 @@ from dataclasses import dataclass
 from typing import Literal, Sequence
 
 import numpy as np
-from scipy.special import logsumexp
 
 # The share of the posterior spread back over every skill at each step. None by default: on the
 # kitting data a forgetting of 0.01 per step let a failed run be re-explained by another skill (mean
@@ -46,6 +45,14 @@ FORGETTING = 0.0
 # one or two calibration episodes borrows most of its spread from every skill's.
 PRIOR_EPISODES = 2.0
 Rule = Literal["surprise", "most_probable"]
+
+
+def logsumexp(a: np.ndarray, axis: int, keepdims: bool = False) -> np.ndarray:
+    """log(sum(exp(a))) along ``axis``, the largest term factored out (scipy's costs ~0.3 ms a call,
+    more than the rest of a served step)."""
+    top = a.max(axis=axis, keepdims=True)
+    out = top + np.log(np.exp(a - top).sum(axis=axis, keepdims=True))
+    return out if keepdims else out.squeeze(axis)
 
 
 @dataclass(frozen=True)
