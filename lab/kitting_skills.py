@@ -19,7 +19,11 @@ most probable skill step by step), template_told, nasm_one and nasm_one_online.
 Confounds: the no_object day, anomalies of every run, the 1 % threshold on 36-40 peaks, the silent
 tactile pad, per-skill spreads from 7-14 segments; ε and the shrinkage fixed before any run.
 
-    python -m lab.kitting_skills "$SCHEME" --splits 0 1 2 --seeds 3 --cache /work/data/cache/kitting_skills
+    python -m lab.kitting_skills "$SCHEME" --splits 0 --splits 1 --splits 2 --seeds 3 [--cache DIR] [--only TEXT]
+
+Variants added after runs are marked where VARIANTS lists them. The answer (docs/kitting.md): the
+hypothesis is wrong; the network's recalled course drifts, and forgetting lets a failing run be
+re-explained by another skill.
 """
 
 from __future__ import annotations
@@ -181,7 +185,7 @@ def table(by_split: dict[int, dict[str, list[dict[str, float]]]]) -> str:
 
 def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering scheme' folder"),
          splits: list[int] = typer.Option([0, 1, 2]), seeds: int = typer.Option(3, min=1),
-         cache: Path = typer.Option(Path("/work/data/cache/kitting_skills"), help="trained networks, per split and seed"),
+         cache: Path = typer.Option(Path("kitting_skills_cache"), help="trained networks, per split and seed"),
          out: Path | None = typer.Option(None, help="also write the table here"),
          only: str = typer.Option("", help="only the memory's variants whose name holds this text")) -> None:
     by_split = {}
