@@ -18,8 +18,8 @@ from typing import Any
 
 from cyclonedds.idl import IdlStruct, make_idl_struct
 from cyclonedds.idl import types as idl
+from rosbags.interfaces import Nodetype
 from rosbags.typesys import get_typestore
-from rosbags.typesys.base import Nodetype
 
 from neural_asm.logs.bagfiles import DEFAULT_STORE
 

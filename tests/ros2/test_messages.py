@@ -12,8 +12,8 @@ import pytest
 
 pytest.importorskip("cyclonedds")
 
+from rosbags.interfaces import Nodetype  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
-from rosbags.typesys.base import Nodetype  # noqa: E402
 
 from neural_asm.ros2 import messages as m  # noqa: E402
 
