@@ -18,7 +18,7 @@ import pytest
 pytest.importorskip("cyclonedds")
 
 from neural_asm.ros2 import messages as m  # noqa: E402
-from neural_asm.ros2.bus import Bus, Discovery, domain_id_from_env, resolve  # noqa: E402
+from neural_asm.ros2.bus import DEFAULT, Bus, Discovery, domain_id_from_env, resolve  # noqa: E402
 
 PUBLISHER = Path(__file__).with_name("joint_state_publisher.py")
 DOMAIN = str(100 + random.randrange(100))  # one per run: parallel runs on one machine never mix
@@ -77,6 +77,22 @@ def test_a_writer_takes_only_its_type_and_a_domain_keeps_its_discovery():
         writer.write(m.STORE.types[m.FLOAT64](data=1.0))
     with pytest.raises(ValueError, match=f"domain {DOMAIN} is already joined"):
         Bus(env={**LOOPBACK, "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"})
+
+
+def test_a_diagnostic_array_written_with_the_default_qos_is_read_back_whole():
+    bus = Bus("/robot1", env=LOOPBACK)
+    reader = bus.reader("/diagnostics", m.DIAGNOSTIC_ARRAY, qos=DEFAULT)
+    writer = bus.writer("/diagnostics", m.DIAGNOSTIC_ARRAY)
+    assert writer.wait_for_subscribers(1, timeout_s=30)
+    T = m.STORE.types
+    values = [T[m.KEY_VALUE](key="isolated_joint", value="4"), T[m.KEY_VALUE](key="energy", value="3.5")]
+    status = T[m.DIAGNOSTIC_STATUS](level=T[m.DIAGNOSTIC_STATUS].ERROR, name="nasm", message="fault",
+                                    hardware_id="robot1", values=values)
+    header = T[m.HEADER](stamp=T[m.TIME](sec=3, nanosec=0), frame_id="")
+    writer.write(T[m.DIAGNOSTIC_ARRAY](header=header, status=[status]))
+    assert bus.wait(timeout_s=30)
+    (received,) = reader.take()
+    assert received.message.status == [status] and received.message.header == header
 
 
 def selected_addresses(trace: str) -> set[str]:
