@@ -15,11 +15,11 @@ from neural_asm.rivals.base import Detector, DetectorBase
 from neural_asm.rivals.one_step import LinearOneStep, TemplateResidualOneStep
 from neural_asm.rivals.sequence import LSTMVAE, GRUOneStep
 from neural_asm.rivals.statistics import ClassicASM, PooledZScore
-from neural_asm.rivals.templates import (ConditionalTemplate, CueNearestDemos, CueTemplate, NearestDemos,
-                                         PerSkillZScore, StepRidgeTemplate)
+from neural_asm.rivals.templates import (ConditionalTemplate, CueNearestDemos, CueTemplate, LikelihoodTemplate,
+                                         NearestDemos, PerSkillZScore, StepRidgeTemplate)
 
 RIVALS: dict[str, type[DetectorBase]] = {rival.name: rival for rival in (
-    PooledZScore, ClassicASM, PerSkillZScore, ConditionalTemplate, CueTemplate, NearestDemos, CueNearestDemos,
+    PooledZScore, ClassicASM, PerSkillZScore, LikelihoodTemplate, ConditionalTemplate, CueTemplate, NearestDemos, CueNearestDemos,
     StepRidgeTemplate, LinearOneStep, TemplateResidualOneStep, GRUOneStep, LSTMVAE)}
 
 Spec = tuple[str, dict[str, Any]]  # a rival's name in RIVALS and the options it is built with

@@ -1,6 +1,8 @@
 """Template detectors: each skill's expected trajectory, fixed from the episode's first step.
 
 - ``PerSkillZScore``: the per-skill per-step mean of the demonstrations (classic ASM).
+- ``LikelihoodTemplate``: the same means, not told the skill: at each step, the skill most probable
+  given the steps before under each skill's own course and spreads.
 - ``ConditionalTemplate``: per skill, every step's observation ridge-regressed on the
   context c (linear or quadratic features, chosen by leave-one-out error; a ridge strength
   per step and channel, chosen likewise on the demonstrations only).
@@ -22,6 +24,7 @@ from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 
 from neural_asm.models.one_step import episode_folds
+from neural_asm.models.skill_posterior import SkillSpreads, infer
 from neural_asm.rivals.base import DetectorBase
 from neural_asm.models.step_maps import apply_maps, input_features, ridge_maps, step_codes
 
@@ -43,6 +46,39 @@ class PerSkillZScore(DetectorBase):
     def spread(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
         """The true skill's per-step std of the demonstrations (N, T, D): the z-score denominator."""
         return np.stack([self.stds[s][: x.shape[1]] for s in skills])
+
+
+class LikelihoodTemplate(PerSkillZScore):
+    """Each skill's mean course, the skill not told: every step is expected by the skill most
+    probable given the steps before it (at the first step, given it), each skill's course held to
+    its own spreads per step (its demonstrations' residuals, shrunk towards every skill's:
+    `models.skill_posterior`). A step's log-likelihood under a skill counts its spreads, so a
+    run that fits no skill's course within that skill's spreads is no skill's normal."""
+
+    name = "template_likelihood"
+    label = "per-skill template, the most probable skill by each skill's own course and spreads (not told)"
+
+    def _fit(self, x: np.ndarray, skills: np.ndarray, seed: int) -> None:
+        super()._fit(x, skills, seed)
+        courses = np.stack([self.means[s] for s in self.skill_names])
+        self.spreads = SkillSpreads.estimate(x[:, None] - courses[None], skills, tuple(self.skill_names), floor=1e-3)
+
+    def picks(self, x: np.ndarray) -> np.ndarray:
+        """(N, T) the index of the skill whose course expects each step."""
+        courses = np.stack([self.means[s][: x.shape[1]] for s in self.skill_names])
+        steps = np.arange(x.shape[1])
+        energies = self.spreads.energy(x[:, None] - courses[None], steps)
+        _, after = infer(energies, self.spreads.log_normaliser(steps), forgetting=0.0, rule="most_probable")
+        # the skill most probable before each step (after the first step, for the first)
+        return np.concatenate([after[:, :, :1], after[:, :, :-1]], axis=2).argmax(axis=1)
+
+    def _expected(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        courses = np.stack([self.means[s][: x.shape[1]] for s in self.skill_names])
+        return courses[self.picks(x), np.arange(x.shape[1])]
+
+    def spread(self, x: np.ndarray, skills: np.ndarray) -> np.ndarray:
+        """The picked skill's spread at each step (N, T, D)."""
+        return self.spreads.spread[self.picks(x), np.arange(x.shape[1])]
 
 
 class _SkillRegression:

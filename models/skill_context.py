@@ -1,0 +1,299 @@
+"""One memory for every skill that knows each skill's course: told the skill, or inferring it.
+
+Why: a network whose expectation is set by the episode's first observation adopts whatever that
+observation says. On the Baxter kitting data a skill-5 segment started with an empty gripper is
+recalled as an empty-gripper skill, and its failure passes (docs/kitting.md). Here the one network
+is told the skill by a one-hot skill cue. The cue is observed, as the paper's contextual experiment
+observes its visual cue, and it drives the prior as the tPC's context input,
+`z_prior = W_H f(zhat) + W_C c` (`TPCConfig.context_input`). Each skill k then gives two
+expectations of step t:
+
+- its **course**, which does not depend on the episode's cue: the network's offline recall from the
+  skill's own start (its demonstrations' mean first observation, with its cue), or the
+  demonstrations' mean course of the skill, kept with the memory (on the kitting data the
+  recall drifts from the skill's course over 6 s and the mean does better: docs/kitting.md);
+- its **dynamics**: online recall under the skill's cue (z inferred from every step), which
+  expects the next step from the last.
+
+Each term's residuals are divided by the skill's own spreads at that step (from held-out normal
+episodes: `models.skill_posterior.SkillSpreads`), and the skill's energy is the sum of their
+squares. A session told the skill is scored by that skill's energy. One not told keeps a
+posterior over the skills and scores the step's surprise under those still plausible
+(`models.skill_posterior`: contextual inference, as in the COIN model of Heald et al., Nature
+2021).
+
+The network is a `NeuralASM` over the observation channels and the K cue channels (named
+`skill:<name>`), so it is trained, checkpointed and recalled as any other model. What this
+module adds is the cue, the courses, the spreads per skill and the decision; `SkillMemory.session`
+is the served step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, Sequence
+
+import numpy as np
+
+from neural_asm.models.asm import NeuralASM
+from neural_asm.models.calibration import conformal_episode_threshold
+from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
+from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, SkillSpreads, infer
+
+CUE_PREFIX = "skill:"
+TERMS = ("course", "dynamics")
+Course = Literal["recalled", "mean"]
+
+
+def cue_names(skills: Sequence[str]) -> tuple[str, ...]:
+    return tuple(f"{CUE_PREFIX}{s}" for s in skills)
+
+
+def skills_of(model: NeuralASM) -> tuple[str, ...]:
+    """The skills a model's cue channels name (none: a model trained without skills)."""
+    return tuple(c[len(CUE_PREFIX):] for c in model.context_channels if c.startswith(CUE_PREFIX))
+
+
+def with_cue(x: np.ndarray, skill: np.ndarray, skills: int) -> np.ndarray:
+    """Observations (N, T, D) with each episode's one-hot skill cue (N,) appended: (N, T, D + K)."""
+    cue = np.zeros(x.shape[:-1] + (skills,))
+    cue[np.arange(len(x)), ..., skill] = 1.0
+    return np.concatenate([x, cue], axis=-1)
+
+
+def mean_courses(sequences: np.ndarray, labels: Sequence[str], skills: Sequence[str]) -> np.ndarray:
+    """(K, T, D) each skill's mean course of its raw demonstrations (N, T, D)."""
+    labels = np.asarray(labels).astype(str)
+    return np.stack([np.asarray(sequences, np.float64)[labels == s].mean(axis=0) for s in skills])
+
+
+@dataclass
+class SkillCalibration:
+    """What scoring a memory's sessions needs beyond the network: the terms scored, each skill's
+    course (normalised, K x T x D), each term's spreads per skill, and episode thresholds
+    (a false-positive rate -> threshold): not told (`inferred`), told (one per skill, its own
+    where it has enough threshold episodes for a split-conformal quantile, else every skill's)."""
+
+    terms: tuple[str, ...]
+    courses: np.ndarray
+    spreads: dict[str, SkillSpreads]
+    forgetting: float = FORGETTING
+    rule: Rule = "surprise"
+    recognised_by: tuple[str, ...] = ()  # the terms whose likelihood updates the posterior (none: every term)
+    inferred: dict[float, float] = field(default_factory=dict)
+    told: dict[float, np.ndarray] = field(default_factory=dict)  # fpr -> (K,)
+
+    def energies(self, residuals: dict[str, np.ndarray], steps: np.ndarray, rows: np.ndarray | slice = slice(None),
+                 terms: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The energies (..., R, S) of residuals per term (..., R, S, D) against the skills ``rows``
+        (all K by default) at ``steps``, and those skills' log normalisers (R, S), summed over
+        ``terms`` (None: every term scored)."""
+        terms = self.terms if terms is None else terms
+        energy = sum(self.spreads[t].energy(residuals[t], steps, rows) for t in terms)
+        return energy, sum(self.spreads[t].log_normaliser(steps, rows) for t in terms)
+
+    def evidence(self, residuals: dict[str, np.ndarray], steps: np.ndarray,
+                 rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray] | None:
+        """What updates the posterior, where it is not the scored energies (`recognised_by`)."""
+        if not self.recognised_by or set(self.recognised_by) == set(self.terms):
+            return None
+        return self.energies(residuals, steps, rows, self.recognised_by)
+
+
+class SkillMemory:
+    """One network told the skill by a cue, with each skill's course, spreads and thresholds."""
+
+    def __init__(self, model: NeuralASM, means: np.ndarray) -> None:
+        self.skills = skills_of(model)
+        if not self.skills:
+            raise ValueError("a skill memory needs a model trained with skill cues (SkillMemory.fit)")
+        if means.ndim != 3 or means.shape[::2] != (len(self.skills), model.obs_size - len(self.skills)):
+            raise ValueError(f"mean courses have shape {means.shape} for {len(self.skills)} skills")
+        self.model = model
+        self.means = np.asarray(means, np.float64)  # (K, T, D) each skill's mean course of its demonstrations, raw
+        self.calibration: SkillCalibration | None = None
+
+    @classmethod
+    def fit(cls, sequences: np.ndarray, channel_names: Sequence[str], labels: Sequence[str], config: TPCConfig,
+            progress: bool = False, provenance: dict | None = None, rate_hz: float = DEFAULT_RATE_HZ) -> "SkillMemory":
+        """Train the one network on raw demonstrations (N, T, D) of the named skills, each with its cue."""
+        labels = np.asarray(labels).astype(str)
+        if len(labels) != len(sequences):
+            raise ValueError(f"{len(labels)} skill labels for {len(sequences)} demonstrations")
+        skills = tuple(sorted(set(labels.tolist())))
+        if len(skills) < 2:
+            raise ValueError(f"a skill memory needs demonstrations of at least 2 skills, got {list(skills)}")
+        index = np.array([skills.index(s) for s in labels])
+        cues = cue_names(skills)
+        model = NeuralASM.fit(with_cue(np.asarray(sequences, np.float64), index, len(skills)),
+                              (*channel_names, *cues), config.with_(context_input=True), progress=progress,
+                              provenance=provenance, labels=labels, context_channels=cues, rate_hz=rate_hz)
+        return cls(model, mean_courses(sequences, labels, skills))
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        return self.model.channel_names[: self.width]
+
+    @property
+    def width(self) -> int:
+        return self.means.shape[2]
+
+    def index(self, skill: str) -> int:
+        """The skill's row, or a ValueError naming it and the skills known."""
+        if skill not in self.skills:
+            raise ValueError(f"unknown skill {skill!r}: this memory knows {', '.join(self.skills)}")
+        return self.skills.index(skill)
+
+    def normalise(self, x: np.ndarray) -> np.ndarray:
+        """Raw observations (..., D) in the network's normalised units (the cue channels left out)."""
+        return ((np.asarray(x, np.float64) - self.model.normaliser.mean[: self.width])
+                / self.model.normaliser.std[: self.width])
+
+    def courses(self, course: Course, steps: int) -> np.ndarray:
+        """(K, steps, D) normalised: each skill's offline recall from its own start (its mean first
+        observation) and cue ("recalled"), or its demonstrations' mean course ("mean")."""
+        if course == "mean":
+            return self.normalise(self.means[:, np.minimum(np.arange(steps), self.means.shape[1] - 1)])
+        if course != "recalled":
+            raise ValueError(f"course must be 'recalled' or 'mean', got {course!r}")
+        cue = with_cue(self.means[:, :1], np.arange(len(self.skills)), len(self.skills))
+        return self.model.normaliser.normalise(self.model.recall(cue, steps))[..., : self.width].astype(np.float64)
+
+    def residuals(self, sequences: np.ndarray, courses: np.ndarray, terms: Sequence[str] = TERMS) -> dict[str, np.ndarray]:
+        """Raw episodes' (N, T, D) residuals per term against every skill (N, K, T, D), normalised."""
+        x = self.normalise(sequences)
+        n, steps, _ = x.shape
+        k = len(self.skills)
+        out = {}
+        if "course" in terms:
+            out["course"] = x[:, None] - courses[None, :, np.minimum(np.arange(steps), courses.shape[1] - 1)]
+        if "dynamics" in terms:
+            cued = with_cue(np.repeat(np.asarray(sequences, np.float64), k, axis=0), np.tile(np.arange(k), n), k)
+            errors = self.model.errors(cued, "online")[..., : self.width]
+            out["dynamics"] = errors.reshape(n, k, steps, -1).astype(np.float64)
+        return out
+
+    def calibrate(self, precision: np.ndarray, precision_skills: Sequence[str], threshold: np.ndarray,
+                  threshold_skills: Sequence[str], threshold_lengths: np.ndarray | None = None,
+                  terms: Sequence[str] = TERMS, course: Course = "mean", recognised_by: Sequence[str] = ("course",),
+                  fprs: tuple[float, ...] = SCORING.fprs, forgetting: float = FORGETTING,
+                  rule: Rule = "surprise") -> SkillCalibration:
+        """Spreads per skill on one set of normal episodes (raw, with their skills), episode
+        thresholds on another, their peaks taken over each episode's own steps (``threshold_lengths``;
+        None: every step). ``terms`` are scored, ``recognised_by`` update the posterior (none: the
+        scored ones); ``course``: see `courses`. The defaults are the variant that did best not
+        told on the kitting data, chosen after its three splits were seen (docs/kitting.md): the
+        demonstrations' mean course (the network's recall drifts from it) and the network's
+        dynamics scored, the skill recognised by the course."""
+        unknown = [t for t in (*terms, *recognised_by) if t not in TERMS]
+        if unknown or not terms:
+            raise ValueError(f"terms must be among {TERMS}, got {list(terms)} and {list(recognised_by)}")
+        needed = tuple(dict.fromkeys((*terms, *recognised_by)))  # every term used gets its spreads
+        for skill in {*map(str, precision_skills), *map(str, threshold_skills)}:
+            self.index(skill)
+        courses = self.courses(course, np.asarray(precision).shape[1])
+        floor = SCORING.spread_floor(self.model.rate_hz)
+        residuals = self.residuals(precision, courses, needed)
+        spreads = {t: SkillSpreads.estimate(residuals[t], precision_skills, self.skills, floor) for t in needed}
+        cal = SkillCalibration(tuple(terms), courses, spreads, forgetting, rule, tuple(recognised_by))
+        lengths = np.full(len(threshold), np.asarray(threshold).shape[1]) if threshold_lengths is None else threshold_lengths
+        told = np.array([self.index(str(s)) for s in threshold_skills])
+        inferred, by_skill = self._energies(cal, threshold, told)
+        peaks = {name: np.array([e[:n].max() for e, n in zip(energies, lengths)])
+                 for name, energies in (("inferred", inferred), ("told", by_skill))}
+        for fpr in fprs:
+            cal.inferred[fpr] = conformal_episode_threshold(peaks["inferred"], fpr)
+            pooled = conformal_episode_threshold(peaks["told"], fpr)
+            cal.told[fpr] = np.array([conformal_episode_threshold(peaks["told"][told == k], fpr)
+                                      if (told == k).sum() >= 1 / fpr - 1 else pooled for k in range(len(self.skills))])
+        self.calibration = cal
+        return cal
+
+    def _energies(self, cal: SkillCalibration, sequences: np.ndarray, told: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, T) not told and told energies of raw episodes, each told its skill in ``told`` (N,)."""
+        steps = np.arange(np.asarray(sequences).shape[1])
+        residuals = self.residuals(sequences, cal.courses, tuple(cal.spreads))
+        energies, norm = cal.energies(residuals, steps)
+        inferred, _ = infer(energies, norm, cal.forgetting, cal.rule, cal.evidence(residuals, steps))
+        return inferred, energies[np.arange(len(told)), told]
+
+    def score(self, sequences: np.ndarray, told: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Raw episodes' (N, T, D) fault energies (N, T) and posteriors after each step (N, K, T):
+        not told (``told`` None) as a session infers them, or each told its skill."""
+        cal = self._calibrated()
+        steps = np.arange(np.asarray(sequences).shape[1])
+        residuals = self.residuals(sequences, cal.courses, tuple(cal.spreads))
+        energies, norm = cal.energies(residuals, steps)
+        if told is None:
+            return infer(energies, norm, cal.forgetting, cal.rule, cal.evidence(residuals, steps))
+        index = np.array([self.index(str(s)) for s in told])
+        posterior = np.zeros(energies.shape)
+        posterior[np.arange(len(index)), index] = 1.0
+        return energies[np.arange(len(index)), index], posterior
+
+    def _calibrated(self) -> SkillCalibration:
+        if self.calibration is None:
+            raise ValueError("the skill memory is not calibrated: SkillMemory.calibrate first")
+        return self.calibration
+
+    def session(self, skill: str | None = None, fpr: float = SCORING.default_fpr) -> "SkillSession":
+        return SkillSession(self, skill, fpr)
+
+
+@dataclass(frozen=True)
+class SkillStep:
+    """What a session answers at each step."""
+
+    t: int
+    energy: float  # the fault energy: against the told skill, or the surprise under the skills still plausible
+    energies: dict[str, float]  # each scored skill's own energy (the told one's only, when told)
+    skill: str  # the told skill, or the most probable one after this step
+    probability: float  # its posterior probability (1 when told)
+    threshold: float
+    fault: bool  # energy strictly above the threshold, as the served rule decides
+
+
+class SkillSession:
+    """One episode scored step by step: ``step(x) -> SkillStep``. Told a skill, it expects that
+    skill only; not told, it scores every skill it knows (one batch of online recall, one row per
+    skill) and keeps the posterior over them."""
+
+    def __init__(self, memory: SkillMemory, skill: str | None = None, fpr: float = SCORING.default_fpr) -> None:
+        cal = memory._calibrated()
+        self.memory, self.calibration = memory, cal
+        self.told = None if skill is None else memory.index(skill)
+        self.rows = np.arange(len(memory.skills)) if self.told is None else np.array([self.told])
+        thresholds = cal.inferred if self.told is None else {f: float(t[self.told]) for f, t in cal.told.items()}
+        if fpr not in thresholds:
+            raise ValueError(f"no threshold at false-positive rate {fpr}; calibrated at {sorted(thresholds)}")
+        self.threshold = float(thresholds[fpr])
+        self.recaller = memory.model.recaller(len(self.rows), "online") if "dynamics" in cal.spreads else None
+        self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
+        self.t = 0
+
+    def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
+        memory, cal, t = self.memory, self.calibration, np.array([self.t])
+        raw = np.asarray(observation, np.float64)
+        if raw.shape != (memory.width,) or not np.isfinite(raw).all():
+            raise ValueError(f"observation: expected {memory.width} finite values ({', '.join(memory.channel_names)}), "
+                             f"got {raw.tolist()}")
+        x = memory.normalise(raw)
+        residuals = {}
+        if "course" in cal.spreads:
+            residuals["course"] = (x - cal.courses[self.rows, min(self.t, cal.courses.shape[1] - 1)])[:, None]
+        if self.recaller is not None:
+            cued = with_cue(np.repeat(raw[None], len(self.rows), axis=0), self.rows, len(memory.skills))
+            expected = self.recaller.step(memory.model.normaliser.normalise(cued))
+            residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
+        energies, norm = (a[:, 0] for a in cal.energies(residuals, t, self.rows))  # (R,) each
+        if self.told is None:
+            evidence = cal.evidence(residuals, t, self.rows)
+            seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
+            energy = float(self.posterior.step(energies[None], norm, cal.rule, self.t == 0, seen)[0])
+            p = self.posterior.probabilities[0]
+            skill, probability = memory.skills[int(p.argmax())], float(p.max())
+        else:
+            energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0
+        self.t += 1
+        return SkillStep(int(t[0]), energy, {memory.skills[r]: float(e) for r, e in zip(self.rows, energies)},
+                         skill, probability, self.threshold, energy > self.threshold)

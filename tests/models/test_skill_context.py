@@ -1,0 +1,139 @@
+"""One memory for every skill told the skill by a cue, or inferring it (models/skill_context.py,
+models/skill_posterior.py), on the tests' own kitting-shaped skill courses."""
+
+import numpy as np
+import pytest
+
+from kitting_fixtures import skill_curve
+from neural_asm.models.config import FAST
+from neural_asm.models.skill_context import SkillMemory, skills_of
+from neural_asm.models.skill_posterior import SkillPosterior, SkillSpreads, infer
+
+SKILLS = (3, 4, 5)
+STEPS = 40
+NAMES = [f"c{i}" for i in range(6)]
+
+
+def episodes(n: int, skills: tuple[int, ...], seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    x = np.stack([skill_curve(s, STEPS, rng) for s in skills for _ in range(n)])
+    return x, np.array([str(s) for s in skills for _ in range(n)])
+
+
+@pytest.fixture(scope="module")
+def memory() -> SkillMemory:
+    x, y = episodes(10, SKILLS, 0)
+    m = SkillMemory.fit(x, NAMES, y, FAST.with_(hidden_size=32, epochs=40))
+    m.calibrate(*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
+    return m
+
+
+def test_a_memory_told_the_skill_flags_a_run_that_follows_another_skills_course(memory):
+    x, y = episodes(3, SKILLS, 3)
+    threshold = memory.calibration.told[0.01]
+    own, _ = memory.score(x, told=y)
+    assert (own.max(axis=1) <= threshold[[memory.index(s) for s in y]]).mean() >= 0.8  # its own skill: normal
+    other, _ = memory.score(x[y == "3"], told=["4"] * 3)  # skill 3's course, told skill 4
+    assert (other.max(axis=1) > threshold[memory.index("4")]).all()
+
+
+def test_not_told_the_posterior_settles_on_the_right_skill(memory):
+    x, y = episodes(3, SKILLS, 4)
+    energies, posterior = memory.score(x)
+    assert [memory.skills[k] for k in posterior[:, :, -1].argmax(axis=1)] == list(y)
+    assert (posterior[:, :, -1].max(axis=1) > 0.9).all()
+    assert (energies.max(axis=1) <= memory.calibration.inferred[0.01]).mean() >= 0.8
+
+
+def test_not_told_a_run_that_follows_no_skills_course_is_flagged(memory):
+    x, _ = episodes(3, SKILLS, 5)
+    between = (x[:3] + x[3:6]) / 2  # half skill 3, half skill 4: no skill's course
+    between[:, :, 4] += 8.0  # and a gripper at a level no skill holds
+    energies, _ = memory.score(between)
+    assert (energies.max(axis=1) > memory.calibration.inferred[0.01]).all()
+
+
+def test_a_session_answers_as_the_whole_episode_is_scored(memory):
+    x, y = episodes(1, SKILLS, 6)
+    for told in (None, "4"):
+        energies, posterior = memory.score(x[1:2], told=None if told is None else [told])
+        session = memory.session(told)
+        steps = [session.step(v) for v in x[1]]
+        np.testing.assert_allclose([s.energy for s in steps], energies[0], rtol=1e-3, atol=1e-3)  # float32 relaxations batched differently
+        assert steps[-1].skill == (told or "4") and steps[-1].fault == (steps[-1].energy > steps[-1].threshold)
+        assert steps[-1].probability == pytest.approx(posterior[0, memory.index(steps[-1].skill), -1])
+
+
+def test_a_skill_the_memory_does_not_know_is_refused(memory):
+    with pytest.raises(ValueError, match="unknown skill '9'.*3, 4, 5"):
+        memory.session("9")
+    with pytest.raises(ValueError, match="unknown skill '9'"):
+        memory.score(episodes(1, (3,), 7)[0], told=["9"])
+
+
+def test_a_model_trained_without_skills_has_none():
+    from neural_asm.models.asm import NeuralASM
+
+    x, _ = episodes(3, (3,), 8)
+    model = NeuralASM.fit(x, NAMES, FAST.with_(hidden_size=8, epochs=2), progress=False)
+    assert skills_of(model) == ()
+    with pytest.raises(ValueError, match="trained with skill cues"):
+        SkillMemory(model, np.zeros((0, 6)))
+
+
+def test_the_posterior_forgets_so_it_can_recognise_again():
+    energies = np.zeros((1, 2, 40))
+    energies[0, 1, :25] = 9.0  # skill 0 explains the first 25 steps, skill 1 the last 15
+    energies[0, 0, 25:] = 9.0
+    _, after = infer(energies, np.zeros((2, 40)), forgetting=0.01)
+    assert after[0, 0, 24] > 0.99 and after[0, 1, -1] > 0.99
+    _, stuck = infer(energies, np.zeros((2, 40)), forgetting=0.0)
+    assert stuck[0, 0, 24] > 0.99 and stuck[0, 1, -1] < 0.5  # without forgetting it cannot turn in time
+
+
+def test_the_surprise_is_the_plausible_skills_energy():
+    posterior = SkillPosterior(1, 2)
+    posterior.log_p = np.log(np.array([[1 - 1e-9, 1e-9]]))
+    energy = posterior.energy(np.array([[3.0, 0.0]]), np.zeros(2))
+    assert energy[0] == pytest.approx(3.0, abs=0.1)  # skill 1 would explain it, but is not plausible
+
+
+def test_spreads_borrow_from_every_skill_where_a_skill_has_few_episodes():
+    residuals = np.zeros((3, 2, 1, 1))
+    residuals[:2, 0] = 1.0  # two episodes of skill a, off by 1 from a's expectation
+    residuals[2, 1] = 3.0  # one of b, off by 3
+    spreads = SkillSpreads.estimate(residuals, ["a", "a", "b"], ("a", "b"), floor=0.01, prior_episodes=2)
+    pooled = (1 + 1 + 9) / 3
+    assert spreads.spread[0, 0, 0] == pytest.approx(np.sqrt((2 + 2 * pooled) / 4))
+    assert spreads.spread[1, 0, 0] == pytest.approx(np.sqrt((9 + 2 * pooled) / 3))
+    with pytest.raises(ValueError, match=r"skill\(s\) \['c'\]"):
+        SkillSpreads.estimate(residuals, ["a", "a", "c"], ("a", "b"), floor=0.01)
+
+
+def test_the_likelihood_template_picks_each_steps_skill_by_its_own_course_and_spreads():
+    from neural_asm.rivals.templates import LikelihoodTemplate
+
+    x, y = episodes(10, SKILLS, 9)
+    template = LikelihoodTemplate().fit(x, y, [])
+    test, truth = episodes(2, SKILLS, 10)
+    picked = np.array(template.skill_names)[template.picks(test)]
+    assert (picked[:, 5:] == truth[:, None]).all()  # told nothing, it names each episode's skill
+    np.testing.assert_allclose(template.expected(test, np.full(len(test), "3"))[:, 5:],
+                               template.expected(test, truth)[:, 5:])  # and ignores the skill it is given
+
+
+def test_the_skill_can_be_recognised_by_the_course_alone_while_both_terms_are_scored(memory):
+    x, _ = episodes(1, SKILLS, 11)
+    calibrating = (*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
+    try:
+        memory.calibrate(*calibrating, terms=("course",))
+        _, by_course = memory.score(x)
+        memory.calibrate(*calibrating, recognised_by=("course",))
+        _, posterior = memory.score(x)
+        both, _ = memory.score(x, told=["3", "4", "5"])  # scored by both terms: at least the course's energy
+        np.testing.assert_allclose(posterior, by_course)  # the dynamics term does not move the posterior
+        assert (both >= memory.calibration.spreads["course"].energy(
+            memory.residuals(x, memory.calibration.courses, ("course",))["course"], np.arange(STEPS))[
+            np.arange(3), [0, 1, 2]] - 1e-9).all()
+    finally:
+        memory.calibrate(*calibrating)
