@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Sequence, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator, model_validator
 
 from neural_asm.logs.errors import LogError
 from neural_asm.models.fault import JOINT_PREFIX
@@ -56,6 +56,11 @@ class Section(_Strict):
     address: ClassVar[Address]
     pads: ClassVar[bool] = False
 
+    def layout(self) -> list[str]:
+        """What is read, in words (``nasm logs inspect``): the section's settings."""
+        settings = self.model_dump(exclude_none=True, exclude={"kind"})
+        return [f"{self.kind}: " + (", ".join(f"{k} = {v!r}" for k, v in settings.items()) or "as recorded")]
+
 
 class Episodes(Section):
     """How a bag is cut into episodes and where their time stamps and skill names come from."""
@@ -86,24 +91,38 @@ class Value(_Strict):
     """Where an episode's skill, label or onset comes from: a ``column`` (its first row; for an
     onset, the time of the first row where it is non-zero), the name of the ``folder`` holding the
     file (1) or of one above it (2, ...), a ``sidecar`` label pickle beside the file (its label;
-    its time for an onset), or a constant ``value``. ``pattern`` keeps a regex's first group of
-    the text; ``missing`` stands in when the sidecar is not there."""
+    its time for an onset), a constant ``value``, or (a label) ``flag`` columns of true/false cells:
+    the label is the name of the flag true first, its onset that row's time, none true a normal
+    episode. ``pattern`` keeps a regex's first group of the text; ``missing`` stands in when the
+    sidecar is not there."""
 
     column: str | None = None
     folder: int | None = Field(None, ge=1)
     sidecar: str | None = Field(None, min_length=1)
     value: str | None = None
+    flag: list[str] | None = Field(None, min_length=1, description="a flag column's name, or several: each "
+                                   "names the label it raises (TRUE/FALSE, 1/0, yes/no)")
     pattern: str | None = None
     missing: str | None = None
 
+    @field_validator("flag", mode="before")
+    @classmethod
+    def _flags(cls, flag: Any) -> Any:
+        return [flag] if isinstance(flag, str) else flag
+
     @model_validator(mode="after")
     def _one(self) -> "Value":
-        given = [k for k in ("column", "folder", "sidecar", "value") if getattr(self, k) is not None]
+        given = [k for k in ("column", "folder", "sidecar", "value", "flag") if getattr(self, k) is not None]
         if len(given) != 1:
-            raise ValueError(f"give one of column, folder, sidecar or value, got {given or 'none'}")
+            raise ValueError(f"give one of column, folder, sidecar, value or flag, got {given or 'none'}")
         if self.missing is not None and self.sidecar is None:
             raise ValueError("missing is for a sidecar file that may not be there")
         return self
+
+    @property
+    def columns(self) -> list[str]:
+        """The table columns it reads."""
+        return self.flag or ([self.column] if self.column is not None else [])
 
 
 class Dataset(Section):
@@ -113,24 +132,63 @@ class Dataset(Section):
     address: ClassVar[Address] = "feature"
 
 
-class Table(Section):
-    """A lab's tables: which files, their format, the time column and where labels come from."""
+class Layout(_Strict):
+    """How one file of a table is laid out: its format, header, time column and blank cells."""
+
+    format: Literal["auto", "csv", "tsv", "whitespace", "parquet"] = Field(
+        "auto", description="auto: by suffix (.csv, .tsv, .txt/.dat = whitespace, .parquet); whitespace: "
+        "any run of spaces and tabs separates cells, trailing ones included")
+    time_column: str | int | None = Field(None, description="the time column: its name, or its position from 0")
+    time_unit: Literal["s", "ms", "us", "ns", "iso"] = Field(
+        "s", description="iso: ISO-8601 text or a date-time column, its zone offset applied (none: UTC)")
+    header: bool = Field(True, description="false: the file has no header line; its columns are names, or "
+                         "else their positions as text (\"0\", \"1\", ...)")
+    names: list[str] | None = Field(None, min_length=1, description="the columns of a headerless file, in order")
+    blank: Literal["refuse", "drop_row", "hold"] = Field(
+        "refuse", description="a blank cell (empty, NA, NaN, null) in a read column: refused naming the file and "
+        "row, its row dropped, or the column's previous value held")
+
+    @model_validator(mode="after")
+    def _names_without_header(self) -> "Layout":
+        if self.names is not None and self.header:
+            raise ValueError("names are the columns of a file without a header line: set header = false")
+        return self
+
+
+class Part(Layout):
+    """One file of each episode's folder, at its own rate and on its own clock (a sensor's log)."""
+
+    files: str = Field(min_length=1, description="glob of the part's file in an episode's folder")
+    columns: list[str] = Field(min_length=1, description="the columns read from it: channels' and labels'")
+
+    @model_validator(mode="after")
+    def _has_time(self) -> "Part":
+        if self.time_column is None:
+            raise ValueError(f"part {self.files!r} needs its time_column")
+        return self
+
+
+class Table(Section, Layout):
+    """A lab's tables: which files, their layout, how they are cut into episodes and where labels
+    come from; or, with ``parts``, one folder per episode holding one file per sensor."""
 
     kind: Literal["table"] = "table"
     address: ClassVar[Address] = "column"
     pads: ClassVar[bool] = True
     files: str = Field("**/*", description="glob of the tables under the source folder (a source that "
-                       "is a file is read alone)")
-    format: Literal["auto", "csv", "tsv", "whitespace", "parquet"] = Field(
-        "auto", description="auto: by suffix (.csv, .tsv, .txt/.dat = whitespace, .parquet)")
-    time_column: str | int = Field(description="the time column: its name, or its position from 0")
-    time_unit: Literal["s", "ms", "us", "ns"] = "s"
+                       "is a file is read alone); with parts, of the episodes' folders (default: every "
+                       "folder holding a part's file)")
+    parts: list[Part] | None = Field(None, min_length=1, description="an episode is a folder of these files, "
+                                     "joined on the model's clock, each resampled from its own time column")
     episode_column: str | None = Field(None, description="one table holds many episodes, told apart "
                                        "by this column (their rows contiguous); default: one per file")
+    split: Literal["file", "gap"] = Field("file", description="gap: a pause longer than gap_s in a table's "
+                                          "time also starts an episode (with episode_column too)")
+    gap_s: float | None = Field(None, gt=0)
     phases: str | None = Field(None, min_length=1, description="a label pickle beside each table listing which "
                                "skill ran when, [(tag, (start, end)), ...]: one episode per phase with a tag > 0 "
                                "(its skill the tag unless skill says otherwise); rows outside them are not read")
-    skill: Value | None = Field(None, description="default: the file's name")
+    skill: Value | None = Field(None, description="default: the file's name (with parts, the folder's)")
     label: Value | None = Field(None, description="the anomaly label (default: none, a normal episode)")
     normal: list[str] = Field(["normal"], description="labels that mean a normal episode")
     onset: Value | None = None
@@ -139,7 +197,55 @@ class Table(Section):
     def _one_split(self) -> "Table":
         if self.phases is not None and self.episode_column is not None:
             raise ValueError("give episode_column or phases, not both: each cuts a table into episodes")
+        if self.phases is not None and self.split == "gap":
+            raise ValueError("give split = 'gap' or phases, not both: each cuts a table into episodes")
+        if self.split == "gap" and self.gap_s is None:
+            raise ValueError("split = 'gap' needs gap_s")
+        if (self.parts is None) == (self.time_column is None):
+            raise ValueError("give time_column (one table per episode, or per episode_column value) or parts "
+                             "(a folder per episode, a file per sensor, each with its time_column), not both")
+        if self.parts is not None and (self.episode_column or self.phases or self.split == "gap"):
+            raise ValueError("an episode of parts is a folder: no episode_column, phases or split = 'gap'")
+        for name in ("skill", "onset"):
+            if getattr(self, name) is not None and getattr(self, name).flag is not None:
+                raise ValueError(f"flags give an episode's label and onset: {name} cannot be a flag")
+        if self.label is not None and self.label.flag is not None and self.onset is not None:
+            raise ValueError("a flag label has its onset at the flag's first true row: give no onset")
         return self
+
+    @property
+    def label_columns(self) -> list[str]:
+        """The columns read as text: the skill's, the label's, the episode column."""
+        values = [v for v in (self.skill, self.label) if v is not None and v.column is not None]
+        return [*(v.column for v in values), *([self.episode_column] if self.episode_column else [])]  # type: ignore[misc]
+
+    @property
+    def flag_columns(self) -> list[str]:
+        return [] if self.label is None or self.label.flag is None else self.label.flag
+
+    @property
+    def onset_column(self) -> str | None:
+        return None if self.onset is None else self.onset.column
+
+    def layout(self) -> list[str]:
+        """What is read, in words: for ``nasm logs inspect``."""
+        def file(lay: Layout, what: str) -> str:
+            header = "a header line" if lay.header else f"no header, columns {lay.names or 'by position'}"
+            return (f"{what} ({lay.format}, {header}), time in column {lay.time_column!r} ({lay.time_unit}), "
+                    f"blank cells: {lay.blank}")
+        if self.parts is not None:
+            lines = [f"an episode per folder ({self.files!r} under the source, or the source itself) of "
+                     f"{len(self.parts)} files, joined on the model's clock:"]
+            lines += ["  " + file(p, f"{p.files!r} -> {', '.join(p.columns)}") for p in self.parts]
+        else:
+            cut = ["a file"] + ([f"a change of {self.episode_column!r}"] if self.episode_column else []) + (
+                [f"a pause over {self.gap_s:g} s"] if self.split == "gap" else [])
+            lines = [file(self, f"tables {self.files!r}"), "an episode per " + (
+                f"tagged phase of {self.phases!r}" if self.phases else " or ".join(cut))]
+        labels = {"skill": self.skill, "label": self.label, "onset": self.onset}
+        lines.append("; ".join(f"{k} from {v.model_dump(exclude_none=True)}" for k, v in labels.items() if v)
+                     or "skill from the file's name, every episode normal")
+        return lines
 
 
 class Channel(_Strict):
@@ -225,14 +331,30 @@ class Mapping(_Strict):
                              f"names a {other.address}: one mapping reads one kind of source")
         if self.timing.shorter == "hold" and not self.source.pads:
             raise ValueError(f"timing.shorter = 'hold' is for tables, not a {self.kind} source")
-        ep = self.source if isinstance(self.source, Episodes) else None
-        if ep is not None and ep.split == "gap" and ep.gap_s is not None and ep.gap_s <= self.timing.gap_limit_s:
-            raise ValueError(f"episodes.gap_s ({ep.gap_s}) must exceed timing.max_gap_s ({self.timing.gap_limit_s}): "
+        split = self.source if isinstance(self.source, (Episodes, Table)) and self.source.split == "gap" else None
+        if split is not None and split.gap_s is not None and split.gap_s <= self.timing.gap_limit_s:
+            raise ValueError(f"{self.kind}.gap_s ({split.gap_s}) must exceed timing.max_gap_s ({self.timing.gap_limit_s}): "
                              "a silence that splits episodes cannot also be allowed inside one")
+        ep = self.source if isinstance(self.source, Episodes) else None
         if ep is not None and ep.split == "gap" and ep.gap_s is not None and ep.label_tolerance_s >= ep.gap_s:
             raise ValueError(f"episodes.label_tolerance_s ({ep.label_tolerance_s}) must be below gap_s ({ep.gap_s}): "
                              "a label before an episode must come after the previous one")
+        if isinstance(self.source, Table) and self.source.parts is not None:
+            self._check_parts(self.source)
         return self
+
+    def _check_parts(self, table: Table) -> None:
+        """Every column read, a channel's or a label's, is in exactly one part."""
+        held = [p.columns for p in table.parts or []]
+        wanted = [c.column for c in self.channels] + table.label_columns + table.flag_columns + (
+            [table.onset_column] if table.onset_column else [])
+        for column in wanted:
+            holders = [i for i, columns in enumerate(held) if column in columns]
+            if len(holders) != 1:
+                raise ValueError(f"column {column!r} is in {len(holders) or 'no'} parts' columns; name it in one")
+        unused = [c for columns in held for c in columns if c not in wanted]
+        if unused:
+            raise ValueError(f"parts' columns {unused} are read by no channel or label")
 
     @property
     def kind(self) -> str:

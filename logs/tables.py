@@ -1,39 +1,35 @@
 """A lab's tables (CSV/TSV, whitespace-delimited text, Parquet) as episodes on the model's clock.
 
-One file per episode, or one table whose ``episode_column`` tells its episodes apart (their rows
-contiguous). Files are read in blocks (Parquet by row groups' batches, CSV by pyarrow's streaming
-reader, text line by line) and each block goes straight into its episode's resampler
-(``logs.resample``), so a table larger than memory is read in bounded memory. Each episode's
-skill, anomaly label and onset come from a column, the folder's name or a sidecar label pickle
-(``logs.label_pickle``), as the mapping's ``[table]`` says. A whole run kept as one table with a
-sidecar saying which skill ran when (``phases``) is read as one episode per tagged phase.
+One file per episode, or one table cut into episodes by an ``episode_column`` (their rows
+contiguous), by pauses in its time (``split = "gap"``; with an episode column, both), or by a
+sidecar saying which skill ran when (``phases``); or, with ``parts``, one folder per episode
+holding one file per sensor, each at its own rate and on its own clock, joined on the model's
+clock. Files are read in blocks of checked rows (``logs.table_file``) and each block goes
+straight into its episode's resampler (``logs.resample``, one stream per part), so a table larger
+than memory is read in bounded memory. Each episode's skill, anomaly label and onset come from a
+column, flag columns, the folder's name or a sidecar label pickle (``logs.label_pickle``).
 
-Bad input (a malformed row, a mapped column missing, time going backwards, NaN or inf, an empty
-file, a label pickle holding anything but a label) is a LogError naming the file, or with
-``skip_bad`` a warning and the next file.
+Bad input (a malformed row, a mapped column missing, time not increasing, a blank cell refused,
+a flag that is not true or false, an empty file, a part missing from a folder, a label pickle
+holding anything but a label) is a LogError naming the file (and row), or with ``skip_bad`` a
+warning and the next file or folder.
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.csv as pacsv
-import pyarrow.parquet as pq
 
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.formats import TABLE_SUFFIXES as SUFFIXES
 from neural_asm.logs.label_pickle import Phase, read_anomaly, read_phases
-from neural_asm.logs.mapping import TIME_UNITS, Mapping, Table, Value
+from neural_asm.logs.mapping import Mapping, Part, Table, Value
 from neural_asm.logs.recorded import Recorded
 from neural_asm.logs.resample import EpisodeResampler, Group
-
-BATCH_ROWS = 65_536
-Block = dict[str, np.ndarray]
+from neural_asm.logs.table_file import Rows, TableFile, Wanted
 
 
 def table_files(source: Path, table: Table) -> list[Path]:
@@ -47,88 +43,19 @@ def table_files(source: Path, table: Table) -> list[Path]:
     return files
 
 
-def _format(path: Path, table: Table) -> str:
-    if table.format != "auto":
-        return table.format
-    if path.suffix.lower() not in SUFFIXES:
-        raise LogError(f"{path}: cannot tell the table's format from its suffix; set table.format")
-    return SUFFIXES[path.suffix.lower()]
+def episode_folders(source: Path, table: Table) -> list[Path]:
+    """The episodes' folders: the source, or the folders under it matching ``table.files``, that hold a part's file."""
+    if source.is_file():
+        raise LogError(f"{source} is a file; an episode of parts is a folder")
+    candidates = [source, *sorted(p for p in source.glob(table.files) if p.is_dir())]
+    folders = [f for f in candidates if any(_part_files(f, part) for part in table.parts or [])]
+    if not folders:
+        raise LogError(f"no folder under {source} holds a file matching {[p.files for p in table.parts or []]}")
+    return folders
 
 
-def _numbers(column: Any) -> np.ndarray:
-    """A block's numeric column as floats (an empty cell as NaN, refused later naming its row); text as objects."""
-    if not (pa.types.is_integer(column.type) or pa.types.is_floating(column.type) or pa.types.is_boolean(column.type)):
-        return np.asarray(column.to_pylist(), dtype=object)
-    return column.to_numpy(zero_copy_only=False).astype(np.float64)
-
-
-class _Reader:
-    """One file's column names and its blocks of the wanted columns."""
-
-    def __init__(self, path: Path, fmt: str) -> None:
-        self.path, self.fmt = path, fmt
-        if path.stat().st_size == 0:
-            raise LogError(f"{path}: empty file")
-        try:
-            if fmt == "parquet":
-                self.parquet = pq.ParquetFile(path, pre_buffer=False)  # pre-buffering holds whole row groups: peak memory
-                self.names = list(self.parquet.schema_arrow.names)
-            elif fmt in ("csv", "tsv"):
-                self.names = pacsv.open_csv(path, parse_options=self._csv_options()).schema.names
-            else:
-                with path.open() as f:
-                    header = f.readline().split()
-                if not header:
-                    raise LogError(f"{path}: no header line")
-                self.names = header
-        except (OSError, pa.ArrowException) as exc:
-            raise LogError(f"{path}: {exc}") from None
-
-    def _csv_options(self) -> pacsv.ParseOptions:
-        return pacsv.ParseOptions(delimiter="\t" if self.fmt == "tsv" else ",")
-
-    def blocks(self, columns: list[str]) -> Iterator[Block]:
-        try:
-            if self.fmt == "parquet":
-                for batch in self.parquet.iter_batches(batch_size=BATCH_ROWS, columns=columns):
-                    yield {c: _numbers(batch.column(c)) for c in columns}
-            elif self.fmt in ("csv", "tsv"):
-                convert = pacsv.ConvertOptions(include_columns=columns)
-                with pacsv.open_csv(self.path, parse_options=self._csv_options(), convert_options=convert) as reader:
-                    for batch in reader:
-                        yield {c: _numbers(batch.column(c)) for c in columns}
-            else:
-                yield from self._text_blocks(columns)
-        except pa.ArrowException as exc:
-            raise LogError(f"{self.path}: {str(exc).splitlines()[0]}") from None
-
-    def _text_blocks(self, columns: list[str]) -> Iterator[Block]:
-        index = [self.names.index(c) for c in columns]
-        with self.path.open() as f:
-            f.readline()
-            rows: list[list[str]] = []
-            for line_no, line in enumerate(f, start=2):
-                cells = line.split()
-                if not cells:
-                    continue
-                if len(cells) != len(self.names):
-                    raise LogError(f"{self.path}: line {line_no} has {len(cells)} fields, the header {len(self.names)}")
-                rows.append([cells[i] for i in index])
-                if len(rows) == BATCH_ROWS:
-                    yield self._parsed(rows, columns, line_no)
-                    rows = []
-            if rows:
-                yield self._parsed(rows, columns, line_no)
-
-    def _parsed(self, rows: list[list[str]], columns: list[str], line_no: int) -> Block:
-        cells = np.array(rows, dtype=object)
-        out: Block = {}
-        for j, c in enumerate(columns):
-            try:
-                out[c] = cells[:, j].astype(np.float64)
-            except ValueError:
-                out[c] = cells[:, j]
-        return out
+def _part_files(folder: Path, part: Part) -> list[Path]:
+    return sorted(p for p in folder.glob(part.files) if p.is_file())
 
 
 def _cell_text(cell: Any) -> str:
@@ -136,87 +63,151 @@ def _cell_text(cell: Any) -> str:
     return str(int(cell)) if isinstance(cell, (float, np.floating)) and float(cell).is_integer() else str(cell)
 
 
-@dataclass
 class _Episode:
-    key: Any
-    what: str
-    resampler: EpisodeResampler
-    first: dict[str, Any] = field(default_factory=dict)  # skill/label columns at the first row
-    onset_t: float | None = None
-    skill: str | None = None  # a tagged phase's tag
-    last_t: float = -np.inf
-    last_values: np.ndarray | None = None
+    """One episode as it is read: its resampler, each file's last time (and each stream's last
+    values, to pad with), its label columns' first cells and its flags' first true times."""
+
+    def __init__(self, key: Any, what: str, groups: list[Group], mapping: Mapping, files: int = 1) -> None:
+        self.key, self.what, self.segment = key, what, 0
+        self.resampler = EpisodeResampler(groups, mapping.timing, what)
+        self.last_t = [-np.inf] * files
+        self.last_values: list[np.ndarray | None] = [None] * len(groups)
+        self.stream_t = [-np.inf] * len(groups)
+        self.first: dict[str, Any] = {}
+        self.raised: dict[str, float] = {}  # each flag's first true time
+        self.skill: str | None = None  # a tagged phase's tag
+
+    def add(self, file: int, stream: int | None, rows: Rows, flags: tuple[str, ...], a: int = 0, b: int | None = None) -> None:
+        """Rows ``a:b`` of a block of file ``file``, into resampler stream ``stream`` (None: labels only)."""
+        b = len(rows.t) if b is None else b
+        if b <= a:
+            return
+        t = rows.t[a:b]
+        step = np.diff(np.concatenate([[self.last_t[file]], t]))
+        if (step <= 0).any():
+            i = int(np.flatnonzero(step <= 0)[0])
+            before = self.last_t[file] if i == 0 else t[i - 1]
+            raise LogError(f"{self.what}: row {int(rows.number[a + i])}: time does not increase ({t[i]:.6f} s "
+                           f"after {before:.6f} s)")
+        for c, cells in rows.text.items():
+            self.first.setdefault(c, cells[a])
+        for j, name in enumerate(flags):
+            hit = np.flatnonzero(rows.flags[a:b, j])
+            if name not in self.raised and len(hit):
+                self.raised[name] = float(t[hit[0]])
+        self.last_t[file] = float(t[-1])
+        if stream is not None:
+            self.resampler.add(stream, t, values=rows.values[a:b])
+            self.last_values[stream], self.stream_t[stream] = rows.values[b - 1], float(t[-1])
+
+    def data(self, mapping: Mapping) -> tuple[np.ndarray, float, float]:
+        """Its values on the model's clock, its start and own length (s); a stream that ends
+        early is padded by holding its last sample (``timing.shorter = "hold"``)."""
+        timing, grid = mapping.timing, self.resampler.grid
+        length = min(self.stream_t) - float(grid[0]) if grid is not None else 0.0
+        if timing.shorter == "hold" and grid is not None:
+            for g, (last_t, last) in enumerate(zip(self.stream_t, self.last_values)):
+                if last_t < grid[-1]:
+                    pad = last_t + timing.period_s * np.arange(1, int(np.ceil((grid[-1] - last_t) / timing.period_s)) + 1)
+                    self.resampler.add(g, pad, values=np.repeat(last[None], len(pad), axis=0))  # type: ignore[index]
+        data = self.resampler.finish()
+        return data, float(self.resampler.grid[0]), length  # type: ignore[index]
 
 
 class TableEpisodes:
-    """The episodes of one mapping's tables, read file by file."""
+    """The episodes of one mapping's tables, read file by file (or folder by folder, with parts)."""
 
     def __init__(self, source: Path, mapping: Mapping) -> None:
         assert isinstance(mapping.source, Table)
         self.source, self.mapping, self.table = source, mapping, mapping.source
-        self.group = Group("table rows", tuple(mapping.channels), tuple(range(len(mapping.channels))))
+        self.flags = tuple(self.table.flag_columns) + ((self.table.onset_column,) if self.table.onset_column else ())
         self.number = 0
 
-    def _columns(self, reader: _Reader) -> tuple[str, list[str], list[str]]:
-        """The time column's name, the channels' columns and the label columns; a missing one is refused."""
-        t = self.table.time_column
-        if isinstance(t, int):
-            if t >= len(reader.names):
-                raise LogError(f"{reader.path}: no column at position {t}; it has {len(reader.names)}")
-            t = reader.names[t]
-        channels = [c.column for c in self.mapping.channels]
-        labels = [v.column for v in (self.table.skill, self.table.label, self.table.onset) if v and v.column]
-        if self.table.episode_column:
-            labels.append(self.table.episode_column)
-        missing = [c for c in [t, *channels, *labels] if c not in reader.names]
-        if missing:
-            raise LogError(f"{reader.path}: no column {missing}; its columns: {reader.names}")
-        return t, channels, list(dict.fromkeys(labels))  # type: ignore[list-item]
-
     def read(self, path: Path) -> Iterator[Recorded]:
-        reader = _Reader(path, _format(path, self.table))
-        t_col, channels, label_cols = self._columns(reader)
-        scale = TIME_UNITS[self.table.time_unit]
-        wanted = list(dict.fromkeys([t_col, *channels, *label_cols]))
-        ep_col = self.table.episode_column
+        """The episodes of one table file."""
+        table = self.table
+        channels = tuple(c.column for c in self.mapping.channels)  # type: ignore[misc]
+        wanted = Wanted(table.time_column, channels, self.flags, tuple(dict.fromkeys(table.label_columns)))  # type: ignore[arg-type]
+        group = Group("table rows", tuple(self.mapping.channels), tuple(range(len(channels))))
         phases = self._phases(path)
+        gap = table.gap_s if table.split == "gap" else None
         open_: _Episode | None = None
         seen: set[Any] = set()
-        rows_read = 0
-        for block in reader.blocks(wanted):
-            t = np.asarray(block[t_col], np.float64) * scale if block[t_col].dtype != object else None
-            if t is None:
-                raise LogError(f"{path}: time column {t_col!r} holds text")
-            values = np.empty((len(t), len(channels)))
-            for j, c in enumerate(channels):
-                if block[c].dtype == object:
-                    raise LogError(f"{path}: column {c!r} holds text, not numbers")
-                values[:, j] = block[c]
-            bad = ~np.isfinite(values).all(axis=1) | ~np.isfinite(t)
-            if bad.any():
-                r = int(np.flatnonzero(bad)[0])
-                cols = [c for j, c in enumerate(channels) if not np.isfinite(values[r, j])] or [t_col]
-                raise LogError(f"{path}: NaN, inf or an empty cell in column {cols} at data row {rows_read + r + 1}")
-            keys = block[ep_col] if ep_col else None if phases is None else phase_keys(t, phases)
-            starts = [0] if keys is None else [0, *np.flatnonzero(keys[1:] != keys[:-1]) + 1]
-            for a, b in zip(starts, [*starts[1:], len(t)]):
+        for rows in TableFile(path, table).rows(wanted):
+            n = len(rows.t)
+            if n == 0:
+                continue
+            keys = rows.text[table.episode_column] if table.episode_column else (
+                None if phases is None else phase_keys(rows.t, phases))
+            new = np.zeros(n, dtype=bool)
+            if keys is not None:
+                new[1:] = keys[1:] != keys[:-1]
+            if gap is not None:
+                new[1:] |= np.diff(rows.t) > gap
+            key = None if keys is None else keys[0]
+            new[0] = open_ is None or key != open_.key or (gap is not None and rows.t[0] - open_.last_t[0] > gap)
+            bounds = np.flatnonzero(new).tolist()
+            for a, b in zip([0, *bounds], [*bounds, n]):
                 key = None if keys is None else keys[a]
-                if phases is not None and key < 0:  # between tagged phases
+                if b <= a or (phases is not None and key < 0):  # between tagged phases
                     continue
-                if open_ is None or key != open_.key:
+                if new[a] or open_ is None:
                     if open_ is not None:
                         yield self._finish(open_, path)
-                    if key in seen:
-                        raise LogError(f"{path}: the rows of episode {_cell_text(key)} are not contiguous")
-                    seen.add(key)
-                    open_ = self._open(path, key)
+                    open_ = self._next(open_, key, seen, path, [group])
                     open_.skill = None if phases is None else str(phases[key].tag)
-                    open_.first = {c: block[c][a] for c in label_cols}
-                self._add(open_, t[a:b], values[a:b], block, a, b)
-            rows_read += len(t)
+                open_.add(0, 0, rows, self.flags, a, b)
         if open_ is None:
             raise LogError(f"{path}: no data rows" + ("" if phases is None else " in a tagged phase"))
         yield self._finish(open_, path)
+
+    def _next(self, before: _Episode | None, key: Any, seen: set[Any], path: Path, groups: list[Group]) -> _Episode:
+        """The episode starting at a new key (refused if the key was seen before) or after a pause."""
+        if before is not None and key == before.key:
+            return self._open(path, key, groups, before.segment + 1)
+        if key in seen and key is not None:
+            raise LogError(f"{path}: the rows of episode {_cell_text(key)} are not contiguous")
+        seen.add(key)
+        return self._open(path, key, groups, 0)
+
+    def _open(self, path: Path, key: Any, groups: list[Group], segment: int) -> _Episode:
+        what = f"{path}" + ("" if key is None else f", episode {_cell_text(key)}") + (
+            f", segment {segment}" if self.table.split == "gap" else "")
+        episode = _Episode(key, what, groups, self.mapping)
+        episode.segment = segment
+        return episode
+
+    def read_folder(self, folder: Path) -> Recorded:
+        """The episode of one folder of parts: each file a stream of the resampler (a part with no
+        channel: flags or labels only); a part missing, or matched by several files, is refused."""
+        files = []
+        for part in self.table.parts or []:
+            found = _part_files(folder, part)
+            if len(found) != 1:
+                many = f"{len(found)} files ({', '.join(f.name for f in found)}) match" if found else "no file matches"
+                raise LogError(f"{folder}: {many} part {part.files!r}; an episode has one file of each part")
+            files.append(found[0])
+        columns = [c.column for c in self.mapping.channels]
+        groups: list[Group] = []
+        reads = []
+        for part, path in zip(self.table.parts or [], files):
+            mine = tuple(c for c in part.columns if c in columns)
+            places = tuple(columns.index(c) for c in mine)
+            stream = len(groups) if mine else None
+            if mine:
+                groups.append(Group(f"part {path.name}", tuple(self.mapping.channels[i] for i in places), places))
+            flags = tuple(c for c in self.flags if c in part.columns)
+            text = tuple(c for c in self.table.label_columns if c in part.columns)
+            blocks = TableFile(path, part).rows(Wanted(part.time_column, mine, flags, text))  # type: ignore[arg-type]
+            reads.append((blocks, stream, flags))
+        episode = _Episode(None, str(folder), groups, self.mapping, len(files))
+        for whole in (False, True):  # a block of each file first: the clock is set and no file waits whole
+            for i, (blocks, stream, flags) in enumerate(reads):
+                for rows in blocks:
+                    episode.add(i, stream, rows, flags)
+                    if not whole and len(rows.t):
+                        break
+        return self._finish(episode, files[0])
 
     def _phases(self, path: Path) -> list[Phase] | None:
         """The tagged phases (tag > 0) of the sidecar beside ``path``, in time order; None without ``phases``."""
@@ -227,35 +218,27 @@ class TableEpisodes:
             raise LogError(f"{path}: no phase file {self.table.phases} beside it")
         return sorted((p for p in read_phases(sidecar) if p.tag > 0), key=lambda p: p.start_s)
 
-    def _open(self, path: Path, key: Any) -> _Episode:
-        what = f"{path}" + ("" if key is None else f", episode {_cell_text(key)}")
-        return _Episode(key, what, EpisodeResampler([self.group], self.mapping.timing, what))
-
-    def _add(self, ep: _Episode, t: np.ndarray, values: np.ndarray, block: Block, a: int, b: int) -> None:
-        onset = self.table.onset
-        if onset is not None and onset.column and ep.onset_t is None:
-            hit = np.flatnonzero(np.asarray(block[onset.column][a:b], np.float64) != 0)
-            ep.onset_t = float(t[hit[0]]) if len(hit) else None
-        ep.resampler.add(0, t, values=values)
-        ep.last_t, ep.last_values = float(t[-1]), values[-1]
-
     def _finish(self, ep: _Episode, path: Path) -> Recorded:
-        timing = self.mapping.timing
-        grid = ep.resampler.grid
-        length = ep.last_t - float(grid[0]) if grid is not None else 0.0
-        if timing.shorter == "hold" and grid is not None and ep.last_t < grid[-1]:
-            pad = ep.last_t + timing.period_s * np.arange(1, int(np.ceil((grid[-1] - ep.last_t) / timing.period_s)) + 1)
-            ep.resampler.add(0, pad, values=np.repeat(ep.last_values[None], len(pad), axis=0))  # type: ignore[index]
-        data = ep.resampler.finish()
-        start = float(ep.resampler.grid[0])  # type: ignore[index]
-        skill = self._text(self.table.skill, ep, path) or ep.skill or path.stem
-        label = self._text(self.table.label, ep, path)
-        anomaly = None if label is None or label in self.table.normal else label
-        onset = self._onset(ep, path)
+        """The episode read; ``path`` its (first) file, where folder and sidecar labels are found."""
+        data, start, length = ep.data(self.mapping)
+        parts = self.table.parts is not None
+        skill = self._text(self.table.skill, ep, path) or ep.skill or (path.parent.name if parts else path.stem)
+        anomaly, onset = self._anomaly(ep, path)
         number, self.number = self.number, self.number + 1
-        origin = str(path.relative_to(self.source)) if path != self.source and self.source.is_dir() else path.name
+        where = path.parent if parts else path
+        origin = str(where.relative_to(self.source)) if where != self.source and self.source.is_dir() else where.name
         origin += "" if ep.key is None else f" episode {_cell_text(ep.key)}"
+        origin += f" segment {ep.segment}" if self.table.split == "gap" else ""
         return Recorded(data, skill, origin, start, number, anomaly, None if onset is None else onset - start, length)
+
+    def _anomaly(self, ep: _Episode, path: Path) -> tuple[str | None, float | None]:
+        """The anomaly label and its onset (on the source's clock): the flag raised first, or as label and onset say."""
+        label = self.table.label
+        if label is not None and label.flag is not None:
+            raised = sorted((t, label.flag.index(name), name) for name, t in ep.raised.items() if name in label.flag)
+            return (raised[0][2], raised[0][0]) if raised else (None, None)
+        text = self._text(label, ep, path)
+        return (None if text is None or text in self.table.normal else text), self._onset(ep, path)
 
     def _text(self, value: Value | None, ep: _Episode, path: Path) -> str | None:
         if value is None:
@@ -288,12 +271,11 @@ class TableEpisodes:
         if onset is None:
             return None
         if onset.column is not None:
-            return ep.onset_t
+            return ep.raised.get(onset.column)
         if onset.sidecar is not None:
             sidecar = path.parent / onset.sidecar
             return read_anomaly(sidecar).time_s if sidecar.exists() else None
         raise LogError("table.onset comes from a column or a sidecar label file")
-
 
 def phase_keys(t: np.ndarray, phases: list[Phase]) -> np.ndarray:
     """(len(t),) the index of the phase holding each time (start <= t <= end), -1 outside every phase."""
@@ -307,13 +289,20 @@ def phase_keys(t: np.ndarray, phases: list[Phase]) -> np.ndarray:
 
 
 def read_episodes(source: Path, mapping: Mapping, skip_bad: bool = False) -> Iterator[Recorded | str]:
-    """Every episode of the source's tables; strings are warnings (``skip_bad``)."""
+    """Every episode of the source's tables (or folders of parts); strings are warnings (``skip_bad``)."""
     assert isinstance(mapping.source, Table)
     reader = TableEpisodes(source, mapping)
-    for path in table_files(source, mapping.source):
+    parts = mapping.source.parts is not None
+    for path in episode_folders(source, mapping.source) if parts else table_files(source, mapping.source):
+        what = "folder" if parts else "file"
         try:
-            yield from reader.read(path)
+            if parts:
+                yield reader.read_folder(path)
+            else:
+                yield from reader.read(path)
         except LogError as exc:
             if not skip_bad:
-                raise LogError(f"{exc} (--skip-bad skips this file)") from None
+                raise LogError(f"{exc} (--skip-bad skips this {what})") from None
+            if parts:
+                reader.number += 1  # a skipped folder keeps its number: later episodes do not shift
             yield f"skipped {path}: {exc}"

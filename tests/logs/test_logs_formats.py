@@ -122,7 +122,8 @@ def test_a_mapping_written_before_source_sections_checks_as_its_rewrite():
     provenance = {"mapping": old, "episode_numbers": [0, 1], "lengths_s": [1.0, 2.0], "format": "table"}
     new = parse_mapping(old, "m")
     assert new.to_dict()["source"] == {"kind": "table", "time_column": "t", "files": "**/*", "format": "auto",
-                                       "time_unit": "s", "normal": ["normal"]}
+                                       "time_unit": "s", "normal": ["normal"], "header": True, "blank": "refuse",
+                                       "split": "file"}
     check_checkpoint(parse_mapping(new.to_dict(), "m"), ("a",), provenance)
     slower = {**new.to_dict(), "timing": {"period_s": 0.1, "steps": 40}}
     with pytest.raises(LogError, match="the model was trained on 40 steps of 0.05 s"):

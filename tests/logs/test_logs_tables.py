@@ -121,8 +121,8 @@ def _bad_csv(folder: Path, what: str) -> Path:
 
 
 @pytest.mark.parametrize("what,message", [
-    ("malformed", "Expected 7 columns"), ("missing", "no column"), ("backwards", "do not increase"),
-    ("nan", "NaN, inf"), ("empty", "empty file"), ("pickle", "expected \\(label, time\\)"),
+    ("malformed", "Expected 7 columns"), ("missing", "no column"), ("backwards", r"row 7: time does not increase"),
+    ("nan", r"row 4, column .*: a blank cell"), ("empty", "empty file"), ("pickle", "expected \\(label, time\\)"),
 ])
 def test_bad_tables_are_one_line_exit_2_and_skippable(tmp_path, what, message):
     root = write_kitting(tmp_path / "k", runs=3)
@@ -140,7 +140,7 @@ def test_bad_tables_are_one_line_exit_2_and_skippable(tmp_path, what, message):
 
 
 def test_mapping_refuses_mixed_kinds_and_missing_table():
-    with pytest.raises(LogError, match=r"source.time_column: Field required"):
+    with pytest.raises(LogError, match=r"source: give time_column \(one table per episode"):
         parse_mapping({"timing": {"period_s": 1, "steps": 2}, "channels": [{"name": "a", "units": "1", "column": "a"}]}, "m")
-    with pytest.raises(LogError, match="give one of column, folder, sidecar or value"):
+    with pytest.raises(LogError, match="give one of column, folder, sidecar, value or flag"):
         _mapping(skill={"column": "x", "folder": 1})
