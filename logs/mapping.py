@@ -234,14 +234,14 @@ class Table(Section, Layout):
             return (f"{what} ({lay.format}, {header}), time in column {lay.time_column!r} ({lay.time_unit}), "
                     f"blank cells: {lay.blank}")
         if self.parts is not None:
-            lines = [f"an episode per folder ({self.files!r} under the source, or the source itself) of "
-                     f"{len(self.parts)} files, joined on the model's clock:"]
+            lines = [f"a folder per episode, {len(self.parts)} files each, joined on the model's clock (folders "
+                     f"{self.files!r} under the source, or the source itself, holding a part):"]
             lines += ["  " + file(p, f"{p.files!r} -> {', '.join(p.columns)}") for p in self.parts]
         else:
-            cut = ["a file"] + ([f"a change of {self.episode_column!r}"] if self.episode_column else []) + (
-                [f"a pause over {self.gap_s:g} s"] if self.split == "gap" else [])
-            lines = [file(self, f"tables {self.files!r}"), "an episode per " + (
-                f"tagged phase of {self.phases!r}" if self.phases else " or ".join(cut))]
+            cut = ["an episode per file"] + ([f"per value of {self.episode_column!r}"] if self.episode_column else []) + (
+                [f"a new one after each pause over {self.gap_s:g} s"] if self.split == "gap" else [])
+            lines = [file(self, f"tables {self.files!r}"),
+                     f"an episode per tagged phase of {self.phases!r}" if self.phases else ", ".join(cut)]
         labels = {"skill": self.skill, "label": self.label, "onset": self.onset}
         lines.append("; ".join(f"{k} from {v.model_dump(exclude_none=True)}" for k, v in labels.items() if v)
                      or "skill from the file's name, every episode normal")

@@ -67,10 +67,10 @@ class _Episode:
     """One episode as it is read: its resampler, each file's last time (and each stream's last
     values, to pad with), its label columns' first cells and its flags' first true times."""
 
-    def __init__(self, key: Any, what: str, groups: list[Group], mapping: Mapping, files: int = 1) -> None:
-        self.key, self.what, self.segment = key, what, 0
+    def __init__(self, key: Any, what: str, groups: list[Group], mapping: Mapping, files: list[Path]) -> None:
+        self.key, self.what, self.files, self.segment = key, what, files, 0
         self.resampler = EpisodeResampler(groups, mapping.timing, what)
-        self.last_t = [-np.inf] * files
+        self.last_t = [-np.inf] * len(files)
         self.last_values: list[np.ndarray | None] = [None] * len(groups)
         self.stream_t = [-np.inf] * len(groups)
         self.first: dict[str, Any] = {}
@@ -87,7 +87,7 @@ class _Episode:
         if (step <= 0).any():
             i = int(np.flatnonzero(step <= 0)[0])
             before = self.last_t[file] if i == 0 else t[i - 1]
-            raise LogError(f"{self.what}: row {int(rows.number[a + i])}: time does not increase ({t[i]:.6f} s "
+            raise LogError(f"{self.files[file]}: row {int(rows.number[a + i])}: time does not increase ({t[i]:.6f} s "
                            f"after {before:.6f} s)")
         for c, cells in rows.text.items():
             self.first.setdefault(c, cells[a])
@@ -173,7 +173,7 @@ class TableEpisodes:
     def _open(self, path: Path, key: Any, groups: list[Group], segment: int) -> _Episode:
         what = f"{path}" + ("" if key is None else f", episode {_cell_text(key)}") + (
             f", segment {segment}" if self.table.split == "gap" else "")
-        episode = _Episode(key, what, groups, self.mapping)
+        episode = _Episode(key, what, groups, self.mapping, [path])
         episode.segment = segment
         return episode
 
@@ -200,7 +200,7 @@ class TableEpisodes:
             text = tuple(c for c in self.table.label_columns if c in part.columns)
             blocks = TableFile(path, part).rows(Wanted(part.time_column, mine, flags, text))  # type: ignore[arg-type]
             reads.append((blocks, stream, flags))
-        episode = _Episode(None, str(folder), groups, self.mapping, len(files))
+        episode = _Episode(None, str(folder), groups, self.mapping, files)
         for whole in (False, True):  # a block of each file first: the clock is set and no file waits whole
             for i, (blocks, stream, flags) in enumerate(reads):
                 for rows in blocks:

@@ -28,6 +28,15 @@ def _episodes(seqs: Any) -> list[dict[str, Any]]:
     return rows
 
 
+def _layout(seqs: Any) -> list[str]:
+    """How the mapping says the logs are laid out and read, in words; nothing for other data."""
+    from neural_asm.logs.mapping import parse_mapping
+
+    doc = seqs.provenance.get("mapping")
+    return ["read as " + line if i == 0 else line
+            for i, line in enumerate(parse_mapping(doc, "the mapping").source.layout())] if doc else []
+
+
 @app.command(cls=DataCommand)
 def inspect(
     data: str = typer.Argument(..., help=DATA_HELP),
@@ -43,14 +52,18 @@ def inspect(
     seqs = read_data(data, mapping, skip_bad=mapping is not None)
     rows = _episodes(seqs)
     skipped = seqs.provenance.get("warnings", [])
+    layout = _layout(seqs)
     if as_json:
-        typer.echo(json.dumps({"source": data, "format": seqs.provenance.get("format"), "rate_hz": seqs.rate_hz,
+        typer.echo(json.dumps({"source": data, "format": seqs.provenance.get("format"), "layout": layout,
+                               "rate_hz": seqs.rate_hz,
                                "steps": seqs.data.shape[1], "channels": list(seqs.channel_names), "episodes": rows,
                                "skipped": skipped}, indent=1))
         return
     typer.echo(f"{data}: {len(rows)} episodes of {seqs.data.shape[1]} steps at {seqs.rate_hz:g} Hz "
                f"(a step every {1 / seqs.rate_hz:g} s), {len(seqs.channel_names)} channels: "
                f"{', '.join(seqs.channel_names)}")
+    for line in layout:
+        typer.echo(f"  {line}")
     for row in rows:
         label = "normal" if row["anomaly"] is None else f"anomaly {row['anomaly']}" + (
             "" if row["onset_s"] is None else f" from {row['onset_s']:.3g} s")
