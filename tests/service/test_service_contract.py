@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 
 from neural_asm.models.config import SCORING
 from neural_asm.service.app import create_app
-from neural_asm.service.auth import HEADER
+from neural_asm.models.answer import API_KEY_HEADER
 from neural_asm.service.settings import Settings
 from neural_asm.sim.channels import CHANNEL_NAMES
 
@@ -41,8 +41,8 @@ def test_quota_per_client_address(model_dir):
 def test_quota_per_api_key_counts_websocket_sessions_too(model_dir):
     app = _app(model_dir, api_key="k", max_sessions_per_client=1)
     with TestClient(app) as c:
-        assert c.post("/sessions", json={}, headers={HEADER: "k"}).status_code == 201
-        with c.websocket_connect("/stream", headers={HEADER: "k"}) as ws:
+        assert c.post("/sessions", json={}, headers={API_KEY_HEADER: "k"}).status_code == 201
+        with c.websocket_connect("/stream", headers={API_KEY_HEADER: "k"}) as ws:
             ws.receive_json()
             ws.send_json({"type": "start"})
             answer = ws.receive_json()
@@ -74,7 +74,7 @@ def test_openapi_declares_the_key_only_when_there_is_one(model_dir):
     assert "securitySchemes" not in open_spec.get("components", {})
     assert all("security" not in op and "401" not in op["responses"]
                for ops in open_spec["paths"].values() for op in ops.values())
-    assert keyed["components"]["securitySchemes"]["APIKeyHeader"]["name"] == HEADER
+    assert keyed["components"]["securitySchemes"]["APIKeyHeader"]["name"] == API_KEY_HEADER
     assert keyed["paths"]["/models"]["get"]["security"] == [{"APIKeyHeader": []}]
     assert "security" not in keyed["paths"]["/healthz"]["get"]
 
