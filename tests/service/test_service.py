@@ -18,10 +18,10 @@ import websockets
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
+from neural_asm.models.answer import API_KEY_HEADER
 from neural_asm.recordings.blueprint import ENERGY
 from neural_asm.recordings.readers import read_mcap, read_rrd_series
 from neural_asm.service.app import create_app
-from neural_asm.models.answer import API_KEY_HEADER
 from neural_asm.service.cli import app as cli_app
 from neural_asm.service.embedded import start_embedded
 from neural_asm.service.errors import TooManySessions
