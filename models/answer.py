@@ -13,6 +13,7 @@ with a default is one some answers lack; where an answer has it, it is never nul
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any, Literal
@@ -83,9 +84,9 @@ class StepAnswer:
                                     for c, e in zip(decision.ranked_channels, decision.ranked_errors)],
                    inference_ms=inference_ms, batch_size=batch_size)
 
-    def to_json(self, parts: Sequence[Part] = PARTS) -> dict[str, Any]:
+    def to_json(self, parts: tuple[Part, ...] = PARTS) -> dict[str, Any]:
         """The JSON object of the answer's ``parts`` (a payload of the protocol), in field order."""
-        return {name: getattr(self, name) for name, part in _PART_OF.items() if part in parts}
+        return {name: getattr(self, name) for name in _names(parts)}
 
     @classmethod
     def from_json(cls, payload: Mapping[str, Any]) -> StepAnswer:
@@ -99,3 +100,9 @@ class StepAnswer:
 
 _PART_OF: dict[str, Part] = {f.name: f.metadata["part"] for f in fields(StepAnswer)}
 _REQUIRED = tuple(f.name for f in fields(StepAnswer) if f.default is not None)
+
+
+@functools.cache
+def _names(parts: tuple[Part, ...]) -> tuple[str, ...]:
+    """The fields of ``parts``, in field order: looked up once per payload kind, not per step."""
+    return tuple(name for name, part in _PART_OF.items() if part in parts)
