@@ -37,7 +37,7 @@ def _field(part: Part, description: str | None = None, absent: bool = False) -> 
 
 
 class RankedChannel(TypedDict):
-    """A channel and its |weighted prediction error|."""
+    """A channel and its absolute weighted prediction error."""
 
     channel: str
     error: float
@@ -45,7 +45,13 @@ class RankedChannel(TypedDict):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class StepAnswer:
-    """One observation judged: its energy, the fault decision, the forecast, and where it was served."""
+    """One observation judged: its energy, the fault decision, the forecast, and where it was served.
+
+    The same from a service (``ServiceSession.step``, the client's transports) and from a local
+    ``Monitor.step``. ``session_id``, ``inference_ms`` and ``batch_size`` are None in a local
+    monitor's answers; ``prediction``, ``expected`` and ``errors`` (by channel name) are None in
+    an answer over HTTP ``/fault``.
+    """
 
     session_id: str | None = _field("service", absent=True)
     step: int = _field("step", "index of the observation just scored (0 = first)")
@@ -67,7 +73,8 @@ class StepAnswer:
     threshold: float = _field("decision")
     fpr: float = _field("decision")
     isolated_joint: str | None = _field("decision", "joint channel with the largest |error|")
-    ranked_channels: list[RankedChannel] = _field("decision", "every channel, largest |weighted error| first")
+    ranked_channels: list[RankedChannel] = _field("decision",
+                                                  "every channel with its absolute weighted error, largest first")
 
     @classmethod
     def judged(cls, score: StepScore, decision: FaultDecision, channel_names: Sequence[str], fpr: float,
@@ -94,7 +101,7 @@ class StepAnswer:
         a ValueError names the keys it lacks."""
         missing = [name for name in _REQUIRED if name not in payload]
         if missing:
-            raise ValueError(f"not a step answer: no {', '.join(repr(name) for name in missing)} in {dict(payload)}")
+            raise ValueError(f"not a step answer: no {', '.join(repr(name) for name in missing)}")
         return cls(**{name: payload[name] for name in _PART_OF if name in payload})
 
 
