@@ -5,7 +5,8 @@ refused), finite and bounded (|x| <= 1e6): NaN and inf are refused with a 422 na
 the field, and 1e39, finite in Python, would be inf in float32. The rules a field's
 type cannot say are in the JSON schema too: exactly one of ``observation`` and
 ``channels`` (``oneOf``), and the false-positive rates thresholds are calibrated at
-(``enum``).
+(``enum``). The step payloads' schemas are made from the fields of ``StepAnswer``
+(``models/answer.py``), the one type of a step's answer.
 """
 
 import dataclasses
@@ -14,7 +15,7 @@ from typing import Annotated, Any, Literal, get_args, get_type_hints
 from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, create_model,
                       model_validator)
 
-from neural_asm.models.answer import Part, StepAnswer
+from neural_asm.models.answer import PARTS, Part, StepAnswer
 from neural_asm.models.config import SCORING
 from neural_asm.models.fault import ThresholdKind
 
@@ -164,9 +165,9 @@ class StepRequest(Observation):
 
 
 def _present(annotation: Any) -> Any:
-    """``X`` of ``X | None``: a part an answer carries is never null."""
-    kept = [arg for arg in get_args(annotation) if arg is not type(None)]
-    return annotation if len(kept) == len(get_args(annotation)) else kept[0]
+    """``X`` of ``X | None``: a field some answers lack is never null in a payload that carries it."""
+    (present,) = [arg for arg in get_args(annotation) if arg is not type(None)]
+    return present
 
 
 def _answer(name: str, parts: tuple[Part, ...], doc: str | None = None) -> type[BaseModel]:
@@ -182,7 +183,7 @@ def _answer(name: str, parts: tuple[Part, ...], doc: str | None = None) -> type[
 
 PREDICT: tuple[Part, ...] = ("step", "service", "forecast")
 FAULT: tuple[Part, ...] = ("step", "service", "decision")
-STEP: tuple[Part, ...] = ("step", "service", "forecast", "decision")
+STEP: tuple[Part, ...] = PARTS  # the websocket's: every part
 PredictResponse = _answer("PredictResponse", PREDICT)
 FaultResponse = _answer("FaultResponse", FAULT)
 StepResult = _answer("StepResult", STEP, "A websocket step: the /fault payload plus the /predict one.")
