@@ -239,7 +239,7 @@ def test_the_service_flags_the_episodes_the_benchmark_flags(bench, tmp_path, mod
                 ws = WebSocketTransport(server.url, None)
                 try:
                     ws.start({"model": "varied", "mode": mode, "cue_steps": 1, "fpr": 0.01})
-                    flags.append([ws.step(x.tolist())["fault"] for x in episode])
+                    flags.append([ws.step(x.tolist()).fault for x in episode])
                 finally:
                     ws.close()
         return np.array(flags)
