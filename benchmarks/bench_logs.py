@@ -108,7 +108,7 @@ def read_one(bag: Path, mapping_file: Path) -> None:
     seconds, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
     print(json.dumps({"seconds": seconds, "cpu_seconds": cpu, "episodes": len(seqs.data), "peak_rss_mb": peak_mb,
-                      "warnings": len(seqs.provenance["warnings"])}))
+                      "warnings": len(seqs.warnings)}))
 
 
 def main() -> None:

@@ -27,6 +27,7 @@ from typer.testing import CliRunner
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.recordings import EpisodeRecorder
+from neural_asm.recordings.episode import Live, View
 from neural_asm.recordings import blueprint as bp
 from neural_asm.recordings.live import open_viewer, proxy_url, rerun_executable
 from neural_asm.recordings.live_process import QUEUE, LiveProcess, ViewerSpec
@@ -130,7 +131,7 @@ def test_a_served_view_on_loopback_gives_a_late_viewer_what_the_file_has(tmp_pat
     try:
         assert viewer.served and viewer.url.startswith("rerun+http://127.0.0.1:")
         with EpisodeRecorder("client-live", ["joint1", "joint2", "a", "b"], folder=tmp_path, formats=("rrd",),
-                             live=viewer, joints=[0, 1]) as rec:
+                             view=View(joints=(0, 1)), live=Live(viewer)) as rec:
             for record in steps(12, flagged_from=8):
                 rec.log_step(record)
         late = tmp_path / "late.rrd"
