@@ -3,10 +3,12 @@
     client = ServiceClient("http://127.0.0.1:8000", api_key=KEY)
     with client.session(model="panda", fpr=0.01) as session:
         for x in episode:
-            answer = session.step(x)   # the websocket "step" answer: fault, energy, isolated_joint, ...
+            answer = session.step(x)   # a StepAnswer: answer.fault, answer.energy, answer.isolated_joint, ...
 
-The session runs over the websocket ``/stream`` (one connection per session); the answers
-are the protocol's messages as dictionaries (``/asyncapi.json`` describes them).
+The session runs over the websocket ``/stream`` (one connection per session); each step's
+answer is a ``StepAnswer``, the type ``Monitor.step`` returns in-process (the protocol's
+"step" message, which ``/asyncapi.json`` describes). The other answers are the protocol's
+messages as dictionaries.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from neural_asm.client.transport import TIMEOUT_S, WebSocketTransport, check_url, served_models
+from neural_asm.models.answer import StepAnswer
 
 
 class ServiceSession:
@@ -27,7 +30,7 @@ class ServiceSession:
         self._transport = transport
         self.info = info  # the "started" message: session id, model, rate, threshold settings
 
-    def step(self, observation: Sequence[float] | np.ndarray) -> dict[str, Any]:
+    def step(self, observation: Sequence[float] | np.ndarray) -> StepAnswer:
         """Send one raw observation (channel order of the model); the service's verdict on it."""
         return self._transport.step([float(v) for v in observation])
 

@@ -14,8 +14,10 @@ import numpy as np
 from neural_asm.client.source import StreamedEpisode
 from neural_asm.client.summary import EpisodeSummary, StepLine, say, step_line
 from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost, Transport
+from neural_asm.models.answer import StepAnswer
 from neural_asm.models.fault import joint_channels
 from neural_asm.recordings import DEFAULT_DIR, EpisodeRecorder, new_run_id
+from neural_asm.recordings.episode import Live, View
 from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.live import LiveViewer
 from neural_asm.recordings.records import StepRecord
@@ -47,11 +49,9 @@ class StreamOptions:
     foxglove: FoxgloveLive | None = None  # also served to Foxglove
 
 
-def _vector(result: dict[str, Any], key: str, names: tuple[str, ...]) -> np.ndarray | None:
-    values = result.get(key)
-    if not values:
-        return None
-    return np.array([values[n] for n in names], np.float64)
+def _vector(values: dict[str, float] | None, names: tuple[str, ...]) -> np.ndarray | None:
+    """Named values (absent from an HTTP ``/fault`` answer) in channel order."""
+    return None if values is None else np.array([values[n] for n in names], np.float64)
 
 
 class _Stream:
@@ -118,19 +118,18 @@ class _Stream:
                     "transport": self.connection.transport, **(asdict(ep.outcome) if ep.outcome else {})}
         service_logs_events = any(k.split("#")[0] == "rrd" for k in summary.service_recordings)
         return EpisodeRecorder(summary.recording_id, ep.channel_names, folder=self.options.out,
-                               recording_id=summary.recording_id, metadata=metadata, step_period_s=ep.period_s,
-                               joints=joint_channels(ep.channel_names), events=not service_logs_events,
-                               live=self.options.live, foxglove=self.options.foxglove)
+                               recording_id=summary.recording_id, metadata=metadata,
+                               view=View(ep.period_s, tuple(joint_channels(ep.channel_names)),
+                                         events=not service_logs_events),
+                               live=Live(self.options.live, self.options.foxglove))
 
-    def score(self, k: int, result: dict[str, Any], rec: EpisodeRecorder) -> None:
+    def score(self, k: int, answer: StepAnswer, rec: EpisodeRecorder) -> None:
         """Record and print step ``k``'s verdict."""
         names, summary, t_k = self.episode.channel_names, self.summary, k * self.episode.period_s
-        line = StepLine(step=k, time_s=t_k, energy=float(result["energy"]), threshold=float(result["threshold"]),
-                        fault=bool(result["fault"]), isolated_joint=result.get("isolated_joint"),
-                        inference_ms=float(result.get("inference_ms", float("nan"))), skill=result.get("skill"))
+        line = StepLine.of(answer, k, t_k)
         rec.log_step(StepRecord(
-            step=k, observation=self.episode.observations[k], expected=_vector(result, "expected", names),
-            prediction=_vector(result, "prediction", names), errors=_vector(result, "errors", names),
+            step=k, observation=self.episode.observations[k], expected=_vector(answer.expected, names),
+            prediction=_vector(answer.prediction, names), errors=_vector(answer.errors, names),
             energy=line.energy, threshold=line.threshold, fault=line.fault,
             isolated_joint=line.isolated_joint, time_s=t_k))
         summary.steps.append(line)
@@ -153,11 +152,11 @@ class _Stream:
                 rec.log_world(world[shown])
                 shown += 1
             try:
-                result = self.conn.step(ep.observations[k].tolist())
+                answer = self.conn.step(ep.observations[k].tolist())
             except ServiceLost as exc:
                 self.reopen(k, exc, f"service lost at step {k}")
                 continue  # send step k again on the new session
-            self.score(k, result, rec)
+            self.score(k, answer, rec)
             if after_step is not None:
                 after_step(k)
             k += 1

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from neural_asm.models.answer import StepAnswer
 from neural_asm.sim.config import SIM
 
 
@@ -18,6 +19,12 @@ class StepLine:
     isolated_joint: str | None
     inference_ms: float
     skill: str | None = None  # recognised by the service at this step
+
+    @classmethod
+    def of(cls, answer: StepAnswer, step: int, time_s: float) -> StepLine:
+        """The line of the service's answer to the episode's step ``step``, observed at ``time_s``."""
+        ms = float("nan") if answer.inference_ms is None else answer.inference_ms
+        return cls(step, time_s, answer.energy, answer.threshold, answer.fault, answer.isolated_joint, ms, answer.skill)
 
 
 @dataclass

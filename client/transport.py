@@ -1,7 +1,7 @@
 """How the client talks to the service: a websocket ``/stream`` or plain HTTP requests.
 
-Both transports offer the same four calls (start, step, end, close) and turn what can go
-wrong into two errors: ``ServiceError`` (the service refused: fix the request) and
+Both transports offer the same four calls (start, step, end, close), a step answered by a
+``StepAnswer`` parsed once from its JSON, and turn what can go wrong into two errors: ``ServiceError`` (the service refused: fix the request) and
 ``ServiceLost`` (it went away or stopped answering: a reconnect may help).
 """
 
@@ -16,10 +16,9 @@ import httpx
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 from websockets.sync.client import connect as ws_connect
 
+from neural_asm.models.answer import API_KEY_HEADER, SESSION_ID_HEADER, StepAnswer
 from neural_asm.runtime.net import is_loopback
 
-API_KEY_HEADER = "X-API-Key"
-SESSION_ID_HEADER = "X-Session-Id"  # as service/schemas.py
 TIMEOUT_S = 30.0
 
 
@@ -33,7 +32,7 @@ class ServiceError(RuntimeError):
 
 class Transport(Protocol):
     def start(self, params: dict[str, Any]) -> dict[str, Any]: ...
-    def step(self, observation: list[float]) -> dict[str, Any]: ...
+    def step(self, observation: list[float]) -> StepAnswer: ...
     def end(self) -> dict[str, Any] | None: ...
     def close(self) -> None: ...
 
@@ -48,6 +47,14 @@ def check_url(url: str) -> str:
     if parsed.scheme not in ("http", "https") or not parsed.hostname:
         raise ValueError(f"--url {url!r} is not an http(s) URL; write it like http://127.0.0.1:8000")
     return url
+
+
+def _answer(payload: dict[str, Any]) -> StepAnswer:
+    """The step answer in a decoded payload; a ServiceError if it is none."""
+    try:
+        return StepAnswer.from_json(payload)
+    except (ValueError, TypeError) as exc:
+        raise ServiceError(f"the service's answer to a step: {exc}") from exc
 
 
 def _headers(api_key: str | None) -> dict[str, str]:
@@ -106,8 +113,8 @@ class WebSocketTransport:
     def start(self, params: dict[str, Any]) -> dict[str, Any]:
         return self._call({"type": "start", **params}, "started")
 
-    def step(self, observation: list[float]) -> dict[str, Any]:
-        return self._call({"type": "step", "observation": observation}, "step")
+    def step(self, observation: list[float]) -> StepAnswer:
+        return _answer(self._call({"type": "step", "observation": observation}, "step"))
 
     def end(self) -> dict[str, Any] | None:
         return self._call({"type": "end"}, "ended")
@@ -147,8 +154,8 @@ class HttpTransport:
         self.session_id = info["session_id"]
         return info
 
-    def step(self, observation: list[float]) -> dict[str, Any]:
-        return self._request("POST", "/fault", {"session_id": self.session_id, "observation": observation})
+    def step(self, observation: list[float]) -> StepAnswer:
+        return _answer(self._request("POST", "/fault", {"session_id": self.session_id, "observation": observation}))
 
     def end(self) -> dict[str, Any] | None:
         if self.session_id is None:

@@ -30,11 +30,11 @@ def main() -> None:
             with client.session(model="panda", fpr=0.05) as session:
                 for x in episode.observations:
                     answer, verdict = session.step(x), local.step(x)
-                    if answer["fault"] != verdict.fault or abs(answer["energy"] - verdict.energy) > 1e-6 * verdict.energy:
+                    if answer.fault != verdict.fault or abs(answer.energy - verdict.energy) > 1e-6 * verdict.energy:
                         raise SystemExit(f"step {verdict.step}: the service and the local monitor disagree")
-                    if answer["fault"]:
-                        print(f"step {answer['step']}: fault, isolated {answer['isolated_joint']}, served in "
-                              f"{answer['inference_ms']:.2f} ms")
+                    if answer.fault:
+                        print(f"step {answer.step}: fault, isolated {answer.isolated_joint}, served in "
+                              f"{answer.inference_ms:.2f} ms")
     print("the service and SkillMemory.monitor gave the same verdict at every step")
 
 

@@ -43,7 +43,7 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
                   "warnings": warnings}
     return Sequences(np.stack([e.data for e in episodes]), np.array([e.label for e in episodes]),
                      mapping.channel_names, provenance=provenance, rate_hz=1.0 / mapping.timing.period_s,
-                     episodes=tuple(_facts(e, mapping.timing) for e in episodes))
+                     episodes=tuple(_facts(e, mapping.timing) for e in episodes), warnings=tuple(warnings))
 
 
 def _facts(episode: Recorded, timing: Timing) -> EpisodeFacts:
@@ -61,12 +61,20 @@ def load_log_sequences(source: str | Path, mapping_file: str | Path, skip_bad: b
     return read_mapped(source, load_mapping(mapping_file), str(mapping_file), skip_bad)
 
 
+def read_as(seqs: Sequences) -> list[str]:
+    """How the mapping the sequences were read through lays out and reads the logs, in words
+    (``nasm logs inspect``); nothing for data read without one."""
+    doc = seqs.provenance.get("mapping")
+    lines = parse_mapping(doc, "the mapping").source.layout() if doc else []
+    return [f"read as {line}" if i == 0 else line for i, line in enumerate(lines)]
+
+
 def episode_position(seqs: Sequences, number: int) -> int:
     """Where episode ``number`` of the source is in ``seqs``, or a LogError saying why it is not there."""
     numbers = [e.number for e in seqs.episodes] if seqs.episodes else list(range(len(seqs.data)))
     if number in numbers:
         return numbers.index(number)
-    skipped = [w for w in seqs.provenance.get("warnings", []) if f"episode {number}" in w]
+    skipped = [w for w in seqs.warnings if f"episode {number}" in w]
     have = f"{numbers[0]}..{numbers[-1]}" if numbers == list(range(numbers[0], numbers[-1] + 1)) else str(numbers)
     raise LogError(f"episode {number} is not among the episodes read from {seqs.provenance.get('source')}"
                    + (f": {skipped[0]}" if skipped else f" (it has episodes {have})"))

@@ -28,7 +28,8 @@ if TYPE_CHECKING:
     from neural_asm.client.transport import ServiceError, ServiceLost
     from neural_asm.logs.errors import LogError
     from neural_asm.logs.sources import load_log_sequences as read_logs
-    from neural_asm.memory import Monitor, SkillMemory, Verdict
+    from neural_asm.memory import Monitor, SkillMemory
+    from neural_asm.models.answer import StepAnswer
     from neural_asm.models.checkpoint import CheckpointError
     from neural_asm.models.config import PRESETS, TPCConfig
     from neural_asm.models.cross_fit import CrossFit
@@ -45,7 +46,7 @@ if TYPE_CHECKING:
 _EXPORTS: dict[str, tuple[str, str]] = {
     "SkillMemory": ("neural_asm.memory", "SkillMemory"),
     "Monitor": ("neural_asm.memory", "Monitor"),
-    "Verdict": ("neural_asm.memory", "Verdict"),
+    "StepAnswer": ("neural_asm.models.answer", "StepAnswer"),
     "CrossFit": ("neural_asm.models.cross_fit", "CrossFit"),
     "Sequences": ("neural_asm.models.sequences", "Sequences"),
     "SequenceScore": ("neural_asm.models.scoring", "SequenceScore"),

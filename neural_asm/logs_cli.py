@@ -28,15 +28,6 @@ def _episodes(seqs: Any) -> list[dict[str, Any]]:
     return rows
 
 
-def _layout(seqs: Any) -> list[str]:
-    """How the mapping says the logs are laid out and read, in words; nothing for other data."""
-    from neural_asm.logs.mapping import parse_mapping
-
-    doc = seqs.provenance.get("mapping")
-    return ["read as " + line if i == 0 else line
-            for i, line in enumerate(parse_mapping(doc, "the mapping").source.layout())] if doc else []
-
-
 @app.command(cls=DataCommand)
 def inspect(
     data: str = typer.Argument(..., help=DATA_HELP),
@@ -48,11 +39,12 @@ def inspect(
     Each episode's own steps, skill, anomaly label and onset, the rate and the channels; for
     logs, what would be skipped and why (the warnings)."""
     from neural_asm.data import read_data
+    from neural_asm.logs.sources import read_as
 
     seqs = read_data(data, mapping, skip_bad=mapping is not None)
     rows = _episodes(seqs)
-    skipped = seqs.provenance.get("warnings", [])
-    layout = _layout(seqs)
+    skipped = seqs.warnings
+    layout = read_as(seqs)
     if as_json:
         typer.echo(json.dumps({"source": data, "format": seqs.provenance.get("format"), "layout": layout,
                                "rate_hz": seqs.rate_hz,

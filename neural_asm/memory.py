@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from neural_asm.models import checkpoint
+from neural_asm.models.answer import StepAnswer
 from neural_asm.models.asm import NeuralASM, SkillStream, step_streams
 from neural_asm.models.calibration import set_energy_thresholds
 from neural_asm.models.config import DEFAULT_RATE_HZ, PRESETS, SCORING, TPCConfig
@@ -34,40 +34,27 @@ def _data(sequences: Sequences | np.ndarray) -> np.ndarray:
     return sequences.data if isinstance(sequences, Sequences) else np.asarray(sequences, np.float64)
 
 
-@dataclass(frozen=True)
-class Verdict:
-    """One observation judged: the fields of the service's step answer."""
-
-    step: int  # index of the observation just scored (0 = first)
-    fault: bool
-    energy: float  # precision-weighted squared prediction error of this step
-    threshold: float
-    isolated_joint: str | None  # the joint channel with the largest |weighted error|
-    ranked_channels: list[str]  # every channel, largest |weighted error| first
-    expected: np.ndarray  # (D,) what the memory expected of this observation, original units
-    prediction: np.ndarray  # (D,) its forecast of the next observation, original units
-
-
 class Monitor:
-    """One episode monitored as the service monitors a session: ``step(x) -> Verdict``."""
+    """One episode monitored as the service monitors a session: ``step(x) -> StepAnswer``, the
+    service's answer to the same observation less what only a service knows (session, timing)."""
 
     def __init__(self, stream: SkillStream) -> None:
-        self._stream = stream
+        if stream.fpr is None:
+            raise ValueError("a monitor decides: its stream needs a false-positive rate")
+        self._stream, self._fpr = stream, stream.fpr
 
     @property
     def steps(self) -> int:
         """Observations judged so far."""
         return self._stream.t
 
-    def step(self, observation: Observation) -> Verdict:
+    def step(self, observation: Observation) -> StepAnswer:
         """Judge one raw observation (a vector in channel order, or a channel -> value mapping);
         a ValueError names what is wrong with it."""
         result = step_streams([self._stream], self._stream.check(observation)[None])[0]
         if result is None or result.decision is None:
             raise FloatingPointError(f"step {self._stream.t}: the memory's outputs are not finite")
-        score, decision = result.score, result.decision
-        return Verdict(score.step, decision.fault, score.energy, decision.threshold, decision.isolated_joint,
-                       decision.ranked_channels, score.expected, score.prediction)
+        return StepAnswer.judged(result.score, result.decision, self._stream.model.channel_names, self._fpr)
 
 
 class SkillMemory:
@@ -111,9 +98,8 @@ class SkillMemory:
             names = tuple(channel_names) if channel_names is not None else tuple(f"x{i}" for i in range(width))
             labels = np.asarray(skills) if skills is not None else np.full(len(data), "skill")
             seqs = Sequences(data, labels, names, rate_hz=rate_hz or DEFAULT_RATE_HZ)
-        provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs)}
-        if seqs.seeds is not None:
-            provenance["seeds"] = seqs.seeds.tolist()
+        seeds = {} if seqs.seeds is None else {"seeds": seqs.seeds.tolist()}
+        provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs), **seeds}
         model = NeuralASM.fit(seqs.data, seqs.channel_names, config, progress=progress, provenance=provenance,
                               labels=seqs.labels, rate_hz=rate_hz or seqs.rate_hz)
         return cls(model)

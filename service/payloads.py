@@ -1,17 +1,18 @@
 """Response bodies from sessions and step outcomes (named channels, plain floats).
 
-Step payloads are built as plain dicts and serialised by orjson: pydantic objects per
-channel would cost as much as the model step itself. Their shape is the
-routes' declared ``response_model`` (tests check both), and the runner has already
-refused non-finite outputs, so nothing can turn into a silent null.
+Step payloads are ``StepAnswer``s (a dataclass of plain values, its ranked channels plain
+dicts) turned into dicts and serialised by orjson: pydantic objects per channel would cost
+as much as the model step itself. Their shape is the routes' declared ``response_model``,
+built from the same fields (tests check both), and the runner has already refused
+non-finite outputs, so nothing can turn into a silent null.
 """
 
 from typing import Any
 
-import numpy as np
 import orjson
 from fastapi import Response
 
+from neural_asm.models.answer import StepAnswer
 from neural_asm.service.runner import StepOutcome
 from neural_asm.service.schemas import SessionInfo
 from neural_asm.service.sessions import Session
@@ -35,37 +36,10 @@ def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
     )
 
 
-def _named(names: tuple[str, ...], values: np.ndarray) -> dict[str, float]:
-    return dict(zip(names, values.tolist()))
-
-
-def _timed(session: Session, o: StepOutcome) -> dict[str, Any]:
-    return {"session_id": session.id, "step": o.score.step, "energy": o.score.energy,
-            "inference_ms": o.inference_ms, "batch_size": o.batch_size, "skill": o.score.skill}
-
-
-def _predict(session: Session, o: StepOutcome) -> dict[str, Any]:
-    s, names = o.score, session.channel_names
-    return {"prediction": _named(names, s.prediction), "expected": _named(names, s.expected),
-            "errors": _named(names, s.weighted_errors)}
-
-
-def _fault(session: Session, o: StepOutcome) -> dict[str, Any]:
-    d = o.decision
-    return {"fault": d.fault, "threshold": d.threshold, "fpr": session.fpr, "isolated_joint": d.isolated_joint,
-            "ranked_channels": [{"channel": c, "error": e} for c, e in zip(d.ranked_channels, d.ranked_errors)]}
-
-
-def predict_payload(session: Session, o: StepOutcome) -> dict[str, Any]:
-    return {**_timed(session, o), **_predict(session, o)}
-
-
-def fault_payload(session: Session, o: StepOutcome) -> dict[str, Any]:
-    return {**_timed(session, o), **_fault(session, o)}
-
-
-def step_payload(session: Session, o: StepOutcome) -> dict[str, Any]:
-    return {**_timed(session, o), **_predict(session, o), **_fault(session, o)}
+def step_answer(session: Session, o: StepOutcome) -> StepAnswer:
+    """The answer to a served step; each route sends its parts (``schemas.PREDICT``, ``FAULT``, ``STEP``)."""
+    return StepAnswer.judged(o.score, o.decision, session.channel_names, session.fpr, session.id, o.inference_ms,
+                             o.batch_size)
 
 
 def json_response(payload: dict[str, Any], headers: dict[str, str] | None = None) -> Response:

@@ -5,20 +5,23 @@ refused), finite and bounded (|x| <= 1e6): NaN and inf are refused with a 422 na
 the field, and 1e39, finite in Python, would be inf in float32. The rules a field's
 type cannot say are in the JSON schema too: exactly one of ``observation`` and
 ``channels`` (``oneOf``), and the false-positive rates thresholds are calibrated at
-(``enum``).
+(``enum``). The step payloads' schemas are made from the fields of ``StepAnswer``
+(``models/answer.py``), the one type of a step's answer.
 """
 
-from typing import Annotated, Any, Literal
+import dataclasses
+from typing import Annotated, Any, Literal, get_args, get_type_hints
 
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, model_validator
+from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, create_model,
+                      model_validator)
 
+from neural_asm.models.answer import PARTS, Part, StepAnswer
 from neural_asm.models.config import SCORING
 from neural_asm.models.fault import ThresholdKind
 
 BOUND = 1e6
 MAX_CHANNELS = 1024
 SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
-SESSION_ID_HEADER = "X-Session-Id"  # answers name their session here; clients send it back (see docker/haproxy.cfg)
 Value = Annotated[float, Field(strict=True, ge=-BOUND, le=BOUND, allow_inf_nan=False)]
 SessionId = Annotated[str, Field(pattern=SESSION_ID_PATTERN)]
 RecallMode = Literal["offline", "online", "plan"]
@@ -161,41 +164,29 @@ class StepRequest(Observation):
     session_id: SessionId
 
 
-class Timed(BaseModel):
-    session_id: str
-    step: int = Field(description="index of the observation just scored (0 = first)")
-    energy: float = Field(description="precision-weighted squared prediction error of this step")
-    inference_ms: float = Field(description="server-side compute time of the batch this step ran in")
-    batch_size: int = Field(description="steps computed together in that batch")
-    skill: str | None = Field(description="the skill the model recognises at this step, from the steps before it "
-                              "(the one whose calibrated mean errors it takes out); null at the first step and for "
-                              "models calibrated without skills")
+def _present(annotation: Any) -> Any:
+    """``X`` of ``X | None``: a field some answers lack is never null in a payload that carries it."""
+    (present,) = [arg for arg in get_args(annotation) if arg is not type(None)]
+    return present
 
 
-class PredictResponse(Timed):
-    prediction: dict[str, float] = Field(description="forecast of the next observation, original units")
-    expected: dict[str, float] = Field(description="what the model expected of this observation")
-    errors: dict[str, float] = Field(
-        description="prediction errors divided by their expected spread; energy = their sum of squares, or "
-        "their quadratic form with the step's precision matrix when the calibration whitens"
-    )
+def _answer(name: str, parts: tuple[Part, ...], doc: str | None = None) -> type[BaseModel]:
+    """The schema of a step payload: the fields of ``StepAnswer`` in ``parts`` (``StepAnswer.to_json(parts)``)."""
+    hints = get_type_hints(StepAnswer)
+    answer_fields: dict[str, Any] = {
+        f.name: (_present(hints[f.name]) if f.default is None else hints[f.name],
+                 Field(description=f.metadata.get("description")))
+        for f in dataclasses.fields(StepAnswer) if f.metadata["part"] in parts
+    }
+    return create_model(name, __doc__=doc, **answer_fields)
 
 
-class RankedChannel(BaseModel):
-    channel: str
-    error: float = Field(description="|weighted prediction error|")
-
-
-class FaultResponse(Timed):
-    fault: bool
-    threshold: float
-    fpr: float
-    isolated_joint: str | None = Field(description="joint channel with the largest |error|")
-    ranked_channels: list[RankedChannel]
-
-
-class StepResult(PredictResponse, FaultResponse):
-    """A websocket step: the /fault payload plus the /predict one."""
+PREDICT: tuple[Part, ...] = ("step", "service", "forecast")
+FAULT: tuple[Part, ...] = ("step", "service", "decision")
+STEP: tuple[Part, ...] = PARTS  # the websocket's: every part
+PredictResponse = _answer("PredictResponse", PREDICT)
+FaultResponse = _answer("FaultResponse", FAULT)
+StepResult = _answer("StepResult", STEP, "A websocket step: the /fault payload plus the /predict one.")
 
 
 class StartMessage(SessionCreate):
@@ -227,8 +218,7 @@ class StartedMessage(SessionInfo):
     type: Literal["started"]
 
 
-class StepReply(StepResult):
-    type: Literal["step"]
+StepReply = create_model("StepReply", __base__=StepResult, type=(Literal["step"], ...))
 
 
 class EndedMessage(SessionInfo):

@@ -7,8 +7,9 @@ from fastapi import APIRouter, Depends, Response
 from neural_asm.service.auth import require_api_key
 from neural_asm.service.deps import get_state
 from neural_asm.service.errors import ERROR_RESPONSES
-from neural_asm.service.payloads import fault_payload, json_response, predict_payload
-from neural_asm.service.schemas import SESSION_ID_HEADER, Error, FaultResponse, PredictResponse, StepRequest
+from neural_asm.models.answer import SESSION_ID_HEADER
+from neural_asm.service.payloads import json_response, step_answer
+from neural_asm.service.schemas import FAULT, PREDICT, Error, FaultResponse, PredictResponse, StepRequest
 from neural_asm.service.state import ServiceState
 
 router = APIRouter(
@@ -22,11 +23,11 @@ router = APIRouter(
 async def predict(req: StepRequest, state: ServiceState = Depends(get_state)) -> Response:
     """Score one observation; returns the next-step prediction, per-channel errors and energy."""
     session, outcome = await state.step(req.session_id, req)
-    return json_response(predict_payload(session, outcome), {SESSION_ID_HEADER: session.id})
+    return json_response(step_answer(session, outcome).to_json(PREDICT), {SESSION_ID_HEADER: session.id})
 
 
 @router.post("/fault", response_model=FaultResponse)
 async def fault(req: StepRequest, state: ServiceState = Depends(get_state)) -> Response:
     """Score one observation; returns the fault flag, energy, threshold, isolated joint and ranked channels."""
     session, outcome = await state.step(req.session_id, req)
-    return json_response(fault_payload(session, outcome), {SESSION_ID_HEADER: session.id})
+    return json_response(step_answer(session, outcome).to_json(FAULT), {SESSION_ID_HEADER: session.id})

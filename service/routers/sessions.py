@@ -2,11 +2,12 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path, Request, Response, status
 
+from neural_asm.models.answer import SESSION_ID_HEADER
 from neural_asm.service.auth import client_of, require_api_key
 from neural_asm.service.deps import get_state
 from neural_asm.service.errors import ERROR_RESPONSES
 from neural_asm.service.payloads import session_info
-from neural_asm.service.schemas import SESSION_ID_HEADER, SESSION_ID_PATTERN, Error, SessionCreate, SessionInfo
+from neural_asm.service.schemas import SESSION_ID_PATTERN, Error, SessionCreate, SessionInfo
 from neural_asm.service.state import ServiceState
 
 router = APIRouter(

@@ -28,11 +28,11 @@ import orjson
 from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect, status
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
+from neural_asm.models.answer import API_KEY_HEADER
 from neural_asm.service import asyncapi
-
-from neural_asm.service.auth import HEADER, client_of, key_ok
+from neural_asm.service.auth import client_of, key_ok
 from neural_asm.service.errors import ServiceError, describe, json_problem, undecodable
-from neural_asm.service.payloads import session_info, step_payload
+from neural_asm.service.payloads import session_info, step_answer
 from neural_asm.service.schemas import ClientMessage, EndMessage, MetadataMessage, SessionCreate, StartMessage
 from neural_asm.service.sessions import Session
 from neural_asm.service.state import ServiceState
@@ -79,7 +79,7 @@ async def _handle(ws: WebSocket, state: ServiceState, text: str | bytes, session
         await _send(ws, "ended", session_info(closed, state.settings.session_idle_s))
         return None
     session, outcome = await state.step(session.id, message)
-    await ws.send_text(orjson.dumps({"type": "step", **step_payload(session, outcome)}).decode())
+    await ws.send_text(orjson.dumps({"type": "step", **step_answer(session, outcome).to_json()}).decode())
     return session
 
 
@@ -92,9 +92,9 @@ def _count_error(state: ServiceState, status_code: int) -> None:
 async def stream(ws: WebSocket) -> None:
     state: ServiceState = ws.app.state.service
     await ws.accept()  # closing before accepting would be an HTTP 403, with no code or reason
-    if not key_ok(state.settings.api_key, ws.headers.get(HEADER)):
+    if not key_ok(state.settings.api_key, ws.headers.get(API_KEY_HEADER)):
         _count_error(state, 401)
-        await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=f"missing or wrong {HEADER} header")
+        await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=f"missing or wrong {API_KEY_HEADER} header")
         return
     await ws.send_json(metadata(state))
     session: Session | None = None

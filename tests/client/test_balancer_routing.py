@@ -5,9 +5,9 @@ header back with each step."""
 import httpx
 import pytest
 
-from neural_asm.client.transport import SESSION_ID_HEADER, HttpTransport
+from neural_asm.client.transport import HttpTransport
+from neural_asm.models.answer import SESSION_ID_HEADER
 from neural_asm.service.embedded import start_embedded
-from neural_asm.service.schemas import SESSION_ID_HEADER as SERVICE_HEADER
 from neural_asm.service.settings import Settings
 
 
@@ -20,15 +20,14 @@ def server(servable_model, tmp_path_factory):
 
 
 def test_answers_name_their_session(server):
-    assert SESSION_ID_HEADER == SERVICE_HEADER
     with httpx.Client(base_url=server.url, timeout=10) as c:
         created = c.post("/sessions", json={"mode": "offline"})
         sid = created.json()["session_id"]
-        assert created.headers[SERVICE_HEADER] == sid
+        assert created.headers[SESSION_ID_HEADER] == sid
         step = c.post("/fault", json={"session_id": sid, "observation": [0.0] * 25})
-        assert step.status_code == 200 and step.headers[SERVICE_HEADER] == sid
-        assert c.post("/predict", json={"session_id": sid, "observation": [0.0] * 25}).headers[SERVICE_HEADER] == sid
-        assert SERVICE_HEADER not in c.get("/healthz").headers
+        assert step.status_code == 200 and step.headers[SESSION_ID_HEADER] == sid
+        assert c.post("/predict", json={"session_id": sid, "observation": [0.0] * 25}).headers[SESSION_ID_HEADER] == sid
+        assert SESSION_ID_HEADER not in c.get("/healthz").headers
 
 
 def test_http_client_sends_the_session_header(server):

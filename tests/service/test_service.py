@@ -18,10 +18,10 @@ import websockets
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
+from neural_asm.models.answer import API_KEY_HEADER
 from neural_asm.recordings.blueprint import ENERGY
 from neural_asm.recordings.readers import read_mcap, read_rrd_series
 from neural_asm.service.app import create_app
-from neural_asm.service.auth import HEADER
 from neural_asm.service.cli import app as cli_app
 from neural_asm.service.embedded import start_embedded
 from neural_asm.service.errors import TooManySessions
@@ -294,11 +294,11 @@ def test_api_key_enforced_and_expiry_on_a_keyed_server(model_dir, tmp_path, epis
                         recordings_dir=tmp_path)
     with start_embedded(settings) as srv, httpx.Client(base_url=srv.url) as c:
         assert c.get("/healthz").status_code == 200
-        for headers in ({}, {HEADER: "wrong"}):
+        for headers in ({}, {API_KEY_HEADER: "wrong"}):
             r = c.get("/models", headers=headers)
-            assert r.status_code == 401 and HEADER in r.json()["detail"]
+            assert r.status_code == 401 and API_KEY_HEADER in r.json()["detail"]
             assert c.post("/sessions", json={}, headers=headers).status_code == 401
-        key = {HEADER: "s3cret"}
+        key = {API_KEY_HEADER: "s3cret"}
         info = c.post("/sessions", json={}, headers=key).json()
         assert info["recordings"] == {} and not list(tmp_path.iterdir())
 
@@ -306,10 +306,10 @@ def test_api_key_enforced_and_expiry_on_a_keyed_server(model_dir, tmp_path, epis
             async with websockets.connect(srv.url.replace("http", "ws") + "/stream", additional_headers=headers) as w:
                 return json.loads(await w.recv())["type"]
 
-        for headers in ({}, {HEADER: "wrong"}):  # as the stream's docstring and the AsyncAPI document say
+        for headers in ({}, {API_KEY_HEADER: "wrong"}):  # as the stream's docstring and the AsyncAPI document say
             with pytest.raises(websockets.exceptions.ConnectionClosedError) as closed:
                 asyncio.run(ws(headers))
-            assert closed.value.rcvd.code == 1008 and HEADER in closed.value.rcvd.reason
+            assert closed.value.rcvd.code == 1008 and API_KEY_HEADER in closed.value.rcvd.reason
         assert asyncio.run(ws(key)) == "metadata"
         time.sleep(1.0)
         assert c.get(f"/sessions/{info['session_id']}", headers=key).status_code == 404

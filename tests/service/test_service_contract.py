@@ -2,18 +2,22 @@
 
 In-process (TestClient, no recording): quotas per client, 405 Allow headers, path
 parameter patterns, the security scheme declared only with a key, the JSON schema's
-oneOf and enum, and every websocket message checked against ``/asyncapi.json``.
+oneOf and enum, every websocket message checked against ``/asyncapi.json``, and every step
+payload one ``StepAnswer``, the type a local ``Monitor`` answers with.
 """
 
+import dataclasses
 from pathlib import Path
 
 import jsonschema
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from neural_asm.models.answer import API_KEY_HEADER, StepAnswer
 from neural_asm.models.config import SCORING
 from neural_asm.service.app import create_app
-from neural_asm.service.auth import HEADER
+from neural_asm.service.schemas import FAULT, FaultResponse, PredictResponse, StepResult
 from neural_asm.service.settings import Settings
 from neural_asm.sim.channels import CHANNEL_NAMES
 
@@ -41,8 +45,8 @@ def test_quota_per_client_address(model_dir):
 def test_quota_per_api_key_counts_websocket_sessions_too(model_dir):
     app = _app(model_dir, api_key="k", max_sessions_per_client=1)
     with TestClient(app) as c:
-        assert c.post("/sessions", json={}, headers={HEADER: "k"}).status_code == 201
-        with c.websocket_connect("/stream", headers={HEADER: "k"}) as ws:
+        assert c.post("/sessions", json={}, headers={API_KEY_HEADER: "k"}).status_code == 201
+        with c.websocket_connect("/stream", headers={API_KEY_HEADER: "k"}) as ws:
             ws.receive_json()
             ws.send_json({"type": "start"})
             answer = ws.receive_json()
@@ -74,7 +78,7 @@ def test_openapi_declares_the_key_only_when_there_is_one(model_dir):
     assert "securitySchemes" not in open_spec.get("components", {})
     assert all("security" not in op and "401" not in op["responses"]
                for ops in open_spec["paths"].values() for op in ops.values())
-    assert keyed["components"]["securitySchemes"]["APIKeyHeader"]["name"] == HEADER
+    assert keyed["components"]["securitySchemes"]["APIKeyHeader"]["name"] == API_KEY_HEADER
     assert keyed["paths"]["/models"]["get"]["security"] == [{"APIKeyHeader": []}]
     assert "security" not in keyed["paths"]["/healthz"]["get"]
 
@@ -130,3 +134,40 @@ def test_asyncapi_document_describes_the_stream(model_dir):
                   {"type": "launch"}):
         kind = wrong["type"] if wrong["type"] in names else "start"
         assert not _validator(document, kind).is_valid(wrong), wrong
+
+
+def test_every_step_payload_is_one_step_answer_and_a_local_monitor_gives_the_same(model_dir):
+    """/predict, /fault and the websocket step each send their declared keys, which are the parts
+    of one StepAnswer; /fault and the websocket parse into it and back unchanged, and a local
+    Monitor with the same settings answers the same observation with the same values, less the
+    service's part."""
+    from neural_asm.memory import SkillMemory
+
+    schemas = {"predict": PredictResponse, "fault": FaultResponse, "step": StepResult}
+    x = np.load(model_dir / "episodes.npy")[0]
+    local = SkillMemory.load(model_dir / "m.safetensors").monitor("offline", 0.05)
+    with TestClient(_app(model_dir)) as c:
+        sid = c.post("/sessions", json={"mode": "offline", "fpr": 0.05}).json()["session_id"]
+        payloads = {route: c.post(f"/{route}", json={"session_id": sid, "observation": x[0].tolist()}).json()
+                    for route in ("predict", "fault")}
+        with c.websocket_connect("/stream") as ws:
+            ws.receive_json()
+            ws.send_json({"type": "start", "mode": "offline", "fpr": 0.05})
+            ws.receive_json()
+            ws.send_json({"type": "step", "observation": x[0].tolist()})
+            payloads["step"] = ws.receive_json()
+    assert payloads["step"].pop("type") == "step"
+    for route, payload in payloads.items():
+        assert list(payload) == list(schemas[route].model_fields), route  # the declared keys, in their order
+    assert set(payloads["predict"]) | set(payloads["fault"]) == set(payloads["step"])
+    fault, step = StepAnswer.from_json(payloads["fault"]), StepAnswer.from_json(payloads["step"])
+    assert fault.to_json(FAULT) == payloads["fault"] and fault.prediction is None
+    assert step.to_json() == payloads["step"] and step.session_id and step.inference_ms and step.batch_size == 1
+    mine = local.step(x[0])
+    assert mine.session_id is mine.inference_ms is mine.batch_size is None
+    assert dataclasses.replace(step, session_id=None, inference_ms=None, batch_size=None) == mine
+
+
+def test_a_payload_that_is_no_step_answer_is_refused_naming_what_it_lacks():
+    with pytest.raises(ValueError, match="no 'fault', 'threshold'"):
+        StepAnswer.from_json({"type": "step", "step": 0, "energy": 1.0, "skill": None})
