@@ -124,24 +124,32 @@ class EpisodeResampler:
                 if not s.last_decoded:
                     s.last, s.last_decoded = self._decoded(g, s.last), True
                 return s.last
-            if values is not None:
-                return values[j - shift]
             if j not in cache:
                 cache[j] = self._decoded(g, payloads[j - shift])  # type: ignore[index]
             return cache[j]
 
         if s.k < steps:
             after = np.searchsorted(times, grid[s.k:] + EPS_S, side="right")
+            # the grid points whose following sample is here; the grid starts at or after every stream's
+            # first sample, so each has a sample before it (j >= 1)
+            after = after[after < len(times)]
             linear = self.linear[g]
-            for j in after[after < len(times)].tolist():
-                before = at(j - 1)  # the grid starts at or after every stream's first sample: j >= 1
-                if linear.any():
-                    w = min(max((grid[s.k] - times[j - 1]) / (times[j] - times[j - 1]), 0.0), 1.0)
-                    nxt = at(j)
-                    s.out[s.k] = np.where(linear, before + w * (nxt - before), before)
-                else:
-                    s.out[s.k] = before
-                s.k += 1
+            if values is not None:  # every sample's values at hand: all those grid points at once
+                held = np.vstack([s.last[None], values]) if have_last else values
+                span = slice(s.k, s.k + len(after))
+                w = np.clip((grid[span] - times[after - 1]) / (times[after] - times[after - 1]), 0.0, 1.0)[:, None]
+                before = held[after - 1]
+                s.out[span] = np.where(linear, before + w * (held[after] - before), before)
+                s.k += len(after)
+            else:
+                for j in after.tolist():
+                    before = at(j - 1)
+                    if linear.any():
+                        w = min(max((grid[s.k] - times[j - 1]) / (times[j] - times[j - 1]), 0.0), 1.0)
+                        s.out[s.k] = np.where(linear, before + w * (at(j) - before), before)
+                    else:
+                        s.out[s.k] = before
+                    s.k += 1
         last = len(times) - 1
         if values is not None:
             s.last, s.last_decoded = values[-1], True

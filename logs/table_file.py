@@ -94,7 +94,8 @@ class TableFile:
             if not first:
                 raise LogError(f"{self.path}: no rows")
             return first if self.layout.header else list(range(len(first)))
-        names = pacsv.open_csv(self.path, read_options=self._read_options(), parse_options=self._parse_options()).schema.names
+        first = self._read_options(block_size=1 << 16)  # the names need one small block
+        names = pacsv.open_csv(self.path, read_options=first, parse_options=self._parse_options()).schema.names
         return names if self.layout.header else list(range(len(names)))
 
     def _read_options(self, **kw: Any) -> pacsv.ReadOptions:
