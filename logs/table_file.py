@@ -131,13 +131,13 @@ class TableFile:
             t = cells.seconds(block["time"], self.layout.time_unit, str(wanted.time))
             values = np.empty((n, len(wanted.channels)))
             for j, c in enumerate(wanted.channels):
-                values[:, j] = cells.floats(block[c], c)
+                values[:, j] = cells.floats(block[c], c.strip())
             flags, flag_blank = np.empty((n, len(wanted.flags)), bool), np.empty((n, len(wanted.flags)), bool)
             for j, c in enumerate(wanted.flags):
-                flags[:, j], flag_blank[:, j] = cells.flags(block[c], c)
+                flags[:, j], flag_blank[:, j] = cells.flags(block[c], c.strip())
             text = {c: _objects(block[c]) for c in wanted.text}
             yield blanks.apply(Rows(number, t, values, flags, text), flag_blank,
-                               (str(wanted.time), *wanted.channels, *wanted.flags))
+                               tuple(str(c).strip() for c in (wanted.time, *wanted.channels, *wanted.flags)))
 
     def _blocks(self, keys: dict[str, Any], wanted: Wanted) -> Iterator[dict[str, Any]]:
         """Blocks of the wanted columns as read (pyarrow arrays, or text's numpy arrays)."""

@@ -7,6 +7,8 @@ by hand from the signals the fixtures write."""
 from __future__ import annotations
 
 import datetime as dt
+import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +22,8 @@ from neural_asm.experiments.robot_logs.write import write_mapping
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.mapping import parse_mapping
 from neural_asm.logs.sources import read_mapped
+from neural_asm.service.embedded import start_embedded
+from neural_asm.service.settings import Settings
 
 T0 = 1_700_000_000.0  # the trials' clock: seconds since the epoch
 PERIOD_S, STEPS = 0.1, 10
@@ -32,11 +36,11 @@ def _iso(seconds: float, hours: int) -> str:
     return dt.datetime.fromtimestamp(seconds, zone).isoformat(timespec="milliseconds")
 
 
-def write_trial(folder: Path, offset: float = 0.0, swap_joint_rows: bool = False) -> Path:
+def write_trial(folder: Path, offset: float = 0.0, swap_joint_rows: bool = False, lost_from: float = 0.8) -> Path:
     """A trial's folder, one file per sensor, each on its own clock and rate, 1.2 s long:
     wrench.csv (200 Hz, time in ms, fx = 2 t + 1), joints.txt (30 Hz, headerless whitespace
     with mixed tabs, spaces and trailing tabs, seconds, q = t^2) and pose.csv (20 Hz, ISO-8601
-    time at UTC+02:00, x = 3 - t, and a grip_lost flag true from 0.8 s); t is seconds after T0."""
+    time at UTC+02:00, x = 3 - t, and a grip_lost flag true from ``lost_from``); t is seconds after T0."""
     folder.mkdir(parents=True)
     wrench = 0.013 + np.arange(240) / 200
     lines = ["t_ms,fx"] + [f"{(T0 + s) * 1000:.3f},{2 * s + 1 + offset:.9f}" for s in wrench]
@@ -47,7 +51,7 @@ def write_trial(folder: Path, offset: float = 0.0, swap_joint_rows: bool = False
         rows[6], rows[7] = rows[7], rows[6]
     (folder / "joints.txt").write_text("\n".join(rows) + "\n")
     pose = 0.05 + np.arange(24) / 20
-    lines = ["Timestamp,x,grip_lost"] + [f"{_iso(T0 + s, 2)},{3 - s + offset:.9f},{'TRUE' if s >= 0.8 else 'FALSE'}"
+    lines = ["Timestamp,x,grip_lost"] + [f"{_iso(T0 + s, 2)},{3 - s + offset:.9f},{'TRUE' if s >= lost_from else 'FALSE'}"
                                          for s in pose]
     (folder / "pose.csv").write_text("\n".join(lines) + "\n")
     return folder
@@ -244,7 +248,7 @@ def test_a_bad_trial_is_one_line_exit_2_or_skipped_and_counted(tmp_path, what):
     result = runner.invoke(app, ["train", str(root), "--mapping", str(mapping), "--out", str(out)])
     assert result.exit_code == 2, result.output
     errors = [line for line in result.output.splitlines() if line.startswith("error")]
-    assert len(errors) == 1 and __import__("re").search(message, errors[0]), result.output
+    assert len(errors) == 1 and re.search(message, errors[0]), result.output
     assert not out.exists()
     seqs = read_mapped(root, parse_mapping(trial_mapping(), "m"), skip_bad=True)
     assert [e.number for e in seqs.episodes] == [0, 2] and len(seqs.provenance["warnings"]) == 1
@@ -266,3 +270,32 @@ def test_inspect_says_how_each_layout_is_read(tmp_path):
     shown = runner.invoke(app, ["logs", "inspect", str(path), "--mapping", str(write_mapping(doc, tmp_path / "t.yaml"))])
     assert shown.exit_code == 0, shown.output
     assert "an episode per file, a new one after each pause over 1 s" in shown.output and "blank cells: drop_row" in shown.output
+
+
+@pytest.mark.slow  # trains a network and serves it
+def test_a_model_trained_from_trial_folders_serves_a_replay_equal_to_score(tmp_path):
+    trials = tmp_path / "trials"
+    for k in range(6):
+        write_trial(trials / f"trial_{k}", offset=0.1 * k, lost_from=np.inf)  # normal trials: no grip lost
+    mapping = write_mapping(trial_mapping(), tmp_path / "m.yaml")
+    models = tmp_path / "models"
+    model = models / "trials.safetensors"
+    trained = runner.invoke(app, ["train", str(trials), "--mapping", str(mapping), "--epochs", "5", "--hidden", "8",
+                                  "--out", str(model)])
+    assert trained.exit_code == 0, trained.output
+    calibrated = runner.invoke(app, ["calibrate", str(model), str(trials), "--mapping", str(mapping)])
+    assert calibrated.exit_code == 0, calibrated.output
+    one = trials / "trial_3"
+    scored = runner.invoke(app, ["score", str(model), str(one), "--mapping", str(mapping), "--json"])
+    assert scored.exit_code == 0, scored.output
+    energy = json.loads(scored.output.strip().splitlines()[-1])["energy"]
+    assert len(energy) == 1 and len(energy[0]) == STEPS and min(energy[0]) > 0.01, energy
+    summaries = tmp_path / "replay.json"
+    settings = Settings(models_dir=models, recordings_dir=tmp_path / "service-recordings", build_default_model=False)
+    with start_embedded(settings) as server:
+        replayed = runner.invoke(app, ["replay", str(one), "--mapping", str(mapping), "--url", server.url,
+                                       "--model", "trials", "--out", str(tmp_path / "rec"), "--json", str(summaries)])
+    assert replayed.exit_code == 0, replayed.output
+    summary = json.loads(summaries.read_text())
+    assert len(summary) == 1 and summary[0]["steps_scored"] == STEPS and summary[0]["completed"]
+    np.testing.assert_allclose([step["energy"] for step in summary[0]["steps"]], energy[0], rtol=1e-5, atol=1e-6)
