@@ -29,6 +29,7 @@ from neural_asm.logs.formats import TABLE_SUFFIXES
 from neural_asm.logs.mapping import TIME_UNITS, Layout
 
 BATCH_ROWS = 65_536
+TIME = "\x00time"  # the time column's key among a block's columns: no column's name
 ZONES = ("UTC", None)  # ISO-8601 text with zone offsets, or without (read as UTC)
 TRUE_WORDS = frozenset({"true", "1", "yes", "1.0"})
 FALSE_WORDS = frozenset({"false", "0", "no", "0.0"})
@@ -119,16 +120,15 @@ class TableFile:
         missing = [c.strip() for c in (*wanted.channels, *wanted.flags, *wanted.text) if c.strip() not in self._by_name]
         if missing:
             raise LogError(f"{self.path}: no column {missing}; its columns: {self.names}")
-        time_key = self.key(wanted.time)
-        keys = {"time": time_key, **{c: self.key(c) for c in (*wanted.channels, *wanted.flags, *wanted.text)}}
+        keys = {TIME: self.key(wanted.time), **{c: self.key(c) for c in (*wanted.channels, *wanted.flags, *wanted.text)}}
         blanks = _Blanks(self.path, self.layout.blank)
         read = 0
         for block in self._blocks(keys, wanted):
-            n = len(block["time"])
+            n = len(block[TIME])
             number = read + 1 + np.arange(n)
             read += n
             cells = _Cells(self.path, number)
-            t = cells.seconds(block["time"], self.layout.time_unit, str(wanted.time))
+            t = cells.seconds(block[TIME], self.layout.time_unit, str(wanted.time))
             values = np.empty((n, len(wanted.channels)))
             for j, c in enumerate(wanted.channels):
                 values[:, j] = cells.floats(block[c], c.strip())
@@ -159,7 +159,7 @@ class TableFile:
         types = {name[keys[c]]: pa.float64() for c in wanted.channels}
         types.update({name[keys[c]]: pa.string() for c in (*wanted.flags, *wanted.text)})
         if self.layout.time_unit == "iso":
-            types[name[keys["time"]]] = pa.string()
+            types[name[keys[TIME]]] = pa.string()
         convert = pacsv.ConvertOptions(include_columns=list(dict.fromkeys(name.values())), column_types=types)
         with pacsv.open_csv(self.path, read_options=self._read_options(block_size=1 << 22),
                             parse_options=self._parse_options(), convert_options=convert) as reader:

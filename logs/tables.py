@@ -67,8 +67,9 @@ class _Episode:
     """One episode as it is read: its resampler, each file's last time (and each stream's last
     values, to pad with), its label columns' first cells and its flags' first true times."""
 
-    def __init__(self, key: Any, what: str, groups: list[Group], mapping: Mapping, files: list[Path]) -> None:
-        self.key, self.what, self.files, self.segment = key, what, files, 0
+    def __init__(self, key: Any, what: str, groups: list[Group], mapping: Mapping, files: list[Path],
+                 segment: int = 0) -> None:
+        self.key, self.what, self.files, self.segment = key, what, files, segment  # segment: after how many pauses
         self.resampler = EpisodeResampler(groups, mapping.timing, what)
         self.last_t = [-np.inf] * len(files)
         self.last_values: list[np.ndarray | None] = [None] * len(groups)
@@ -173,9 +174,7 @@ class TableEpisodes:
     def _open(self, path: Path, key: Any, groups: list[Group], segment: int) -> _Episode:
         what = f"{path}" + ("" if key is None else f", episode {_cell_text(key)}") + (
             f", segment {segment}" if self.table.split == "gap" else "")
-        episode = _Episode(key, what, groups, self.mapping, [path])
-        episode.segment = segment
-        return episode
+        return _Episode(key, what, groups, self.mapping, [path], segment)
 
     def read_folder(self, folder: Path) -> Recorded:
         """The episode of one folder of parts: each file a stream of the resampler (a part with no
