@@ -17,7 +17,7 @@ from neural_asm.logs import formats
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.mapping import check_checkpoint, parse_mapping
 from neural_asm.logs.sources import read_mapped
-from tests.logs.toy_format import ToyReader
+from toy_format import ToyReader  # tests/logs/toy_format.py, beside this file
 
 runner = CliRunner()
 NAMED = "a toy file (.toy)"
