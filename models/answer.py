@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Literal
 
 from typing_extensions import TypedDict  # typing's, before Python 3.12, is not one pydantic can describe
@@ -61,7 +61,10 @@ class StepAnswer:
     batch_size: int | None = _field("service", "steps computed together in that batch", absent=True)
     skill: str | None = _field("step", "the skill the model recognises at this step, from the steps before it (the "
                                "one whose calibrated mean errors it takes out); null at the first step and for "
-                               "models calibrated without skills")
+                               "models calibrated without skills; a skill memory's: the skill it was told, or the "
+                               "most probable after this step")
+    skill_probability: float | None = _field("step", "a skill memory's probability of that skill after this step (1 "
+                                             "when the session was told it); null for other models")
     prediction: dict[str, float] | None = _field("forecast", "forecast of the next observation, original units",
                                                  absent=True)
     expected: dict[str, float] | None = _field("forecast", "what the model expected of this observation",
@@ -78,18 +81,20 @@ class StepAnswer:
 
     @classmethod
     def judged(cls, score: StepScore, decision: FaultDecision, channel_names: Sequence[str], fpr: float,
-               session_id: str | None = None, inference_ms: float | None = None,
-               batch_size: int | None = None) -> StepAnswer:
-        """The answer of a decided step, with the service's part when it was served."""
-        return cls(session_id=session_id, step=score.step, energy=score.energy, skill=score.skill,
+               skill_probability: float | None = None) -> StepAnswer:
+        """The answer of a decided step; a served one adds the service's part (`served`)."""
+        return cls(step=score.step, energy=score.energy, skill=score.skill, skill_probability=skill_probability,
                    prediction=dict(zip(channel_names, score.prediction.tolist())),
                    expected=dict(zip(channel_names, score.expected.tolist())),
                    errors=dict(zip(channel_names, score.weighted_errors.tolist())),
                    fault=decision.fault, threshold=decision.threshold, fpr=fpr,
                    isolated_joint=decision.isolated_joint,
                    ranked_channels=[{"channel": c, "error": e}
-                                    for c, e in zip(decision.ranked_channels, decision.ranked_errors)],
-                   inference_ms=inference_ms, batch_size=batch_size)
+                                    for c, e in zip(decision.ranked_channels, decision.ranked_errors)])
+
+    def served(self, session_id: str, inference_ms: float, batch_size: int) -> StepAnswer:
+        """This answer as a service sends it: with its session and the batch it ran in."""
+        return replace(self, session_id=session_id, inference_ms=inference_ms, batch_size=batch_size)
 
     def to_json(self, parts: tuple[Part, ...] = PARTS) -> dict[str, Any]:
         """The JSON object of the answer's ``parts`` (a payload of the protocol), in field order."""

@@ -38,8 +38,8 @@ def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
 
 def step_answer(session: Session, o: StepOutcome) -> StepAnswer:
     """The answer to a served step; each route sends its parts (``schemas.PREDICT``, ``FAULT``, ``STEP``)."""
-    return StepAnswer.judged(o.score, o.decision, session.channel_names, session.fpr, session.id, o.inference_ms,
-                             o.batch_size)
+    return StepAnswer.judged(o.score, o.decision, session.channel_names, session.fpr,
+                             o.skill_probability).served(session.id, o.inference_ms, o.batch_size)
 
 
 def json_response(payload: dict[str, Any], headers: dict[str, str] | None = None) -> Response:
