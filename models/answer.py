@@ -8,7 +8,9 @@ and the service's schemas are built from its fields, so a new field is declared 
 Each field belongs to one part of the answer: ``step`` (every answer), ``service`` (from the
 service: None from a local monitor), ``forecast`` (``/predict`` and the websocket: None in a
 ``/fault`` answer) and ``decision`` (``/fault``, the websocket and a local monitor). A field
-with a default is one some answers lack; where an answer has it, it is never null.
+with a default is one some answers lack; where an answer has it, it is never null, but for a
+field added since (``skill_probability``): in every answer, null where it does not apply, and
+read as None from an older service's answers.
 """
 
 from __future__ import annotations
@@ -30,10 +32,13 @@ Part = Literal["step", "service", "forecast", "decision"]
 PARTS: tuple[Part, ...] = ("step", "service", "forecast", "decision")
 
 
-def _field(part: Part, description: str | None = None, absent: bool = False) -> Any:
-    """A field of ``part`` (``absent``: None where an answer lacks it); pydantic reads its description."""
-    metadata = {"part": part} if description is None else {"part": part, "description": description}
-    return field(default=None, metadata=metadata) if absent else field(metadata=metadata)
+def _field(part: Part, description: str | None = None, absent: bool = False, added: bool = False) -> Any:
+    """A field of ``part`` (``absent``: None where an answer lacks it; ``added``: null where it does
+    not apply, and None when read from an older service's answer, which lacks it); pydantic reads
+    its description."""
+    metadata = {"part": part, "nullable": added} if description is None else \
+        {"part": part, "nullable": added, "description": description}
+    return field(default=None, metadata=metadata) if absent or added else field(metadata=metadata)
 
 
 class RankedChannel(TypedDict):
@@ -64,7 +69,7 @@ class StepAnswer:
                                "models calibrated without skills; a skill memory's: the skill it was told, or the "
                                "most probable after this step")
     skill_probability: float | None = _field("step", "a skill memory's probability of that skill after this step (1 "
-                                             "when the session was told it); null for other models")
+                                             "when the session was told it); null for other models", added=True)
     prediction: dict[str, float] | None = _field("forecast", "forecast of the next observation, original units",
                                                  absent=True)
     expected: dict[str, float] | None = _field("forecast", "what the model expected of this observation",
