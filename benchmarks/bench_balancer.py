@@ -5,7 +5,8 @@ In one run, on loopback, every service recording its sessions: the 64-session fl
 ``bench_service.py`` against one service process directly (the reference), then through
 HAProxy with the project's configuration in front of N replicas (``balancer_vs_direct`` =
 steps/s through the balancer / steps/s direct). Then a fleet through the balancer during which
-one replica is killed (SIGKILL, with its recorder): ``lost_steps_surviving`` counts the steps the
+one replica is killed (SIGKILL, with its recorder) once half of the fleet's steps are answered:
+``lost_steps_surviving`` counts the steps the
 sessions of the other replicas did not get answered (target 0); the killed replica's clients
 reconnect through the balancer and carry on in a new session from the step they were at
 (``reconnected_sessions``; ``lost_steps_killed``: their steps never answered). The killed
@@ -13,7 +14,10 @@ replica is then restarted on its recordings folder: ``killed_recordings_recovere
 recovered at start, ``killed_recordings_readable`` if every file of that folder reads (mcap
 reader, ``rerun rrd verify``). Needs ``haproxy`` (Debian: apt-get install haproxy).
 
-    python benchmarks/bench_balancer.py --via-balancer 2 [--fleet-steps 150] [--kill-steps 300]
+    python benchmarks/bench_balancer.py --via-balancer 2 [--fleet-steps 150] [--kill-steps 300] [--quick]
+
+``--quick``: 10-step fleets and a 20-step fleet losing its replica, in seconds rather than
+minutes: the test suite runs it so the script keeps working; its numbers mean nothing.
 """
 
 import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
@@ -36,6 +40,7 @@ import orjson
 import websockets
 
 from service_harness import SESSION, build_model, free_port, wait_until_up, warm_fleet
+from neural_asm.recordings.live import rerun_executable
 from neural_asm.recordings.readers import read_mcap
 from neural_asm.sim.config import SIM
 
@@ -78,8 +83,22 @@ class Client:
     answered: int = 0
 
 
+@dataclass
+class Halfway:
+    """The fleet's answered steps, and an event set once half of ``total`` are in."""
+
+    total: int
+    answered: int = 0
+    reached: asyncio.Event = field(default_factory=asyncio.Event)
+
+    def add(self) -> None:
+        self.answered += 1
+        if 2 * self.answered >= self.total:
+            self.reached.set()
+
+
 async def session(url: str, episodes: np.ndarray, steps: int, seed: int, go: asyncio.Event,
-                  connected: asyncio.Barrier, attempts: int = 10) -> Client:
+                  connected: asyncio.Barrier, halfway: Halfway, attempts: int = 10) -> Client:
     """One session stepping ``steps`` times; when its connection is lost, a new connection through
     the balancer and a new session that carries on from the step it was at."""
     c = Client()
@@ -102,6 +121,7 @@ async def session(url: str, episodes: np.ndarray, steps: int, seed: int, go: asy
                     reply = orjson.loads(await ws.recv())
                     assert reply.get("type") == "step", reply
                     c.answered += 1
+                    halfway.add()
                     k += 1
                 return c
         except (websockets.ConnectionClosed, websockets.InvalidStatus, OSError, TimeoutError):
@@ -111,12 +131,12 @@ async def session(url: str, episodes: np.ndarray, steps: int, seed: int, go: asy
 
 async def fleet_with_a_kill(url: str, episodes: np.ndarray, steps: int, victim: subprocess.Popen,
                             victim_name: str) -> list[Client]:
-    connected, go = asyncio.Barrier(SESSIONS + 1), asyncio.Event()
-    tasks = [asyncio.create_task(session(url, episodes, steps, s, go, connected)) for s in range(SESSIONS)]
+    connected, go, halfway = asyncio.Barrier(SESSIONS + 1), asyncio.Event(), Halfway(SESSIONS * steps)
+    tasks = [asyncio.create_task(session(url, episodes, steps, s, go, connected, halfway)) for s in range(SESSIONS)]
     await connected.wait()
     go.set()
     t = time.monotonic()
-    await asyncio.sleep(1.0)  # mid-fleet
+    await halfway.reached.wait()  # mid-fleet
     os.killpg(victim.pid, signal.SIGKILL)
     victim.wait()
     print(f"bench_balancer: killed {victim_name} {time.monotonic() - t:.1f} s into the fleet", file=sys.stderr)
@@ -130,7 +150,7 @@ def readable(markers: list[Path]) -> bool:
         for path in marker.parent.glob(f"{run}.*"):
             if path.suffix == ".mcap" and not read_mcap(path):
                 return False
-            verify = [sys.executable, "-m", "rerun", "rrd", "verify", str(path)]
+            verify = [rerun_executable(), "rrd", "verify", str(path)]
             if path.suffix == ".rrd" and subprocess.run(verify, capture_output=True).returncode != 0:
                 return False
     return bool(markers)
@@ -141,7 +161,11 @@ def main() -> None:
     parser.add_argument("--via-balancer", type=int, default=2, metavar="N", help="replicas behind the balancer")
     parser.add_argument("--fleet-steps", type=int, default=150, help="steps per session in the measured fleets")
     parser.add_argument("--kill-steps", type=int, default=300, help="steps per session in the fleet losing a replica")
+    parser.add_argument("--quick", action="store_true",
+                        help="tiny fleets (seconds, not minutes): checks the script runs, measures nothing")
     args = parser.parse_args()
+    if args.quick:
+        args.fleet_steps, args.kill_steps = 10, 20
     if args.via_balancer < 2:
         sys.exit("bench_balancer: --via-balancer needs at least 2 replicas (one is killed)")
     with tempfile.TemporaryDirectory() as tmp:

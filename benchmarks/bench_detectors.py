@@ -7,7 +7,11 @@ Times are printed in seconds and as a ratio to a reference measured in the same 
 ridge fits of ``models.one_step.RidgeOneStep`` on the same demonstrations), because these
 machines are shared and noisy. One JSON object is the last line.
 
-    python benchmarks/bench_detectors.py [--seed 0]
+    python benchmarks/bench_detectors.py [--seed 0] [--quick]
+
+``--quick``: 5 demonstrations per skill, 20 held-out episodes and the recurrent rivals trained
+for 2 epochs, in seconds; the test suite runs it so the script keeps working (its numbers mean
+nothing).
 """
 
 from __future__ import annotations
@@ -17,11 +21,13 @@ import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 import argparse
 import json
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from neural_asm.models.one_step import RidgeOneStep
 from neural_asm.rivals.registry import line_up
+from neural_asm.rivals.sequence import RecurrentDetector
 
 SKILLS, CONTEXT, STEPS, CHANNELS = ("pick", "place", "push", "stack"), 4, 15, 30
 
@@ -47,9 +53,11 @@ def varied(n_per_skill: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--quick", action="store_true",
+                        help="tiny sizes (seconds, not minutes): checks the script runs, measures nothing")
     args = parser.parse_args()
-    demos, skills = varied(40, args.seed)
-    test, test_skills = varied(50, args.seed + 1)
+    demos, skills = varied(5 if args.quick else 40, args.seed)
+    test, test_skills = varied(5 if args.quick else 50, args.seed + 1)
     mean, std = demos.mean((0, 1)), demos.std((0, 1))
     demos, test = (demos - mean) / std, (test - mean) / std
 
@@ -59,6 +67,8 @@ def main() -> None:
     reference = time.perf_counter() - start
     results = {}
     for det in line_up("varied"):
+        if args.quick and isinstance(det, RecurrentDetector):
+            det.config = replace(det.config, max_epochs=2)
         start = time.perf_counter()
         det.fit(demos, skills, list(range(CONTEXT)), seed=args.seed)
         fit = time.perf_counter() - start

@@ -45,7 +45,11 @@ live viewer's receipt of that step (same process, same clock). The Rerun view is
 same recorder messages, sent within ``recordings.live.LIVE_FLUSH_S``; its receipt is not timed.
 
     python benchmarks/bench_service.py [--record] [--live [--rounds 9]] [--rate 2|40] [--steps 400]
-        [--fleet-steps N] [--sessions 1000]
+        [--fleet-steps N] [--sessions 1000] [--quick]
+
+``--quick`` measures each thing once on tiny sizes (20 steps, 10-step fleets, 40 recorded
+sessions, one round), in seconds rather than minutes: the test suite runs it so the script keeps
+working; its numbers mean nothing.
 """
 
 import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
@@ -271,7 +275,11 @@ def main() -> None:
     parser.add_argument("--live", action="store_true", help="measure metrics and the live views against none, and "
                         "the live view's lag")
     parser.add_argument("--rounds", type=int, default=9, help="rounds of the three setups with --live")
+    parser.add_argument("--quick", action="store_true",
+                        help="tiny sizes (seconds, not minutes): checks the script runs, measures nothing")
     args = parser.parse_args()
+    if args.quick:
+        args.steps, args.fleet_steps, args.sessions, args.rounds = 20, 10, 40, 1
     if args.fleet_steps is None:
         args.fleet_steps = 150 if args.rate == SIM.timing.observation_hz else SIM.timing.observations(args.rate)
     SESSION["rate_hz"] = args.rate

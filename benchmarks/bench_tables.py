@@ -10,7 +10,9 @@ reading process's maximum resident set.
 
 Last line: one JSON object {tables_mb_per_s, tables_peak_rss_mb, tables_cpu_mb_per_s,
 reference_mb_per_s, ratio_to_reference, ...}. Targets: >= 50 MB/s and <= 400 MB.
-Run: python benchmarks/bench_tables.py (``--gb`` sets the file's size).
+Run: python benchmarks/bench_tables.py (``--gb`` sets the file's size; ``--quick`` writes one row
+group of 5,000 rows, read in seconds: the test suite runs it so the script keeps working, its
+numbers mean nothing).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ PER_JOINT = ("target_position", "target_velocity", "target_acceleration", "targe
 SAMPLE_ROWS, GROUP_ROWS = 1000, 50_000
 
 
-def write_parquet(path: Path, gb: float) -> None:
+def write_parquet(path: Path, gb: float, group_rows: int = GROUP_ROWS) -> None:
     """Row groups of random numbers until the file holds ``gb`` GB."""
     rng = np.random.default_rng(0)
     names = ["robot_voltage", "robot_current", "io_current", "system_current"] + [
@@ -48,13 +50,13 @@ def write_parquet(path: Path, gb: float) -> None:
     row = 0
     with pq.ParquetWriter(path, schema, compression="snappy") as writer:
         while not path.exists() or path.stat().st_size < gb * 1e9:
-            i = row + np.arange(GROUP_ROWS)
+            i = row + np.arange(group_rows)
             sample = i // SAMPLE_ROWS
             cols = [i, (i % SAMPLE_ROWS) * 0.01, sample, sample % 10 == 9, np.where(sample % 10 == 9, sample % 12, 12),
-                    np.ones(GROUP_ROWS, np.int64), (i % SAMPLE_ROWS > 500).astype(np.int64), np.ones(GROUP_ROWS, np.int64)]
-            cols += list(rng.standard_normal((len(names), GROUP_ROWS)))
+                    np.ones(group_rows, np.int64), (i % SAMPLE_ROWS > 500).astype(np.int64), np.ones(group_rows, np.int64)]
+            cols += list(rng.standard_normal((len(names), group_rows)))
             writer.write_table(pa.Table.from_arrays([pa.array(c) for c in cols], schema=schema))
-            row += GROUP_ROWS
+            row += group_rows
 
 
 def read_one(path: Path, how: str) -> None:
@@ -86,6 +88,9 @@ def _measure(path: Path, how: str) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--gb", type=float, default=1.0, help="size of the parquet file (GB)")
+    parser.add_argument("--quick", action="store_true",
+                        help="one row group of 5,000 rows (seconds, not minutes): checks the script runs, measures "
+                        "nothing")
     parser.add_argument("--read", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--how", choices=("mapping", "pyarrow"), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -95,7 +100,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="bench_tables_") as tmp:
         path = Path(tmp) / "voraus_like.parquet"
         t0 = time.perf_counter()
-        write_parquet(path, args.gb)
+        write_parquet(path, 0.001, 5000) if args.quick else write_parquet(path, args.gb)
         written_s = time.perf_counter() - t0
         size_mb = path.stat().st_size / 1e6
         ours, reference = _measure(path, "mapping"), _measure(path, "pyarrow")

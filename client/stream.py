@@ -17,6 +17,7 @@ from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost, T
 from neural_asm.models.answer import StepAnswer
 from neural_asm.models.fault import joint_channels
 from neural_asm.recordings import DEFAULT_DIR, EpisodeRecorder, new_run_id
+from neural_asm.recordings.episode import Live, View
 from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.live import LiveViewer
 from neural_asm.recordings.records import StepRecord
@@ -117,9 +118,10 @@ class _Stream:
                     "transport": self.connection.transport, **(asdict(ep.outcome) if ep.outcome else {})}
         service_logs_events = any(k.split("#")[0] == "rrd" for k in summary.service_recordings)
         return EpisodeRecorder(summary.recording_id, ep.channel_names, folder=self.options.out,
-                               recording_id=summary.recording_id, metadata=metadata, step_period_s=ep.period_s,
-                               joints=joint_channels(ep.channel_names), events=not service_logs_events,
-                               live=self.options.live, foxglove=self.options.foxglove)
+                               recording_id=summary.recording_id, metadata=metadata,
+                               view=View(ep.period_s, tuple(joint_channels(ep.channel_names)),
+                                         events=not service_logs_events),
+                               live=Live(self.options.live, self.options.foxglove))
 
     def score(self, k: int, answer: StepAnswer, rec: EpisodeRecorder) -> None:
         """Record and print step ``k``'s verdict."""

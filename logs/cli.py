@@ -66,7 +66,7 @@ def read_logs(source: str, mapping: Path, model: NeuralASM | None = None, skip_b
             check_model(seqs, model.channel_names, model.provenance)
     except LogError as exc:
         raise fail(exc) from None
-    for warning in seqs.provenance["warnings"]:
+    for warning in seqs.warnings:
         typer.secho(f"warning: {warning}", fg="yellow", err=True)
     return seqs
 

@@ -43,7 +43,7 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
                   "warnings": warnings}
     return Sequences(np.stack([e.data for e in episodes]), np.array([e.label for e in episodes]),
                      mapping.channel_names, provenance=provenance, rate_hz=1.0 / mapping.timing.period_s,
-                     episodes=tuple(_facts(e, mapping.timing) for e in episodes))
+                     episodes=tuple(_facts(e, mapping.timing) for e in episodes), warnings=tuple(warnings))
 
 
 def _facts(episode: Recorded, timing: Timing) -> EpisodeFacts:
@@ -66,7 +66,7 @@ def episode_position(seqs: Sequences, number: int) -> int:
     numbers = [e.number for e in seqs.episodes] if seqs.episodes else list(range(len(seqs.data)))
     if number in numbers:
         return numbers.index(number)
-    skipped = [w for w in seqs.provenance.get("warnings", []) if f"episode {number}" in w]
+    skipped = [w for w in seqs.warnings if f"episode {number}" in w]
     have = f"{numbers[0]}..{numbers[-1]}" if numbers == list(range(numbers[0], numbers[-1] + 1)) else str(numbers)
     raise LogError(f"episode {number} is not among the episodes read from {seqs.provenance.get('source')}"
                    + (f": {skipped[0]}" if skipped else f" (it has episodes {have})"))

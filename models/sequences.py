@@ -54,6 +54,7 @@ class Sequences:
     provenance: dict[str, Any] = field(default_factory=dict)  # where the data came from, not facts of an episode
     rate_hz: float = DEFAULT_RATE_HZ  # observations per second along T
     episodes: tuple[EpisodeFacts, ...] = ()  # (N,) each sequence's facts, where a reader knows them
+    warnings: tuple[str, ...] = ()  # what the reader left out or doubted, and why (also kept in the provenance)
 
     def __post_init__(self) -> None:
         if self.data.ndim != 3:

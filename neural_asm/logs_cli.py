@@ -42,7 +42,7 @@ def inspect(
 
     seqs = read_data(data, mapping, skip_bad=mapping is not None)
     rows = _episodes(seqs)
-    skipped = seqs.provenance.get("warnings", [])
+    skipped = seqs.warnings
     if as_json:
         typer.echo(json.dumps({"source": data, "format": seqs.provenance.get("format"), "rate_hz": seqs.rate_hz,
                                "steps": seqs.data.shape[1], "channels": list(seqs.channel_names), "episodes": rows,

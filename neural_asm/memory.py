@@ -115,9 +115,8 @@ class SkillMemory:
             names = tuple(channel_names) if channel_names is not None else tuple(f"x{i}" for i in range(width))
             labels = np.asarray(skills) if skills is not None else np.full(len(data), "skill")
             seqs = Sequences(data, labels, names, rate_hz=rate_hz or DEFAULT_RATE_HZ)
-        provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs)}
-        if seqs.seeds is not None:
-            provenance["seeds"] = seqs.seeds.tolist()
+        seeds = {} if seqs.seeds is None else {"seeds": seqs.seeds.tolist()}
+        provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs), **seeds}
         if skill_cue:
             told = skill_context.SkillMemory.fit(seqs.data, seqs.channel_names, seqs.labels, config, progress,
                                                  provenance, rate_hz or seqs.rate_hz)

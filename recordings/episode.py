@@ -9,6 +9,7 @@ Both files are closed when the block exits, normally, on Ctrl-C or on an error.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Iterable, Protocol
@@ -33,6 +34,29 @@ class _Writer(Protocol):
     def close(self) -> None: ...
 
 
+@dataclass(frozen=True)
+class View:
+    """How an episode is drawn: its step period, which channels are joint angles (drawn observed
+    against expected), whether its ``.rrd`` carries the Rerun layout (not in a file of many that
+    share one, e.g. a service's sessions: see ``recorder``) and the event log (not when another
+    file of the same recording says each event, as the service's does for its clients)."""
+
+    step_period_s: float = 0.5
+    joints: tuple[int, ...] = ()
+    layout: bool = True
+    events: bool = True
+
+
+@dataclass(frozen=True)
+class Live:
+    """Where the steps are also sent as they arrive: a Rerun viewer (with its event log whatever
+    ``View.events`` says: the viewer may have only this side) and a Foxglove server (the MCAP
+    file's messages)."""
+
+    rerun: LiveViewer | None = None
+    foxglove: FoxgloveLive | None = None
+
+
 class EpisodeRecorder:
     def __init__(
         self,
@@ -42,23 +66,14 @@ class EpisodeRecorder:
         folder: str | Path = DEFAULT_DIR,
         recording_id: str | None = None,
         metadata: dict[str, Any] | None = None,
-        step_period_s: float = 0.5,
         formats: Iterable[str] = FORMATS,
-        layout: bool = True,
-        joints: Iterable[int] = (),
-        events: bool = True,
-        live: LiveViewer | None = None,
-        foxglove: FoxgloveLive | None = None,
+        view: View = View(),
+        live: Live = Live(),
     ) -> None:
-        """``joints``: indices of the joint-angle channels, drawn observed against expected.
-        ``layout=False`` leaves the Rerun layout out of the ``.rrd`` (a file of many that
-        share one, e.g. a service's sessions: see ``recorder``). ``events=False`` leaves the
-        event log to another file of the same recording (the service's, which a client's file
-        is opened with), so the merged view says each event once. ``live``: the same logged to
-        that viewer as each step arrives, with its event log whatever ``events`` says (the viewer
-        may have only this side). ``foxglove``:
-        the MCAP file's messages also sent on that Foxglove server as they are written."""
+        """An episode's recordings in ``formats`` under ``folder``, drawn as ``view`` says, also
+        sent ``live``."""
         names = tuple(channel_names)
+        step_period_s, joints, events = view.step_period_s, view.joints, view.events
         formats = tuple(formats)
         unknown = set(formats) - set(FORMATS)
         if unknown:
@@ -70,20 +85,20 @@ class EpisodeRecorder:
         self._writers: list[_Writer] = []
         try:
             if "rrd" in formats:
-                stream = RrdFile(rrd, self.recording_id, bp.episode_blueprint() if layout else None)
-                self._writers.append(RerunEpisode(stream, names, step_period_s, tuple(joints), events))
+                stream = RrdFile(rrd, self.recording_id, bp.episode_blueprint() if view.layout else None)
+                self._writers.append(RerunEpisode(stream, names, step_period_s, joints, events))
                 self.paths["rrd"] = rrd
-            if live is not None:
-                self._writers.append(RerunEpisode(live.episode(self.recording_id), names, step_period_s,
-                                                  tuple(joints), step_batch=1))
+            if live.rerun is not None:
+                self._writers.append(RerunEpisode(live.rerun.episode(self.recording_id), names, step_period_s,
+                                                  joints, step_batch=1))
             run = {"run_id": run_id, "recording_id": self.recording_id, "channel_names": list(names), **(metadata or {})}
             if "mcap" in formats:
                 writer = McapEpisode(McapFile(mcap), names, step_period_s)
                 self._writers.append(writer)
                 self.paths["mcap"] = mcap
                 writer.write_metadata(run)
-            if foxglove is not None:
-                writer = McapEpisode(foxglove.episode(), names, step_period_s)
+            if live.foxglove is not None:
+                writer = McapEpisode(live.foxglove.episode(), names, step_period_s)
                 self._writers.append(writer)
                 writer.write_metadata(run)
         except BaseException:

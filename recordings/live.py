@@ -90,7 +90,11 @@ class LiveViewer:
         """Stop serving (a served viewer's browser page keeps what it received)."""
         if self._web is not None:
             self._web.terminate()
-            self._web.wait(10)
+            try:
+                self._web.wait(10)
+            except subprocess.TimeoutExpired:  # never left behind
+                self._web.kill()
+                self._web.wait()
             self._web = None
         if self._host is not None:
             self._host.disconnect()

@@ -14,7 +14,7 @@ from typing import Any
 from neural_asm.recordings import blueprint as bp
 from neural_asm.recordings import rerun_file
 from neural_asm.recordings.children import POLL_S, ignore_interrupts, parent_gone
-from neural_asm.recordings.episode import EpisodeRecorder
+from neural_asm.recordings.episode import EpisodeRecorder, Live, View
 from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.paths import APP_ID
 from neural_asm.recordings.recover import OPEN_MARKER, recover_interrupted, write_json, writer_identity
@@ -68,8 +68,8 @@ def _record(inbox: Any, outbox: Any, folder: Path, foxglove: FoxgloveLive | None
                           "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "metadata": metadata}
                 write_json(folder / f"{key}{OPEN_MARKER}", opened)
                 writers[key] = EpisodeRecorder(key, names, folder=folder, recording_id=recording_id,
-                                               metadata=metadata, step_period_s=step_period_s, layout=False,
-                                               joints=joints, foxglove=foxglove)
+                                               metadata=metadata, view=View(step_period_s, tuple(joints), layout=False),
+                                               live=Live(foxglove=foxglove))
             except Exception as exc:
                 log.exception("cannot open the recording %s; the session continues unrecorded", key)
                 writers[key], errors[key] = None, f"its recording could not be opened: {exc}"

@@ -40,21 +40,20 @@ class Parallel:
 
     def map(self, fn: Callable[..., Any], args: Sequence[tuple], **options: Any) -> list[Any]:
         """``parallel_map`` here (options: initializer, desc, unit, progress, chunksize)."""
-        return parallel_map(fn, args, self.workers, self.backend, **options)
+        return parallel_map(fn, args, self, **options)
 
 
 def parallel_map(
     fn: Callable[..., Any],
     args: Sequence[tuple],
-    workers: int = 2,
-    backend: Backend = "processes",
+    where: Parallel = Parallel(),
     initializer: Callable[[], None] | None = None,
     desc: str = "jobs",
     unit: str = "job",
     progress: bool = True,
     chunksize: int = 1,
 ) -> list[Any]:
-    """``[fn(*a) for a in args]``, in order, run on `workers` processes or on Ray.
+    """``[fn(*a) for a in args]``, in order, run ``where`` says: local processes or Ray.
 
     `fn` and `initializer` must be importable module-level functions (they are sent to
     other processes); `initializer` runs once per process before its first job (on Ray,
@@ -62,17 +61,13 @@ def parallel_map(
     processes take `chunksize` jobs at a time: more amortises many short jobs, 1 balances
     long uneven ones.
     """
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
     if not args:
         return []
     bar = tqdm(total=len(args), desc=desc, unit=unit, disable=not progress)
     try:
-        if backend == "ray":
-            return _ray_map(fn, args, workers, initializer, bar)
-        if workers == 1:
+        if where.backend == "ray":
+            return _ray_map(fn, args, where.workers, initializer, bar)
+        if where.workers == 1:
             if initializer is not None:
                 initializer()
             results = []
@@ -80,7 +75,7 @@ def parallel_map(
                 results.append(fn(*a))
                 bar.update()
             return results
-        return _process_map(fn, args, workers, initializer, chunksize, bar)
+        return _process_map(fn, args, where.workers, initializer, chunksize, bar)
     finally:
         bar.close()
 

@@ -23,7 +23,7 @@ from dm_control import mjcf
 
 from neural_asm.sim.channels import EE_CHANNELS, FINGER_CHANNELS, GRIPPER_CHANNEL, JOINT_CHANNELS, N_CHANNELS, WRENCH_CHANNELS
 from neural_asm.sim.config import SIM, ControllerKind
-from neural_asm.runtime.parallel import Backend, parallel_map
+from neural_asm.runtime.parallel import Backend, Parallel
 from neural_asm.sim.effects import Tick
 from neural_asm.sim.episode import Episode
 from neural_asm.sim.ik import IKError
@@ -237,5 +237,6 @@ def run_jobs(task: Task[J, V], jobs: list[J], workers: int = 2, desc: str = "epi
              backend: Backend = "processes") -> tuple[list[Episode], list[str]]:
     """Run `task`'s jobs over `workers` processes or on Ray (in order), with a progress bar;
     the episodes, and the failures' messages."""
-    results = parallel_map(run_job, [(task, job) for job in jobs], workers, backend, desc=desc, unit="ep", chunksize=8)
+    results = Parallel(workers, backend).map(run_job, [(task, job) for job in jobs], desc=desc, unit="ep",
+                                                                   chunksize=8)
     return [r for r in results if isinstance(r, Episode)], [r for r in results if isinstance(r, str)]

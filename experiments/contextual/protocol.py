@@ -15,7 +15,7 @@ from neural_asm.experiments.contextual.config import CONDITIONS, MODELS, SKILLS,
 from neural_asm.experiments.contextual.dataset import MOTOR_CHANNELS, channel_names
 from neural_asm.experiments.contextual.tasks import separation_task, skills_task
 from neural_asm.models.config import TPCConfig
-from neural_asm.runtime.parallel import Backend, parallel_map
+from neural_asm.runtime.parallel import Backend, Parallel
 
 Job = tuple[Callable[..., dict[str, Any]], tuple[Any, ...]]
 CUES = tuple(s.name for s in SKILLS[:2])
@@ -110,8 +110,8 @@ def run_protocol(
     """Train and recall everything; returns the summary that contextual.json stores."""
     started = time.perf_counter()
     tpc = tpc.with_(epochs=cfg.epochs)
-    results = parallel_map(_call, [(fn, args) for fn, args in jobs(cfg, tpc)], workers, backend,
-                           desc="contextual", unit="run", progress=progress)
+    results = Parallel(workers, backend).map(_call, [(fn, args) for fn, args in jobs(cfg, tpc)], desc="contextual",
+                                             unit="run", progress=progress)
     summary = summarise(results, cfg)
     summary["setup"] = {
         "protocol": asdict(cfg), "tpc": tpc.to_dict(), "workers": workers, "backend": backend,

@@ -17,7 +17,7 @@ from neural_asm.experiments.varied.pairs import PAIR
 from neural_asm.experiments.varied.score import headline, score_all
 from neural_asm.models.config import FAST, PRECISE
 from neural_asm.rivals.templates import ConditionalTemplate, CueTemplate, PerSkillZScore
-from neural_asm.runtime.parallel import Parallel, parallel_map
+from neural_asm.runtime.parallel import Parallel
 from neural_asm.sim.episode import Episode
 from neural_asm.sim.varied import VARIED_SKILLS
 from neural_asm.sim.runner import run_job
@@ -37,7 +37,7 @@ def bench():
             "faults": faults, "twins": [replace(j, fault=None) for j in faults],
             "val_faults": val_faults, "val_twins": [replace(j, fault=None) for j in val_faults]}
     flat = [(kind, job) for kind, js in jobs.items() for job in js]
-    results = parallel_map(run_job, [(VARIED, job) for _, job in flat], 2, progress=False)
+    results = Parallel(2).map(run_job, [(VARIED, job) for _, job in flat], progress=False)
     sets = {kind: [] for kind in jobs}
     for (kind, _), result in zip(flat, results):
         if isinstance(result, Episode):

@@ -1,6 +1,7 @@
 """The live Rerun view, read back through the SDK: what a viewer receives is captured by the
-SDK's own command (``rerun --save``, a served viewer that writes what it receives to a file)
-and read with ``rerun.chunk.RrdReader``."""
+SDK's own command (``rerun --save``, a served viewer that streams what it receives to a file)
+and read with ``rerun.chunk.RrdReader``. A test waits until the capture holds what it checks
+(read from the file as it grows), never for a while; the capturing viewer dies with the test."""
 
 from __future__ import annotations
 
@@ -11,8 +12,10 @@ import signal
 import socket
 import subprocess
 import time
+import warnings
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Iterator
+from typing import TypeVar
 from urllib.parse import urlsplit
 
 import httpx
@@ -24,6 +27,7 @@ from typer.testing import CliRunner
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.recordings import EpisodeRecorder
+from neural_asm.recordings.episode import Live, View
 from neural_asm.recordings import blueprint as bp
 from neural_asm.recordings.live import open_viewer, proxy_url, rerun_executable
 from neural_asm.recordings.live_process import QUEUE, LiveProcess, ViewerSpec
@@ -32,6 +36,10 @@ from neural_asm.recordings.records import StepBatch, StepRecord
 
 # What the episode layout shows: the origin of each of its views.
 SHOWN = (bp.WORLD, bp.EVENTS, bp.MARGIN, bp.FLAG, bp.ERRORS, "/joints")
+SERIES = (bp.ENERGY, bp.FLAG, bp.JOINTS_OBSERVED)  # series a live viewer gets step by step as the file has them
+
+
+T = TypeVar("T")
 
 
 def free_port() -> int:
@@ -45,48 +53,56 @@ def listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def wait_listening(port: int, timeout_s: float = 60.0) -> bool:
-    """Whether something listens on ``port`` within ``timeout_s`` (a served viewer's web server
-    starts a while after its gRPC one)."""
+def wait_for(done: Callable[[], bool], what: str, timeout_s: float = 120.0) -> None:
+    """Return once ``done()`` holds, checked every 50 ms; fail naming ``what`` after ``timeout_s``
+    (a bound for a stuck test on a loaded machine, not a pace any test relies on)."""
     deadline = time.monotonic() + timeout_s
-    while not listening(port):
-        if time.monotonic() > deadline:
-            return False
+    while not done():
+        assert time.monotonic() < deadline, f"gave up after {timeout_s:g} s waiting for {what}"
         time.sleep(0.05)
-    return True
 
 
 @contextlib.contextmanager
 def capture(out: Path, connect_to: str | None = None) -> Iterator[str]:
-    """A served viewer on loopback that saves what it receives to ``out`` (and, with
-    ``connect_to``, what that server holds); yields its address, stops it on exit."""
+    """A served viewer on loopback that streams what it receives to ``out`` (and, with
+    ``connect_to``, what that server holds); yields its address. On exit it is stopped, and
+    killed with whatever it started if it does not stop, pass or fail."""
     port = free_port()
     cmd = [rerun_executable(), "--save", str(out), "--bind", "127.0.0.1", "--port", str(port)]
     proc = subprocess.Popen(cmd + ([connect_to] if connect_to else []), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+                            stderr=subprocess.DEVNULL, start_new_session=True)
     try:
-        deadline = time.monotonic() + 60
-        while not listening(port):
-            assert proc.poll() is None and time.monotonic() < deadline, "the capturing viewer did not start"
-            time.sleep(0.05)
+        wait_for(lambda: proc.poll() is not None or listening(port), "the capturing viewer to listen")
+        assert proc.poll() is None, f"the capturing viewer exited with {proc.returncode}"
         yield proxy_url("127.0.0.1", port)
     finally:
-        proc.send_signal(signal.SIGINT)  # it writes what it received, then exits
-        proc.wait(30)
+        proc.send_signal(signal.SIGINT)  # it closes the file, then exits
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
 
 
-def late_capture(out: Path, url: str, steps: int, timeout_s: float = 60.0) -> None:
-    """Save to ``out`` what a viewer connecting to ``url`` receives, captured for longer each time
-    until every one of ``steps`` steps of its flag has arrived (or ``timeout_s``): on a loaded
-    machine the replay to a late viewer takes a while."""
-    deadline, dwell = time.monotonic() + timeout_s, 0.5
-    while True:
-        with capture(out, connect_to=url):
-            time.sleep(dwell)
-        arrived = len(read_rrd_series(out, bp.FLAG)[0]) if out.exists() else 0
-        if arrived >= steps or time.monotonic() > deadline:
-            return
-        dwell *= 2
+def while_written(path: Path, read: Callable[[Path], T], default: T) -> T:
+    """``read(path)`` of a file a capturing viewer is still writing, or ``default`` while it is
+    missing or ends in a frame cut short (the reader raises RuntimeError)."""
+    if not path.exists():
+        return default
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "no footer": the file is still being written
+            return read(path)
+    except RuntimeError:
+        return default
+
+
+def received(path: Path) -> dict[str, set[str]]:
+    return while_written(path, entities, {})
+
+
+def received_steps(path: Path, entity: str) -> int:
+    return while_written(path, lambda p: len(read_rrd_series(p, entity)[0]), 0)
 
 
 def entities(path: Path) -> dict[str, set[str]]:
@@ -110,22 +126,29 @@ def steps(n: int, flagged_from: int) -> list[StepRecord]:
 
 
 def test_a_served_view_on_loopback_gives_a_late_viewer_what_the_file_has(tmp_path):
+    late_views = {bp.EVENTS, bp.MARGIN, bp.FLAG, bp.ERRORS, "/joints"}
     viewer = open_viewer(grpc_port=free_port(), web_port=free_port(), display=False)
     try:
         assert viewer.served and viewer.url.startswith("rerun+http://127.0.0.1:")
         with EpisodeRecorder("client-live", ["joint1", "joint2", "a", "b"], folder=tmp_path, formats=("rrd",),
-                             live=viewer, joints=[0, 1]) as rec:
+                             view=View(joints=(0, 1)), live=Live(viewer)) as rec:
             for record in steps(12, flagged_from=8):
                 rec.log_step(record)
-        late_capture(tmp_path / "late.rrd", viewer.url, steps=12)  # connects after the episode ended
+        late = tmp_path / "late.rrd"
+        with capture(late, connect_to=viewer.url):  # connects after the episode ended
+            wait_for(lambda: late_views <= shown(received(late).get("client-live", set())),
+                     "the late viewer to receive every view of the episode")
+            wait_for(lambda: all(received_steps(late, entity) == 12 for entity in SERIES),
+                     "the late viewer to receive the episode's 12 steps")
         web = viewer.how.split("open ")[1].split(" ")[0]
-        assert web.startswith("http://127.0.0.1:") and wait_listening(urlsplit(web).port or 80)
+        assert web.startswith("http://127.0.0.1:")
+        wait_for(lambda: listening(urlsplit(web).port or 80), "the web viewer's server to listen")
         assert httpx.get(web, timeout=30).status_code == 200
     finally:
         viewer.close()
-    received = entities(tmp_path / "late.rrd")
-    assert shown(received["client-live"]) == {bp.EVENTS, bp.MARGIN, bp.FLAG, bp.ERRORS, "/joints"}  # no world
-    for entity in (bp.ENERGY, bp.FLAG, bp.JOINTS_OBSERVED):
+    got = entities(tmp_path / "late.rrd")
+    assert shown(got["client-live"]) == late_views  # no world
+    for entity in SERIES:
         live_steps, live_values = read_rrd_series(tmp_path / "late.rrd", entity)
         file_steps, file_values = read_rrd_series(tmp_path / "client-live.rrd", entity)
         assert live_steps.tolist() == file_steps.tolist() == list(range(12))
@@ -150,9 +173,9 @@ def test_nasm_client_live_shows_every_view_of_the_layout_in_a_served_viewer(smal
         assert result.exit_code == 0, result.output
     [s] = json.loads(summaries.read_text())
     assert s["detected"]  # so the events view has a line
-    received = entities(tmp_path / "viewer.rrd")
-    assert set(received) == {s["recording_id"]}
-    assert shown(received[s["recording_id"]]) == set(SHOWN)
+    got = entities(tmp_path / "viewer.rrd")
+    assert set(got) == {s["recording_id"]}
+    assert shown(got[s["recording_id"]]) == set(SHOWN)
     assert len(RrdReader(tmp_path / "viewer.rrd").blueprints()) == 1  # the layout came with the data
     live_steps, live_energy = read_rrd_series(tmp_path / "viewer.rrd", bp.ENERGY)
     assert live_steps.tolist() == list(range(15))
@@ -166,6 +189,12 @@ def test_nasm_serve_live_shows_each_session_as_a_recording_of_its_own(servable_m
 
     models = servable_model(n_skills=1, repetitions=4, steps=8, hidden_size=16, epochs=10, name="panda")
     episode = np.load(models / "episodes.npy")[0]
+    views = {bp.MARGIN, bp.FLAG, bp.ERRORS, "/joints"}
+
+    def both_sessions_shown() -> bool:
+        got = received(tmp_path / "viewer.rrd")
+        return set(got) == {"robot-a", "robot-b"} and all(views <= shown(paths) for paths in got.values())
+
     with capture(tmp_path / "viewer.rrd") as viewer:
         settings = Settings(models_dir=models, recordings_dir=tmp_path / "rec", build_default_model=False,
                             live=True, live_url=viewer)
@@ -179,10 +208,11 @@ def test_nasm_serve_live_shows_each_session_as_a_recording_of_its_own(servable_m
                     assert json.loads(ws.recv())["type"] == "step"
                 ws.send(json.dumps({"type": "end"}))
                 assert json.loads(ws.recv())["type"] == "ended"
-    received = entities(tmp_path / "viewer.rrd")
-    assert set(received) == {"robot-a", "robot-b"}
-    for paths in received.values():
-        assert {bp.MARGIN, bp.FLAG, bp.ERRORS, "/joints"} <= shown(paths)
+        wait_for(both_sessions_shown, "the viewer to show both sessions")  # the service stopped: all was sent
+    got = entities(tmp_path / "viewer.rrd")
+    assert set(got) == {"robot-a", "robot-b"}
+    for paths in got.values():
+        assert views <= shown(paths)
     [file_a] = (tmp_path / "rec").glob("service-robot-a-*.rrd")  # the files are written as before
     np.testing.assert_array_equal(read_rrd_series(file_a, bp.ENERGY)[1].shape, (len(episode), 2))
 

@@ -14,6 +14,7 @@ from rerun.chunk import RrdReader
 
 from neural_asm.client.world import WORKCELL, world_trace
 from neural_asm.recordings import EpisodeRecorder
+from neural_asm.recordings.episode import View
 from neural_asm.recordings import blueprint as bp
 from neural_asm.recordings import view
 from neural_asm.recordings.paths import APP_ID
@@ -40,8 +41,7 @@ def episode(disturbance: FallingObject | None, rows: int = 12) -> Episode:
 def record(tmp_path: Path, ep: Episode, name: str = "client-scene") -> EpisodeRecorder:
     """The episode's world, with a fault flagged on joint4 from step FAULT_STEP (steps every 0.1 s)."""
     names = CHANNEL_NAMES
-    with EpisodeRecorder(name, names, folder=tmp_path, step_period_s=0.1,
-                         joints=range(JOINT_CHANNELS.stop)) as rec:
+    with EpisodeRecorder(name, names, folder=tmp_path, view=View(0.1, tuple(range(JOINT_CHANNELS.stop)))) as rec:
         rows = world_trace(ep)
         for k in range(len(rows) // 4):
             for w in rows[4 * k: 4 * k + 4]:

@@ -6,7 +6,7 @@ import pytest
 from neural_asm.sim.config import SIM
 from neural_asm.sim.paper import PAPER, Job
 from neural_asm.sim.runner import run_jobs
-from neural_asm.runtime.parallel import parallel_map
+from neural_asm.runtime.parallel import Parallel, parallel_map
 from neural_asm.sim.skills import SKILLS
 
 pytestmark = pytest.mark.slow  # simulates episodes or trains networks
@@ -14,7 +14,7 @@ pytestmark = pytest.mark.slow  # simulates episodes or trains networks
 
 def test_results_come_back_in_order_from_processes():
     args = [(i, 10 - i) for i in range(10)] + [(1, 7, 3)]  # argument tuples of any length
-    assert parallel_map(max, args, workers=2, progress=False) == [max(*a) for a in args]
+    assert parallel_map(max, args, Parallel(workers=2), progress=False) == [max(*a) for a in args]
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -23,7 +23,7 @@ def test_results_come_back_in_order_from_processes():
 ])
 def test_bad_settings_are_named(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        parallel_map(divmod, [(1, 1)], progress=False, **kwargs)
+        parallel_map(divmod, [(1, 1)], Parallel(**kwargs), progress=False)
 
 
 def test_ray_runs_the_same_episodes_as_one_process(monkeypatch):

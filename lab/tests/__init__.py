@@ -1,0 +1,1 @@
+"""Tests of the probes, run with the suite (its slow tests)."""
