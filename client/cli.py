@@ -35,6 +35,9 @@ Controller = Enum("Controller", {c: c for c in CONTROLLERS}, type=str)
 
 def client(
     skill: Skill = typer.Option(SKILLS[0], help="skill to run"),
+    tell_skill: bool = typer.Option(False, "--tell-skill", help="tell the service the skill each episode runs "
+                                    "(--skill): a skill memory then decides with that skill's course and threshold "
+                                    "(default: it infers the skill); a model trained without skills refuses it"),
     seed: int = typer.Option(SIM.seeds.client, help="episode seed (episode i uses seed + i); the default is in no "
                              "training or calibration set"),
     fault_joint: int | None = typer.Option(None, min=1, max=7, help="fault: joint 1..7 (give all three fault options or none)"),
@@ -98,8 +101,9 @@ def client(
         run = SimulatedRun(skill.value, seed, fault, hit, episodes or 1, controller.value, correct, rate,
                            showcase=episodes is None and fault is None and hit is None)
         summaries = run_client(run, Connection(url, api_key, transport.value, reconnect),
-                               StreamOptions(None if mode is None else mode.value, out, realtime=realtime, live=viewer,
-                                             foxglove=fox), models_dir)
+                               StreamOptions(None if mode is None else mode.value, out,
+                                             {"skill": skill.value} if tell_skill else {}, realtime=realtime,
+                                             live=viewer, foxglove=fox), models_dir)
         streamed = True
     except (ValueError, ServiceError) as exc:  # a bad option, or the service refused the request
         raise fail(exc) from None
@@ -146,6 +150,9 @@ def replay(
     reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
     skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
     json_out: Path | None = typer.Option(None, "--json", help="also write the summaries as JSON here"),
+    tell_skill: bool = typer.Option(False, "--tell-skill", help="tell the service each episode's skill, the label "
+                                    "the mapping reads (its skill or phase tag): a skill memory then decides with "
+                                    "that skill's course and threshold (default: it infers the skill)"),
 ) -> None:
     """Stream recorded episodes to a running service exactly as the live robot client does,
     after the same checks as ``nasm score`` against the served model."""
@@ -155,7 +162,7 @@ def replay(
     seqs = read_logs(source, mapping, skip_bad=skip_bad)
     try:
         summaries = replay_logs(seqs, episode, Connection(url, api_key, transport, reconnect), StreamOptions(mode, out),
-                                model)
+                                model, tell_skill)
     except (LogError, ServiceError) as exc:
         raise fail(exc) from None
     except ServiceLost as exc:

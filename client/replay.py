@@ -8,7 +8,8 @@ its mapping), as ``nasm score`` checks them against a checkpoint: a mapping at a
 would otherwise give false alarms, not an error. The steps the mapping resamples an episode to
 may differ from the training mapping's (a session lasts as long as its episode), and a table
 episode padded to them is streamed without its padding. Each session states the mapping's rate,
-which the service holds to the model's.
+which the service holds to the model's, and, told the skills, its episode's skill (the label the
+mapping reads: its skill or phase tag), which a skill memory then decides with.
 """
 
 from __future__ import annotations
@@ -41,10 +42,11 @@ def served_model(url: str, api_key: str | None, name: str | None) -> dict[str, A
 
 
 def replay_logs(seqs: Sequences, episodes: list[int], connection: Connection, options: StreamOptions,
-                model: str | None = None) -> list[EpisodeSummary]:
+                model: str | None = None, tell_skill: bool = False) -> list[EpisodeSummary]:
     """Stream the logged ``episodes`` (numbers in the source; none: every episode) to the service
     at ``connection``, scored by its ``model`` (None: its default) once the logs are checked
-    against it; stops after an episode the service was lost in."""
+    against it, each session told its episode's skill (the mapping's skill or phase tag) with
+    ``tell_skill``; stops after an episode the service was lost in."""
     if connection.url is None:
         raise ValueError("a replay streams to a running service: give its URL")
     served = served_model(connection.url, connection.api_key, model)
@@ -53,7 +55,8 @@ def replay_logs(seqs: Sequences, episodes: list[int], connection: Connection, op
     picks = [episode_position(seqs, n) for n in episodes] if episodes else list(range(len(seqs.data)))
     summaries = []
     for i in picks:
-        s = stream_episode(logged(seqs, i), connection, options)
+        told = replace(options, session={**options.session, "skill": str(seqs.labels[i])}) if tell_skill else options
+        s = stream_episode(logged(seqs, i), connection, told)
         summaries.append(s)
         typer.echo(summary_line(s))
         typer.echo(f"recordings: {s.recordings.get('rrd')} {s.recordings.get('mcap')}")

@@ -1,7 +1,7 @@
 """A running Neural ASM service from Python: its models, and episodes streamed to it.
 
     client = ServiceClient("http://127.0.0.1:8000", api_key=KEY)
-    with client.session(model="panda", fpr=0.01) as session:
+    with client.session(model="panda", fpr=0.01) as session:     # skill="pick": tell a skill memory the skill
         for x in episode:
             answer = session.step(x)   # a StepAnswer: answer.fault, answer.energy, answer.isolated_joint, ...
 
@@ -50,12 +50,13 @@ class ServiceClient:
 
     @contextmanager
     def session(self, model: str | None = None, mode: str = "offline", fpr: float | None = None,
-                **settings: Any) -> Iterator[ServiceSession]:
-        """A session of ``model`` (the default model if None); ``settings`` are the protocol's other
-        start fields (``threshold``, ``cue_steps``, ``rate_hz``, ``recording_id``). Ended on exit."""
+                skill: str | None = None, **settings: Any) -> Iterator[ServiceSession]:
+        """A session of ``model`` (the default model if None), told the ``skill`` the robot runs (a
+        skill memory's; None: it infers the skill); ``settings`` are the protocol's other start
+        fields (``threshold``, ``cue_steps``, ``rate_hz``, ``recording_id``). Ended on exit."""
         transport = WebSocketTransport(self.url, self.api_key, self.timeout_s)
         try:
-            params = {"model": model, "mode": mode, "fpr": fpr, **settings}
+            params = {"model": model, "mode": mode, "fpr": fpr, "skill": skill, **settings}
             session = ServiceSession(transport, transport.start({k: v for k, v in params.items() if v is not None}))
             yield session
             transport.end()

@@ -8,14 +8,16 @@ and the service's schemas are built from its fields, so a new field is declared 
 Each field belongs to one part of the answer: ``step`` (every answer), ``service`` (from the
 service: None from a local monitor), ``forecast`` (``/predict`` and the websocket: None in a
 ``/fault`` answer) and ``decision`` (``/fault``, the websocket and a local monitor). A field
-with a default is one some answers lack; where an answer has it, it is never null.
+with a default is one some answers lack; where an answer has it, it is never null, but for a
+field added since (``skill_probability``): in every answer, null where it does not apply, and
+read as None from an older service's answers.
 """
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Literal
 
 from typing_extensions import TypedDict  # typing's, before Python 3.12, is not one pydantic can describe
@@ -30,10 +32,13 @@ Part = Literal["step", "service", "forecast", "decision"]
 PARTS: tuple[Part, ...] = ("step", "service", "forecast", "decision")
 
 
-def _field(part: Part, description: str | None = None, absent: bool = False) -> Any:
-    """A field of ``part`` (``absent``: None where an answer lacks it); pydantic reads its description."""
-    metadata = {"part": part} if description is None else {"part": part, "description": description}
-    return field(default=None, metadata=metadata) if absent else field(metadata=metadata)
+def _field(part: Part, description: str | None = None, absent: bool = False, added: bool = False) -> Any:
+    """A field of ``part`` (``absent``: None where an answer lacks it; ``added``: null where it does
+    not apply, and None when read from an older service's answer, which lacks it); pydantic reads
+    its description."""
+    metadata = {"part": part, "nullable": added} if description is None else \
+        {"part": part, "nullable": added, "description": description}
+    return field(default=None, metadata=metadata) if absent or added else field(metadata=metadata)
 
 
 class RankedChannel(TypedDict):
@@ -61,7 +66,10 @@ class StepAnswer:
     batch_size: int | None = _field("service", "steps computed together in that batch", absent=True)
     skill: str | None = _field("step", "the skill the model recognises at this step, from the steps before it (the "
                                "one whose calibrated mean errors it takes out); null at the first step and for "
-                               "models calibrated without skills")
+                               "models calibrated without skills; a skill memory's: the skill it was told, or the "
+                               "most probable after this step")
+    skill_probability: float | None = _field("step", "a skill memory's probability of that skill after this step (1 "
+                                             "when the session was told it); null for other models", added=True)
     prediction: dict[str, float] | None = _field("forecast", "forecast of the next observation, original units",
                                                  absent=True)
     expected: dict[str, float] | None = _field("forecast", "what the model expected of this observation",
@@ -78,18 +86,20 @@ class StepAnswer:
 
     @classmethod
     def judged(cls, score: StepScore, decision: FaultDecision, channel_names: Sequence[str], fpr: float,
-               session_id: str | None = None, inference_ms: float | None = None,
-               batch_size: int | None = None) -> StepAnswer:
-        """The answer of a decided step, with the service's part when it was served."""
-        return cls(session_id=session_id, step=score.step, energy=score.energy, skill=score.skill,
+               skill_probability: float | None = None) -> StepAnswer:
+        """The answer of a decided step; a served one adds the service's part (`served`)."""
+        return cls(step=score.step, energy=score.energy, skill=score.skill, skill_probability=skill_probability,
                    prediction=dict(zip(channel_names, score.prediction.tolist())),
                    expected=dict(zip(channel_names, score.expected.tolist())),
                    errors=dict(zip(channel_names, score.weighted_errors.tolist())),
                    fault=decision.fault, threshold=decision.threshold, fpr=fpr,
                    isolated_joint=decision.isolated_joint,
                    ranked_channels=[{"channel": c, "error": e}
-                                    for c, e in zip(decision.ranked_channels, decision.ranked_errors)],
-                   inference_ms=inference_ms, batch_size=batch_size)
+                                    for c, e in zip(decision.ranked_channels, decision.ranked_errors)])
+
+    def served(self, session_id: str, inference_ms: float, batch_size: int) -> StepAnswer:
+        """This answer as a service sends it: with its session and the batch it ran in."""
+        return replace(self, session_id=session_id, inference_ms=inference_ms, batch_size=batch_size)
 
     def to_json(self, parts: tuple[Part, ...] = PARTS) -> dict[str, Any]:
         """The JSON object of the answer's ``parts`` (a payload of the protocol), in field order."""

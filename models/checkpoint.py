@@ -7,7 +7,11 @@ calibration ``<key>`` (e.g. ``offline:1``), ``calibration.<key>.error_std``,
 ``calibration.<key>.step_thresholds``, when errors are whitened
 ``calibration.<key>.error_precision`` (absent: channels weighed independently) and, at rates whose
 calibrations centre the errors, ``calibration.<key>.error_mean`` (each skill's mean error per step,
-the skills named in the calibration's metadata; absent: errors taken as centred). The header entry ``neural_asm`` is a JSON
+the skills named in the calibration's metadata; absent: errors taken as centred). A skill memory
+(`neural_asm.models.skill_context`: the network told the skill by its ``skill:<name>`` cue channels) adds
+``skill_memory.means`` (each skill's mean course) and, once calibrated, ``skill_memory.courses``,
+``skill_memory.spreads.<term>`` and ``skill_memory.told`` (each skill's thresholds), its other settings
+in the header's ``skill_memory`` entry. The header entry ``neural_asm`` is a JSON
 document with the format version, the TPCConfig, the channel names, each
 calibration's thresholds and source, the data provenance, the training energy
 curve, the observation rate the model learnt at (``rate_hz``; files without it are 2 Hz),
@@ -37,6 +41,7 @@ from neural_asm.models.calibration import Calibration
 from neural_asm.models.config import DEFAULT_RATE_HZ, TPCConfig
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.plan import PlanMemory
+from neural_asm.models.skill_context import SkillCalibration, SkillMemory
 from neural_asm.models.tpc import TemporalPC
 from neural_asm.runtime.version import __version__
 
@@ -44,14 +49,16 @@ from neural_asm.runtime.version import __version__
 # digest; 5: the inference solver in the config; 6: the observation rate (older: 2 Hz) and
 # optional W_D (direct pathways); 7: optional mean errors per skill and step in calibrations (a reader
 # that ignored them would weigh a 40 Hz model's errors uncentred against centred thresholds); 8: an
-# optional plan memory (a reader that ignored it would refuse its "plan" calibration's sessions).
-FORMAT_VERSION = 8
-READABLE_VERSIONS = (2, 3, 4, 5, 6, 7, 8)  # older files simply have no precision matrices, context input, digest, rate,
+# optional plan memory (a reader that ignored it would refuse its "plan" calibration's sessions); 9: an
+# optional skill memory (a reader that ignored it would serve its cue channels as observations).
+FORMAT_VERSION = 9
+READABLE_VERSIONS = (2, 3, 4, 5, 6, 7, 8, 9)  # older files simply have no precision matrices, context input, digest, rate,
 # W_D or mean errors
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
 MAX_ABS_WEIGHT = 1e3
 PLAN_TENSORS = ("recognition", "inputs", "readouts", "departures")
+SKILLS = "skill_memory"  # the prefix of a skill memory's tensors and its header entry
 
 
 class CheckpointError(ValueError):
@@ -72,7 +79,9 @@ def tensor_digest(tensors: dict[str, torch.Tensor]) -> str:
     return h.hexdigest()
 
 
-def to_bytes(model: NeuralASM) -> bytes:
+def to_bytes(memory: NeuralASM | SkillMemory) -> bytes:
+    """A network, or a skill memory with its network, as checkpoint bytes."""
+    model = memory.model if isinstance(memory, SkillMemory) else memory
     tensors = {
         "W_H": model.net.W_H.contiguous(),
         "W_F": model.net.W_F.contiguous(),
@@ -111,6 +120,13 @@ def to_bytes(model: NeuralASM) -> bytes:
                 "episode_thresholds": [cal.episode_thresholds[f] for f in fprs],
             }
         )
+    skills = None
+    if isinstance(memory, SkillMemory):
+        skills, arrays = {"calibration": None}, {"means": memory.means}
+        if memory.calibration is not None:
+            skills["calibration"], calibrated = memory.calibration.to_parts()
+            arrays.update(calibrated)
+        tensors.update({f"{SKILLS}.{name}": _f64(a) for name, a in arrays.items()})
     meta = {
         "format_version": FORMAT_VERSION,
         "package_version": __version__,
@@ -123,16 +139,17 @@ def to_bytes(model: NeuralASM) -> bytes:
         "rate_hz": model.rate_hz,
         "plan_skills": None if model.plan is None else list(model.plan.skills),
         "plan_context": None if model.plan is None else list(model.plan.context),
+        SKILLS: skills,
         "tensor_sha256": tensor_digest(tensors),
     }
     return st_save(tensors, metadata={HEADER_KEY: json.dumps(meta)})
 
 
-def save(model: NeuralASM, path: str | os.PathLike[str]) -> Path:
-    """Write atomically: a temporary file in the same folder, then os.replace."""
+def save(memory: NeuralASM | SkillMemory, path: str | os.PathLike[str]) -> Path:
+    """Write a network or a skill memory atomically: a temporary file in the same folder, then os.replace."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    data = to_bytes(model)
+    data = to_bytes(memory)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
@@ -163,6 +180,12 @@ def read_header(data: bytes, where: str) -> dict[str, Any]:
 
 
 def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
+    """The network of checkpoint bytes (a skill memory's too: `decode` gives the memory as well)."""
+    return decode(data, where)[0]
+
+
+def decode(data: bytes, where: str = "checkpoint") -> tuple[NeuralASM, SkillMemory | None]:
+    """The network of checkpoint bytes, and the skill memory it belongs to (None: an ordinary network)."""
     meta = read_header(data, where)
     try:
         tensors = st_load(data)
@@ -219,16 +242,41 @@ def from_bytes(data: bytes, where: str = "checkpoint") -> NeuralASM:
         if name in tensors and tensors[name].numel() and float(tensors[name].abs().max()) > MAX_ABS_WEIGHT:
             raise CheckpointError(f"{where}: {name} holds values beyond +-{MAX_ABS_WEIGHT:g}, not a trained network")
     try:
-        return NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"),
-                         meta.get("rate_hz", DEFAULT_RATE_HZ), plan)
-    except ValueError as exc:
+        model = NeuralASM(net, normaliser, names, calibrations, meta.get("provenance"), meta.get("history"),
+                          meta.get("rate_hz", DEFAULT_RATE_HZ), plan)
+        skills = meta.get(SKILLS)
+        return model, None if skills is None else _skill_memory(model, skills, tensors)
+    except (KeyError, TypeError, ValueError) as exc:
         raise CheckpointError(f"{where}: {exc}") from exc
 
 
-def load(path: str | os.PathLike[str]) -> NeuralASM:
+def _skill_memory(model: NeuralASM, meta: dict[str, Any], tensors: dict[str, torch.Tensor]) -> SkillMemory:
+    """The skill memory of ``model`` from its tensors and header entry (a ValueError if they do not fit)."""
+    arrays = {name[len(SKILLS) + 1:]: t.numpy() for name, t in tensors.items() if name.startswith(f"{SKILLS}.")}
+    memory = SkillMemory(model, arrays.pop("means"))
+    if meta["calibration"] is not None:
+        cal = SkillCalibration.from_parts(meta["calibration"], arrays, memory.skills)
+        k, width = len(memory.skills), memory.width
+        shapes = [cal.courses.shape, *(s.spread.shape for s in cal.spreads.values())]
+        if any(len(shape) != 3 or shape[::2] != (k, width) for shape in shapes) or \
+                any(t.shape != (k,) for t in cal.told.values()):
+            raise ValueError(f"its skill calibration does not fit {k} skills of {width} channels")
+        memory.calibration = cal
+    return memory
+
+
+def read(path: str | os.PathLike[str]) -> bytes:
     path = Path(path)
     try:
-        data = path.read_bytes()
+        return path.read_bytes()
     except FileNotFoundError as exc:
         raise CheckpointError(f"no checkpoint at {path}") from exc
-    return from_bytes(data, str(path))
+
+
+def load(path: str | os.PathLike[str]) -> NeuralASM:
+    return from_bytes(read(path), str(path))
+
+
+def load_memory(path: str | os.PathLike[str]) -> tuple[NeuralASM, SkillMemory | None]:
+    """The network at ``path`` and the skill memory it belongs to (None: an ordinary network)."""
+    return decode(read(path), str(path))

@@ -31,13 +31,16 @@ is the served step.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Sequence
+from collections.abc import Mapping
+from typing import Any, Literal, Sequence
 
 import numpy as np
 
-from neural_asm.models.asm import NeuralASM
+from neural_asm.models.asm import NeuralASM, StreamStep
 from neural_asm.models.calibration import conformal_episode_threshold
 from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
+from neural_asm.models.fault import FaultDecision, isolate
+from neural_asm.models.scoring import StepScore
 from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, SkillSpreads, infer
 
 CUE_PREFIX = "skill:"
@@ -98,6 +101,27 @@ class SkillCalibration:
         if not self.recognised_by or set(self.recognised_by) == set(self.terms):
             return None
         return self.energies(residuals, steps, rows, self.recognised_by)
+
+    def to_parts(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """The calibration as JSON metadata and named arrays, as a checkpoint stores it (no pickle)."""
+        fprs = sorted(self.told)
+        meta = {"terms": list(self.terms), "forgetting": self.forgetting, "rule": self.rule,
+                "recognised_by": list(self.recognised_by), "spreads": sorted(self.spreads),
+                "inferred": [[f, t] for f, t in sorted(self.inferred.items())], "told_fprs": fprs}
+        arrays = {"courses": self.courses, **{f"spreads.{t}": s.spread for t, s in self.spreads.items()}}
+        if fprs:
+            arrays["told"] = np.stack([self.told[f] for f in fprs])
+        return meta, arrays
+
+    @classmethod
+    def from_parts(cls, meta: dict[str, Any], arrays: dict[str, np.ndarray], skills: Sequence[str]) -> "SkillCalibration":
+        """The calibration `to_parts` wrote, of a memory knowing ``skills``."""
+        told = arrays.get("told")
+        return cls(tuple(meta["terms"]), arrays["courses"],
+                   {t: SkillSpreads(tuple(skills), arrays[f"spreads.{t}"]) for t in meta["spreads"]},
+                   float(meta["forgetting"]), meta["rule"], tuple(meta["recognised_by"]),
+                   {float(f): float(t) for f, t in meta["inferred"]},
+                   {float(f): told[i] for i, f in enumerate(meta["told_fprs"])})
 
 
 class SkillMemory:
@@ -239,6 +263,21 @@ class SkillMemory:
     def session(self, skill: str | None = None, fpr: float = SCORING.default_fpr) -> "SkillSession":
         return SkillSession(self, skill, fpr)
 
+    def check(self, observation: Sequence[float] | np.ndarray | Mapping[str, float]) -> np.ndarray:
+        """An observation (a vector in channel order, or every channel's value by name) as a
+        vector, or a ValueError naming what is wrong: before it is queued for a session's step."""
+        names = self.channel_names
+        if isinstance(observation, Mapping):
+            missing, unknown = [n for n in names if n not in observation], sorted(set(observation) - set(names))
+            if missing or unknown:
+                raise ValueError(f"channels: missing {missing}, unknown {unknown}; expected {list(names)}")
+            observation = [observation[n] for n in names]
+        raw = np.asarray(observation, np.float64)
+        if raw.shape != (self.width,) or not np.isfinite(raw).all():
+            raise ValueError(f"observation: expected {self.width} finite values ({', '.join(names)}), "
+                             f"got {raw.shape[0] if raw.ndim == 1 else f'shape {raw.shape}'} values")
+        return raw
+
 
 @dataclass(frozen=True)
 class SkillStep:
@@ -297,3 +336,23 @@ class SkillSession:
         self.t += 1
         return SkillStep(int(t[0]), energy, {memory.skills[r]: float(e) for r, e in zip(self.rows, energies)},
                          skill, probability, self.threshold, energy > self.threshold)
+
+
+def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamStep, float]:
+    """A session's step (a raw observation, `SkillMemory.check`ed) as the service and the public
+    ``Monitor`` answer it, in the types every recall mode answers with, and the answered skill's
+    probability. What it expected is the answered skill's course (told, or the most probable), its
+    forecast the course's next step, and each channel's error is divided by that skill's course
+    spread (without one: left as is), which isolation ranks."""
+    step = session.step(observation)
+    memory, cal = session.memory, session.calibration
+    k, last = memory.index(step.skill), cal.courses.shape[1] - 1
+    expected, upcoming = cal.courses[k, min(step.t, last)], cal.courses[k, min(step.t + 1, last)]
+    errors = memory.normalise(observation) - expected
+    course = cal.spreads.get("course")
+    weighted = errors if course is None else errors / course.at(np.array([step.t]), np.array([k]))[0, 0]
+    mean, std = memory.model.normaliser.mean[: memory.width], memory.model.normaliser.std[: memory.width]
+    score = StepScore(step.t, expected * std + mean, errors, weighted, step.energy, upcoming * std + mean, step.skill)
+    joint, ranked, sizes = isolate(weighted, memory.channel_names)
+    decision = FaultDecision(step.fault, step.energy, step.threshold, joint, ranked, sizes)
+    return StreamStep(score, decision), step.probability

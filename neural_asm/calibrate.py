@@ -9,6 +9,10 @@ or NORMAL's episodes alternate between the two roles. ``--cross-fit DEMOS`` adds
 out-of-fold energies of the demonstrations the checkpoint was trained on to the thresholds'
 episodes (``neural_asm.models.cross_fit``), so that a 1 % threshold rests on more than the few
 dozen episodes a lab holds out.
+
+A skill memory (``nasm train --skill-cue``) is calibrated as ``neural_asm.models.skill_context``
+calibrates it, from the episodes' skills (their labels): each skill's spreads and thresholds, and
+the thresholds of a session not told the skill.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import numpy as np
 import typer
 
 from neural_asm.logs.cli import SKIP_BAD_HELP, data_command, mapping_help, write_json
+from neural_asm.logs.sources import check_model
 from neural_asm.runtime.cli import fail
 from neural_asm.models import checkpoint
 from neural_asm.models.cross_fit import CrossFit
@@ -92,13 +97,26 @@ def calibrate(
     except checkpoint.CheckpointError as exc:
         raise fail(exc) from None
     model = memory.model
-    seqs = read_data(normal, mapping, skip_bad, model)
+    if cross_fit is not None and memory.skills:
+        raise fail(f"--cross-fit cross-fits a memory without a skill cue; {model_path} has one (skills "
+                   f"{', '.join(memory.skills)})")
+    checked = None if memory.skills else model  # a skill memory's cue channels are not in the data
+    seqs = read_data(normal, mapping, skip_bad, checked)
     if precision is None:
         spread_seqs = None
         source = f"{normal}: episodes alternate between precisions and thresholds"
     else:
-        spread_seqs = read_data(precision, mapping, skip_bad, model)
+        spread_seqs = read_data(precision, mapping, skip_bad, checked)
         source = f"precisions from {precision}, thresholds from {normal}"
+    for read in (seqs, spread_seqs) if checked is None else ():
+        if read is not None and tuple(read.channel_names) != memory.channel_names:
+            raise fail(f"the episodes have channels {list(read.channel_names)}; the model expects "
+                       f"{list(memory.channel_names)}")
+        if read is not None:
+            try:
+                check_model(read, memory.channel_names, model.provenance)  # a mapping's units and clock
+            except ValueError as exc:
+                raise fail(exc) from None
     try:
         crossing = None
         if cross_fit is not None:
@@ -112,15 +130,21 @@ def calibrate(
     for mode, tables in report["modes"].items():
         shown = ", ".join(f"{float(f) * 100:g} %: {t:.4g}" for f, t in tables["episode_thresholds"].items())
         typer.echo(f"{mode} recall, episode thresholds (the service's default) by false-positive rate: {shown}")
+    if "skills" in report:
+        inferred = ", ".join(f"{float(f) * 100:g} %: {t:.4g}" for f, t in report["skills"]["inferred"].items())
+        typer.echo(f"skill memory ({', '.join(memory.skills)}), episode thresholds not told the skill by "
+                   f"false-positive rate: {inferred}; told: each skill's own (--json lists them)")
     n += report.get("out_of_fold_episodes", 0)
     crossed = f" ({report['out_of_fold_episodes']} of them out-of-fold, {folds} folds)" if cross_fit else ""
     typer.echo(f"from {report['precision_episodes']} episodes for the precisions and {n} for the thresholds{crossed}; "
                f"wrote {target} (nasm serve loads it at its start)")
-    rare = [f for f in report["modes"]["offline"]["episode_thresholds"] if float(f) * n < 1]
+    rare = [f for f in report.get("skills", {}).get("inferred") or report["modes"]["offline"]["episode_thresholds"]
+            if float(f) * n < 1]
     if rare:
         typer.secho(f"warning: with {n} threshold episodes, the thresholds at {', '.join(rare)} are the largest "
                     f"normal peak; rates below 1/{n} need more normal episodes to mean anything"
-                    + ("" if cross_fit else " (or --cross-fit DEMOS: the training demonstrations, out of fold)"),
+                    + ("" if cross_fit or memory.skills else
+                       " (or --cross-fit DEMOS: the training demonstrations, out of fold)"),
                     fg="yellow", err=True)
     if json_out is not None:
         write_json(json_out, {"checkpoint": str(target), "source": source, **report})

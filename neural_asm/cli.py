@@ -81,6 +81,10 @@ def train(
     seed: int = typer.Option(0, help="seed of the weights and the training order"),
     mapping: Path | None = typer.Option(None, help=mapping_help("DATA")),
     skip_bad: bool = typer.Option(False, "--skip-bad", help=SKIP_BAD_HELP),
+    skill_cue: bool = typer.Option(False, "--skill-cue", help="also tell the network each demonstration's skill (its "
+                                   "label: a mapping's skill or phase tag) by a cue, so that a session can be told "
+                                   "the skill or infer it (needs at least two skills; nasm calibrate it before "
+                                   "serving)"),
 ) -> None:
     """Train a Neural ASM on demonstrations and write a checkpoint."""
     from neural_asm.data import read_data
@@ -95,12 +99,13 @@ def train(
         config = config.with_(hidden_size=hidden)
     seqs = read_data(data, mapping, skip_bad)
     try:
-        memory = SkillMemory.fit(seqs, preset=config)
+        memory = SkillMemory.fit(seqs, preset=config, skill_cue=skill_cue)
     except ValueError as exc:  # data the preset cannot be fitted on, named before training
         raise fail(str(exc))
     memory.save(out)
-    typer.echo(f"trained on {len(seqs)} sequences at {seqs.rate_hz:g} Hz; final energy {memory.model.history[-1]:.4g}; "
-               f"wrote {out}")
+    told = f", told the skills {', '.join(memory.skills)} by a cue" if memory.skills else ""
+    typer.echo(f"trained on {len(seqs)} sequences at {seqs.rate_hz:g} Hz{told}; final energy "
+               f"{memory.model.history[-1]:.4g}; wrote {out}")
 
 
 @app.command(cls=DataCommand)

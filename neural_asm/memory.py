@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from neural_asm.models import checkpoint
+from neural_asm.models import checkpoint, skill_context
 from neural_asm.models.answer import StepAnswer
 from neural_asm.models.asm import NeuralASM, SkillStream, step_streams
 from neural_asm.models.calibration import set_energy_thresholds
@@ -38,10 +38,13 @@ class Monitor:
     """One episode monitored as the service monitors a session: ``step(x) -> StepAnswer``, the
     service's answer to the same observation less what only a service knows (session, timing)."""
 
-    def __init__(self, stream: SkillStream) -> None:
-        if stream.fpr is None:
+    def __init__(self, stream: SkillStream | skill_context.SkillSession, fpr: float | None = None) -> None:
+        """``stream``: a recall mode's stream (its own false-positive rate), or a skill memory's
+        session (calibrated at ``fpr``)."""
+        fpr = stream.fpr if isinstance(stream, SkillStream) else fpr
+        if fpr is None:
             raise ValueError("a monitor decides: its stream needs a false-positive rate")
-        self._stream, self._fpr = stream, stream.fpr
+        self._stream, self._fpr = stream, fpr
 
     @property
     def steps(self) -> int:
@@ -51,10 +54,14 @@ class Monitor:
     def step(self, observation: Observation) -> StepAnswer:
         """Judge one raw observation (a vector in channel order, or a channel -> value mapping);
         a ValueError names what is wrong with it."""
-        result = step_streams([self._stream], self._stream.check(observation)[None])[0]
+        stream = self._stream
+        if isinstance(stream, skill_context.SkillSession):
+            result, probability = skill_context.served_step(stream, stream.memory.check(observation))
+            return StepAnswer.judged(result.score, result.decision, stream.memory.channel_names, self._fpr, probability)
+        result = step_streams([stream], stream.check(observation)[None])[0]
         if result is None or result.decision is None:
-            raise FloatingPointError(f"step {self._stream.t}: the memory's outputs are not finite")
-        return StepAnswer.judged(result.score, result.decision, self._stream.model.channel_names, self._fpr)
+            raise FloatingPointError(f"step {stream.t}: the memory's outputs are not finite")
+        return StepAnswer.judged(result.score, result.decision, stream.model.channel_names, self._fpr)
 
 
 class SkillMemory:
@@ -66,10 +73,15 @@ class SkillMemory:
         >>> memory.calibrate(normal)                 # held-out normal episodes
         >>> monitor = memory.monitor(fpr=0.01)
         >>> verdict = monitor.step(observation)      # verdict.fault, verdict.isolated_joint
+
+    A memory fitted with ``skill_cue=True`` is one network told each demonstration's skill by a
+    cue (``neural_asm.models.skill_context``): its monitors may be told the skill the robot runs
+    (``monitor(skill="pick")``), or infer it from how well each skill's course explains the steps.
     """
 
-    def __init__(self, model: NeuralASM) -> None:
+    def __init__(self, model: NeuralASM, told: skill_context.SkillMemory | None = None) -> None:
         self.model = model  # the underlying network and its calibrations (``neural_asm.models.asm.NeuralASM``)
+        self.told = told  # with a skill cue: the memory that can be told the skill (its network is ``model``)
 
     @classmethod
     def fit(
@@ -81,6 +93,7 @@ class SkillMemory:
         preset: str | TPCConfig = "fast",
         rate_hz: float | None = None,
         progress: bool = True,
+        skill_cue: bool = False,
     ) -> SkillMemory:
         """Learn the skills of ``demonstrations``: ``Sequences``, or an (N, T, D) array with its
         ``channel_names`` (default ``x0``, ``x1``, ...) and each sequence's skill.
@@ -88,6 +101,10 @@ class SkillMemory:
         ``preset`` is one of ``neural_asm.PRESETS`` (``faithful``: the paper's
         hyper-parameters) or a ``TPCConfig``. The thresholds set here come from the training
         data and are optimistic: ``calibrate`` on held-out normal episodes before deciding.
+
+        With ``skill_cue`` the network is also told each demonstration's skill (a one-hot cue on
+        ``skill:<name>`` channels), so that a session can be told the skill or infer it
+        (``monitor(skill=...)``); it needs demonstrations of at least two skills.
         """
         config = PRESETS[preset] if isinstance(preset, str) else preset
         if isinstance(demonstrations, Sequences):
@@ -100,6 +117,10 @@ class SkillMemory:
             seqs = Sequences(data, labels, names, rate_hz=rate_hz or DEFAULT_RATE_HZ)
         seeds = {} if seqs.seeds is None else {"seeds": seqs.seeds.tolist()}
         provenance = {**seqs.provenance, "skills": sorted(set(seqs.labels.tolist())), "sequences": len(seqs), **seeds}
+        if skill_cue:
+            told = skill_context.SkillMemory.fit(seqs.data, seqs.channel_names, seqs.labels, config, progress,
+                                                 provenance, rate_hz or seqs.rate_hz)
+            return cls(told.model, told)
         model = NeuralASM.fit(seqs.data, seqs.channel_names, config, progress=progress, provenance=provenance,
                               labels=seqs.labels, rate_hz=rate_hz or seqs.rate_hz)
         return cls(model)
@@ -107,16 +128,21 @@ class SkillMemory:
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> SkillMemory:
         """A checkpoint written by ``save`` or ``nasm train``; ``CheckpointError`` if it is not one."""
-        return cls(checkpoint.load(path))
+        return cls(*checkpoint.load_memory(path))
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the checkpoint ``nasm serve`` hosts (safetensors weights + JSON metadata), atomically."""
-        return checkpoint.save(self.model, path)
+        return checkpoint.save(self.model if self.told is None else self.told, path)
 
     @property
     def channel_names(self) -> tuple[str, ...]:
-        """The channels of every observation, in order."""
-        return self.model.channel_names
+        """The channels of every observation, in order (a skill cue's channels are not observed)."""
+        return self.model.channel_names if self.told is None else self.told.channel_names
+
+    @property
+    def skills(self) -> tuple[str, ...]:
+        """The skills a monitor can be told (none: fitted without ``skill_cue``)."""
+        return () if self.told is None else self.told.skills
 
     @property
     def rate_hz(self) -> float:
@@ -138,6 +164,19 @@ class SkillMemory:
         recalled in ``mode`` (``offline``: from the first observation; ``online``: from each)."""
         return self.model.score(_data(sequences), mode)
 
+    def score_skills(self, sequences: Sequences | np.ndarray,
+                     told: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """A skill memory's fault energies (N, T) of raw sequences and its posteriors over
+        ``skills`` after each step (N, K, T): not told (``told`` None), as a monitor infers them,
+        or each sequence told its skill; a monitor's steps answer these energies."""
+        return self._told().score(_data(sequences), told)
+
+    def _told(self) -> skill_context.SkillMemory:
+        if self.told is None:
+            raise ValueError("this memory was trained without skills: it cannot be told one (fit with skill_cue=True, "
+                             "or nasm train --skill-cue)")
+        return self.told
+
     def calibrate(
         self,
         normal: Sequences | np.ndarray,
@@ -147,6 +186,7 @@ class SkillMemory:
         source: str = "held-out normal episodes",
         cross_fit: CrossFit | None = None,
         progress: bool = True,
+        skills: Sequence[str] | None = None,
     ) -> dict[str, Any]:
         """Set every recall mode's precisions and fault thresholds from normal episodes the memory
         was not trained on: the precisions from ``precision`` and the thresholds from ``normal``,
@@ -156,7 +196,13 @@ class SkillMemory:
         With fewer than 99 threshold episodes a 1 % threshold is their highest peak and promises
         no rate. ``cross_fit`` (the demonstrations the memory learnt, `CrossFit`) adds their
         out-of-fold energies to the threshold episodes': each scored by a network trained as this
-        one was without its fold (`neural_asm.models.cross_fit`)."""
+        one was without its fold (`neural_asm.models.cross_fit`).
+
+        A memory with a skill cue is calibrated as ``neural_asm.models.skill_context`` calibrates
+        it (each skill's spreads and thresholds, and those of a session not told the skill): each
+        episode's skill is its ``Sequences`` label, or for an array of ``normal`` in ``skills``."""
+        if self.told is not None:
+            return self._calibrate_told(normal, precision, skills, fprs, cross_fit)
         if precision is None:
             held = _data(normal)
             spread, held = held[0::2], held[1::2]
@@ -190,8 +236,43 @@ class SkillMemory:
                                      "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}
         return report
 
-    def monitor(self, mode: str = "offline", fpr: float = 0.01, threshold: ThresholdKind = "episode") -> Monitor:
+    def _calibrate_told(self, normal: Sequences | np.ndarray, precision: Sequences | np.ndarray | None,
+                        skills: Sequence[str] | None, fprs: tuple[float, ...],
+                        cross_fit: CrossFit | None) -> dict[str, Any]:
+        """`calibrate` of a memory with a skill cue."""
+        told = self._told()
+        if cross_fit is not None:
+            raise ValueError("cross-fitting calibrates a memory without a skill cue; this one has one")
+        labels = normal.labels if isinstance(normal, Sequences) else skills
+        if labels is None or len(labels) != len(_data(normal)):
+            raise ValueError(f"calibrating a memory with a skill cue needs each episode's skill: Sequences, or "
+                             f"skills= ({len(_data(normal))} episodes, {0 if labels is None else len(labels)} skills)")
+        labels = np.asarray(labels).astype(str)
+        if precision is None:
+            spread, spread_skills = _data(normal)[0::2], labels[0::2]
+            held, held_skills = _data(normal)[1::2], labels[1::2]
+        elif isinstance(precision, Sequences):
+            spread, spread_skills, held, held_skills = precision.data, precision.labels, _data(normal), labels
+        else:
+            raise ValueError("the precision episodes of a memory with a skill cue need their skills: give Sequences")
+        if min(len(spread), len(held)) < MIN_CALIBRATION_EPISODES:
+            raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
+                             f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
+        cal = told.calibrate(spread, spread_skills, held, held_skills, fprs=fprs)
+        return {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {},
+                "skills": {"inferred": {str(f): t for f, t in sorted(cal.inferred.items())},
+                           "told": {str(f): dict(zip(told.skills, map(float, t))) for f, t in sorted(cal.told.items())}}}
+
+    def monitor(self, mode: str = "offline", fpr: float = 0.01, threshold: ThresholdKind = "episode",
+                skill: str | None = None) -> Monitor:
         """A new episode monitored step by step at false-positive rate ``fpr``, as a service
         session with the same settings decides (``threshold``: ``episode``, calibrated so that
-        ``fpr`` of normal episodes are flagged anywhere, or ``step``: of normal steps)."""
+        ``fpr`` of normal episodes are flagged anywhere, or ``step``: of normal steps).
+
+        A memory with a skill cue decides by its skills (``mode`` and ``threshold`` do not apply):
+        told the ``skill``, with that skill's course, dynamics and threshold; not told, with its
+        posterior over the skills (`neural_asm.models.skill_context`). Telling a memory without
+        one a skill, or naming a skill it does not know, is a ValueError."""
+        if skill is not None or self.told is not None:
+            return Monitor(self._told().session(skill, fpr), fpr)
         return Monitor(self.model.stream(mode, 1, True, fpr, threshold))

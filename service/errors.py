@@ -30,6 +30,13 @@ class BadObservation(ServiceError):
     status = 422
 
 
+class SkillRefused(ServiceError):
+    """A skill a session cannot be told: one its model does not know, any for a model without
+    skills, or another than the one its session was told."""
+
+    status = 422
+
+
 class NotCalibrated(ServiceError):
     """A well-formed request for a recall setting or rate the model was not calibrated for."""
 

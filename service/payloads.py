@@ -19,18 +19,21 @@ from neural_asm.service.sessions import Session
 
 
 def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
-    recording = session.recording
+    recording, skilled = session.recording, session.skilled
+    model = session.stream.model if skilled is None else skilled.memory.model  # type: ignore[union-attr]
     return SessionInfo(
         session_id=session.id,
         model=session.model_name,
-        mode=session.stream.recaller.mode,  # type: ignore[arg-type]
-        cue_steps=session.stream.recaller.cue_steps,
+        # a skill memory's sessions recall online under each skill's cue, beside each skill's course
+        mode="online" if skilled is not None else session.stream.recaller.mode,  # type: ignore[arg-type, union-attr]
+        cue_steps=1 if skilled is not None else session.stream.recaller.cue_steps,  # type: ignore[union-attr]
         fpr=session.fpr,
         threshold=session.threshold,
-        rate_hz=session.stream.model.rate_hz,
+        rate_hz=model.rate_hz,
         channel_names=list(session.channel_names),
         steps=session.stream.t,
         recording_id=session.recording_id,
+        skill=session.told,
         recordings={} if recording is None else {k: str(p) for k, p in recording.paths.items()},
         idle_expiry_s=idle_expiry_s,
     )
@@ -38,8 +41,8 @@ def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
 
 def step_answer(session: Session, o: StepOutcome) -> StepAnswer:
     """The answer to a served step; each route sends its parts (``schemas.PREDICT``, ``FAULT``, ``STEP``)."""
-    return StepAnswer.judged(o.score, o.decision, session.channel_names, session.fpr, session.id, o.inference_ms,
-                             o.batch_size)
+    return StepAnswer.judged(o.score, o.decision, session.channel_names, session.fpr,
+                             o.skill_probability).served(session.id, o.inference_ms, o.batch_size)
 
 
 def json_response(payload: dict[str, Any], headers: dict[str, str] | None = None) -> Response:

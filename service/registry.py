@@ -19,6 +19,7 @@ from typing import Literal
 
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
+from neural_asm.models.skill_context import SkillMemory
 from neural_asm.service.errors import UnknownModel
 
 log = logging.getLogger(__name__)
@@ -48,6 +49,7 @@ class Hosted:
     digest: str | None  # SHA-256 of the tensors, from the header (None: unreadable, or a format without one)
     model: NeuralASM | None = None
     error: str | None = None
+    told: SkillMemory | None = None  # a skill memory: the network told the skill by a cue (``model`` is its network)
 
 
 def _host(path: Path, origin: Origin) -> Hosted:
@@ -61,7 +63,8 @@ def _host(path: Path, origin: Origin) -> Hosted:
     except checkpoint.CheckpointError:
         digest = None
     try:
-        return Hosted(path.stem, path, origin, modified, digest, checkpoint.from_bytes(data, str(path)))
+        model, told = checkpoint.decode(data, str(path))
+        return Hosted(path.stem, path, origin, modified, digest, model, told=told)
     except checkpoint.CheckpointError as exc:
         return Hosted(path.stem, path, origin, modified, digest, error=str(exc))
 

@@ -3,7 +3,8 @@
 Handlers never touch a model: they queue a step and await its future. The steps queued
 while the loop reads its ready messages are computed together in one loop callback: all
 steps of distinct sessions at once, one forward relaxation per model, recall setting and
-phase (``models.asm.step_streams``, which also decides each step). On the loop rather than
+phase (``models.asm.step_streams``, which also decides each step); a skill memory's session steps
+alone, its own batch being one row per skill it knows (``models.skill_context``). On the loop rather than
 in a thread: a batch's Python holds the GIL either way, and a second thread would contend
 for it (measured in docs/performance.md).
 
@@ -37,6 +38,7 @@ import numpy as np
 from neural_asm.models.asm import StreamStep, step_streams
 from neural_asm.models.fault import FaultDecision
 from neural_asm.models.scoring import StepScore
+from neural_asm.models.skill_context import served_step
 from neural_asm.recordings.recorder import RecorderProcess
 from neural_asm.recordings.records import StepBatch
 from neural_asm.service.errors import BadObservation, ShuttingDown
@@ -69,6 +71,7 @@ class StepOutcome:
     decision: FaultDecision
     inference_ms: float
     batch_size: int
+    skill_probability: float | None = None  # a skill memory's: of the answered skill
 
 
 @dataclass(frozen=True)
@@ -183,7 +186,7 @@ class Runner:
                     round_[id(job.session)] = job
             groups: dict[Any, list[_Step]] = defaultdict(list)
             for job in round_.values():
-                groups[job.session.stream.batch_key].append(job)
+                groups[job.session.batch_key].append(job)
             for group in groups.values():
                 self._compute(group)
             steps = later
@@ -191,7 +194,7 @@ class Runner:
     def _compute(self, jobs: list[_Step]) -> None:
         start = time.perf_counter()
         try:
-            results = step_streams([j.session.stream for j in jobs], np.stack([j.x for j in jobs]))
+            results, probabilities = _step(jobs)
         except Exception as exc:  # a bug, not a client mistake: fail these steps, keep serving
             log.exception("step batch failed")
             for j in jobs:
@@ -199,7 +202,7 @@ class Runner:
             return
         elapsed_ms = (time.perf_counter() - start) * 1e3
         live = None if self.recorder is None else self.recorder.generation  # a replaced child lacks older files
-        for job, outcome in zip(jobs, results):
+        for job, outcome, probability in zip(jobs, results, probabilities):
             if outcome is None:
                 error = BadObservation(
                     "observation: values so far outside the training data that the model's outputs are not finite"
@@ -207,7 +210,7 @@ class Runner:
                 _settle(job.future, None, error)
                 continue
             assert outcome.decision is not None  # sessions always have a false-positive rate
-            _settle(job.future, StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs)), None)
+            _settle(job.future, StepOutcome(outcome.score, outcome.decision, elapsed_ms, len(jobs), probability), None)
             recording = job.session.recording
             if recording is not None and recording.generation == live:
                 self._unhanded.append(_Record(recording.key, job.x, outcome))
@@ -253,6 +256,17 @@ class Runner:
         except Exception:  # a recorder in trouble costs these steps' records, never the service
             log.exception("recording a batch of %d steps failed", len(batch.keys))
             self.dropped_records += len(batch.keys)
+
+
+def _step(jobs: list[_Step]) -> tuple[list[StreamStep | None], list[float | None]]:
+    """The steps of sessions sharing a batch key, and each answered skill's probability: a skill
+    memory's session steps alone (its skills are the rows of its own batch)."""
+    skilled = jobs[0].session.skilled
+    if skilled is not None:
+        result, probability = served_step(skilled, jobs[0].x)
+        finite = np.isfinite(result.score.energy) and np.isfinite(result.score.prediction).all()
+        return [result if finite else None], [probability]
+    return step_streams([j.session.stream for j in jobs], np.stack([j.x for j in jobs])), [None] * len(jobs)
 
 
 def step_batch(records: list[_Record]) -> StepBatch:

@@ -25,6 +25,7 @@ SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 Value = Annotated[float, Field(strict=True, ge=-BOUND, le=BOUND, allow_inf_nan=False)]
 SessionId = Annotated[str, Field(pattern=SESSION_ID_PATTERN)]
 RecallMode = Literal["offline", "online", "plan"]
+SkillName = Annotated[str, Field(min_length=1, max_length=128)]
 
 
 def _json_integer(value: Any) -> Any:
@@ -92,6 +93,8 @@ class ModelInfo(BaseModel):
     hidden_size: int | None = None
     rate_hz: float | None = Field(None, description="observations per second the model learnt and was calibrated at")
     calibrations: list[CalibrationInfo] = []
+    skills: list[str] = Field([], description="the skills a session of this skill memory may name (`skill`); empty: "
+                              "a model that cannot be told the skill")
     provenance: dict[str, Any] = {}
 
 
@@ -123,6 +126,13 @@ class SessionCreate(Strict):
         None, gt=0, le=10_000,
         description="observations per second the client streams at; refused (409) unless it is the model's",
     )
+    skill: SkillName | None = Field(
+        None,
+        description="the skill the robot runs, when it knows it: a skill memory then decides with that skill's course "
+        "and threshold (omitted: it infers the skill); refused (422) for a skill the model does not know or a model "
+        "trained without skills. A skill memory's sessions score each skill's course and online recall: mode and "
+        "cue_steps do not apply to them, and their threshold is the episode's",
+    )
 
 
 class SessionInfo(BaseModel):
@@ -136,6 +146,7 @@ class SessionInfo(BaseModel):
     channel_names: list[str]
     steps: int = Field(description="observations scored so far")
     recording_id: str
+    skill: str | None = Field(None, description="the skill the session was told (null: not told)")
     recordings: dict[str, str] = Field(description="files the service writes for this session")
     idle_expiry_s: float
 
@@ -152,6 +163,8 @@ class Observation(Strict):
     channels: dict[Annotated[str, Field(max_length=64)], Value] = Field(  # type: ignore[assignment]
         None, max_length=MAX_CHANNELS
     )
+    skill: SkillName | None = Field(None, description="the skill the robot runs, if it says so at every step: refused "
+                                    "(422) unless it is the skill the session was told")
 
     @model_validator(mode="after")
     def one_form(self) -> "Observation":
@@ -174,7 +187,7 @@ def _answer(name: str, parts: tuple[Part, ...], doc: str | None = None) -> type[
     """The schema of a step payload: the fields of ``StepAnswer`` in ``parts`` (``StepAnswer.to_json(parts)``)."""
     hints = get_type_hints(StepAnswer)
     answer_fields: dict[str, Any] = {
-        f.name: (_present(hints[f.name]) if f.default is None else hints[f.name],
+        f.name: (_present(hints[f.name]) if f.default is None and not f.metadata["nullable"] else hints[f.name],
                  Field(description=f.metadata.get("description")))
         for f in dataclasses.fields(StepAnswer) if f.metadata["part"] in parts
     }

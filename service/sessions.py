@@ -1,7 +1,8 @@
 """Sessions: one per episode, each holding its own recall state and recording.
 
 A session fixes the model, the recall mode (offline, online or plan), the cue length, the
-false-positive rate and whether the threshold varies per step. Sessions idle longer
+false-positive rate and whether the threshold varies per step; a skill memory's session, the
+skill it was told (or none: it infers the skill). Sessions idle longer
 than the configured time are closed; the number open at once is capped, in all and per
 client, so that one client can neither exhaust the server's memory nor lock others out.
 """
@@ -11,15 +12,17 @@ import math
 import secrets
 import time
 from collections import Counter
+from collections.abc import Hashable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from neural_asm.models.asm import SkillStream
 from neural_asm.models.fault import ThresholdKind, joint_channels
+from neural_asm.models.skill_context import SkillSession
 from neural_asm.recordings.recorder import RecorderProcess, SessionRecording
-from neural_asm.service.errors import BadObservation, NotCalibrated, TooManySessions, UnknownSession
-from neural_asm.service.registry import ModelRegistry
+from neural_asm.service.errors import BadObservation, NotCalibrated, SkillRefused, TooManySessions, UnknownSession
+from neural_asm.service.registry import Hosted, ModelRegistry
 from neural_asm.service.schemas import Observation, SessionCreate
 from neural_asm.service.settings import Settings
 
@@ -30,36 +33,94 @@ log = logging.getLogger(__name__)
 class Session:
     id: str
     model_name: str
-    stream: SkillStream  # holds the calibration, false-positive rate and threshold kind
+    stream: SkillStream | SkillSession  # holds the calibration and threshold; a skill memory's: a SkillSession
     recording_id: str
     client: str = ""  # whose quota the session counts against (service.auth.client_of)
     recording: SessionRecording | None = None  # None: not recorded
     last_used: float = field(default_factory=time.monotonic)
-
-    @property
-    def channel_names(self) -> tuple[str, ...]:
-        return self.stream.model.channel_names
+    skill_fpr: float | None = None  # a skill memory's session: the false-positive rate of its threshold
 
     @property
     def fpr(self) -> float:
-        assert self.stream.fpr is not None
-        return self.stream.fpr
+        fpr = self.skill_fpr if self.skilled is not None else self.stream.fpr  # type: ignore[union-attr]
+        assert fpr is not None
+        return fpr
+
+    @property
+    def skilled(self) -> SkillSession | None:
+        """A skill memory's session (stepped alone: its rows are its skills), else None."""
+        return self.stream if isinstance(self.stream, SkillSession) else None
+
+    @property
+    def told(self) -> str | None:
+        """The skill the session was told (None: not told, or a model without skills)."""
+        skilled = self.skilled
+        return None if skilled is None or skilled.told is None else skilled.memory.skills[skilled.told]
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        skilled = self.skilled
+        return self.stream.model.channel_names if skilled is None else skilled.memory.channel_names  # type: ignore[union-attr]
 
     @property
     def threshold(self) -> ThresholdKind:
-        return self.stream.threshold
+        return "episode" if self.skilled is not None else self.stream.threshold  # type: ignore[union-attr]
+
+    @property
+    def batch_key(self) -> Hashable:
+        """Sessions with equal keys step together (`models.asm.step_streams`); a skill memory's alone."""
+        return (id(self),) if self.skilled is not None else self.stream.batch_key  # type: ignore[union-attr]
 
     def observation(self, req: Observation) -> np.ndarray:
-        """The request's observation as a vector in channel order, or a 422 naming the problem."""
+        """The request's observation as a vector in channel order, or a 422 naming the problem (a
+        skill other than the session's among them: the session goes on as it was)."""
+        if req.skill is not None and req.skill != self.told:
+            told = f"was told skill {self.told!r}" if self.told else "was told no skill"
+            raise SkillRefused(f"skill: session {self.id} {told}, this step names {req.skill!r}; a skill is told at a "
+                               f"session's start: open a new session for another skill")
+        values = req.observation if req.channels is None else req.channels
+        skilled = self.skilled
         try:
-            return self.stream.check(req.observation if req.channels is None else req.channels)
+            return self.stream.check(values) if skilled is None else skilled.memory.check(values)  # type: ignore[union-attr]
         except ValueError as exc:
             raise BadObservation(f"model {self.model_name!r}: {exc}") from None
+
+
+def _stream(name: str, hosted: Hosted, params: SessionCreate, fpr: float) -> SkillStream | SkillSession:
+    """The session's stream: a skill memory's session, told ``params.skill`` or not, or a recall
+    mode's stream; a 422 for a skill that cannot be told, a 409 for a setting not calibrated."""
+    model, told = hosted.model, hosted.told
+    assert model is not None  # the registry hands out only loaded models
+    if told is not None:
+        if params.skill is not None and params.skill not in told.skills:
+            raise SkillRefused(f"skill: model {name!r} does not know skill {params.skill!r}; it knows "
+                               f"{', '.join(told.skills)}")
+        if told.calibration is None:
+            raise NotCalibrated(f"model {name!r} is a skill memory not calibrated yet: nasm calibrate it")
+        if params.threshold != "episode":
+            raise NotCalibrated(f"threshold: model {name!r} is a skill memory, calibrated with episode thresholds only")
+        try:
+            return told.session(params.skill, fpr)
+        except ValueError as exc:  # no threshold at that rate
+            raise NotCalibrated(f"fpr: model {name!r}: {exc}") from None
+    if params.skill is not None:
+        raise SkillRefused(f"skill: model {name!r} was trained without skills and cannot be told one (a skill memory "
+                           f"is trained with nasm train --skill-cue); omit skill")
+    if model.calibration(params.mode, params.cue_steps) is None:
+        raise NotCalibrated(
+            f"model {name!r} has no calibration for {params.mode} recall cued from {params.cue_steps} step(s); "
+            f"calibrated: {sorted(model.calibrations)}"
+        )
+    try:
+        return model.stream(params.mode, params.cue_steps, weighted=True, fpr=fpr, threshold=params.threshold)
+    except KeyError as exc:  # no threshold at that rate
+        raise NotCalibrated(f"fpr: model {name!r}: {exc.args[0]}") from None
+
 
 def open_session(
     params: SessionCreate, client: str, registry: ModelRegistry, settings: Settings, recorder: RecorderProcess | None
 ) -> Session:
-    """Check the recall setting is calibrated, then start its stream and recording."""
+    """Check the recall setting is calibrated (or the skill can be told), then start its stream and recording."""
     name, model = registry.get(params.model)
     fpr = settings.default_fpr if params.fpr is None else params.fpr
     if params.rate_hz is not None and not math.isclose(params.rate_hz, model.rate_hz, rel_tol=1e-6):
@@ -68,26 +129,20 @@ def open_session(
             f"the client streams one every {1e3 / params.rate_hz:g} ms ({params.rate_hz:g} Hz); open the session on a "
             f"model trained at {params.rate_hz:g} Hz"
         )
-    if model.calibration(params.mode, params.cue_steps) is None:
-        raise NotCalibrated(
-            f"model {name!r} has no calibration for {params.mode} recall cued from {params.cue_steps} step(s); "
-            f"calibrated: {sorted(model.calibrations)}"
-        )
-    try:
-        stream = model.stream(params.mode, params.cue_steps, weighted=True, fpr=fpr, threshold=params.threshold)
-    except KeyError as exc:  # no threshold at that rate
-        raise NotCalibrated(f"fpr: model {name!r}: {exc.args[0]}") from None
+    stream = _stream(name, registry.hosted[name], params, fpr)
     session_id = secrets.token_hex(16)
     recording_id = params.recording_id or f"session-{session_id}"
-    session = Session(id=session_id, model_name=name, stream=stream, recording_id=recording_id, client=client)
+    session = Session(id=session_id, model_name=name, stream=stream, recording_id=recording_id, client=client,
+                      skill_fpr=fpr if isinstance(stream, SkillSession) else None)
     if recorder is not None:
         session.recording = recorder.open(
             f"service-{recording_id}-{session_id[:8]}",
-            model.channel_names,
+            session.channel_names,
             recording_id,
             {"source": "service", "session_id": session_id, "model": name, "mode": params.mode,
-             "cue_steps": params.cue_steps, "fpr": fpr, "threshold": params.threshold, "rate_hz": model.rate_hz},
-            joint_channels(model.channel_names),
+             "cue_steps": params.cue_steps, "fpr": fpr, "threshold": params.threshold, "rate_hz": model.rate_hz,
+             "skill": params.skill},
+            joint_channels(session.channel_names),
             step_period_s=1.0 / model.rate_hz,
         )
     return session

@@ -21,7 +21,9 @@ def model_info(hosted: Hosted, default: str | None) -> ModelInfo:
                         whitened=c.error_precision is not None, source=c.source)
         for c in model.calibrations.values()
     ]
-    info.channel_names, info.hidden_size = list(model.channel_names), model.config.hidden_size
+    told = hosted.told  # a skill memory's cue channels are not observed: its sessions send the others
+    info.channel_names = list(model.channel_names if told is None else told.channel_names)
+    info.hidden_size, info.skills = model.config.hidden_size, [] if told is None else list(told.skills)
     info.rate_hz = model.rate_hz
     info.provenance = model.provenance
     return info

@@ -8,7 +8,7 @@ Protocol (JSON text frames, in the spirit of openpi's policy server):
 2. The server sends ``{"type": "metadata", "server": "neural-asm", "protocol": 1,
    "models": [...], "default_model": ...}``.
 3. The client sends ``{"type": "start", ...}`` with the fields of ``POST /sessions``
-   (model, mode, cue_steps, fpr, threshold, recording_id); the server opens a session
+   (model, mode, cue_steps, fpr, threshold, recording_id, skill); the server opens a session
    (closing the connection's previous one) and answers ``{"type": "started", ...}``
    with the session's info.
 4. For each observation the client sends ``{"type": "step", "observation": [...]}`` (or

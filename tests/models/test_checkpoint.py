@@ -145,3 +145,40 @@ def test_failed_write_leaves_previous_checkpoint_intact(trained, tmp_path, monke
         checkpoint.save(trained, path)
     assert path.read_bytes() == before
     assert list(tmp_path.iterdir()) == [path]
+
+
+@pytest.fixture(scope="module")
+def skill_memory(skills):
+    from neural_asm.models.config import FAST
+    from neural_asm.models.skill_context import SkillMemory
+
+    train, test = skills
+    memory = SkillMemory.fit(train.data, train.channel_names, train.labels, FAST.with_(hidden_size=8, epochs=3))
+    memory.calibrate(test.data[0::2], test.labels[0::2], test.data[1::2], test.labels[1::2])
+    return memory
+
+
+def test_a_skill_memory_round_trips_with_its_courses_and_calibration(skill_memory, skills, tmp_path):
+    _, test = skills
+    path = checkpoint.save(skill_memory, tmp_path / "s.safetensors")
+    network, loaded = checkpoint.load_memory(path)
+    assert loaded is not None and loaded.model is network and loaded.skills == skill_memory.skills
+    assert checkpoint.load_memory(checkpoint.save(network, tmp_path / "n.safetensors"))[1] is None  # the network alone
+    for told in (None, test.labels.tolist()):
+        for a, b in zip(skill_memory.score(test.data, told), loaded.score(test.data, told)):
+            assert np.array_equal(a, b)
+    assert checkpoint.read_header(path.read_bytes(), "s")["format_version"] == checkpoint.FORMAT_VERSION
+
+
+def test_a_skill_memory_whose_header_does_not_fit_its_tensors_is_refused(skill_memory, tmp_path):
+    data = checkpoint.save(skill_memory, tmp_path / "s.safetensors").read_bytes()
+    more = _rewrite_header(data, lambda m: m["skill_memory"]["calibration"]["spreads"].append("elsewhere"))
+    with pytest.raises(CheckpointError, match="elsewhere"):
+        checkpoint.decode(more)
+
+
+def test_a_checkpoint_of_version_8_still_loads(trained, tmp_path):
+    data = checkpoint.save(trained, tmp_path / "m.safetensors").read_bytes()
+    old = _rewrite_header(data, lambda m: (m.__setitem__("format_version", 8), m.pop("skill_memory")))
+    model, skills = checkpoint.decode(old)
+    assert skills is None and model.channel_names == trained.channel_names
