@@ -16,8 +16,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from neural_asm.models import recall as recall_
-from neural_asm.models.calibration import Calibration, calibration_key, estimate, set_thresholds
-from neural_asm.models.config import DEFAULT_RATE_HZ, FAST, SCORING, Covariance, TPCConfig
+from neural_asm.models.calibration import Calibration, Weighting, calibration_key, estimate, set_thresholds
+from neural_asm.models.config import DEFAULT_RATE_HZ, FAST, SCORING, TPCConfig
 from neural_asm.models.fault import FaultDecision, ThresholdKind, decide_rows, threshold_for
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.plan import PlanMemory, PlanRecaller, check_demonstrations
@@ -90,7 +90,6 @@ class NeuralASM:
         channel_names: Sequence[str],
         config: TPCConfig = FAST,
         progress: bool = True,
-        provenance: dict[str, Any] | None = None,
         validation: np.ndarray | None = None,
         labels: np.ndarray | None = None,
         context_channels: Sequence[str] = (),
@@ -119,7 +118,7 @@ class NeuralASM:
         keep_best = validation is not None and config.keep_best_on_held_out
         held_out = normaliser.normalise(as_sequences(validation, len(channel_names))) if keep_best else None
         history, kept = train(net, normaliser.normalise(data), progress=progress, validation=held_out)
-        provenance = {**(provenance or {}), "kept_epoch": kept + 1}
+        provenance = {"kept_epoch": kept + 1}  # the caller's note of its data joins it (`noted`)
         plan = None
         if config.plan_memory:
             context = [list(channel_names).index(c) for c in context_channels]  # checked by context_index above
@@ -132,6 +131,12 @@ class NeuralASM:
                                    SCORING.spread_floor(rate_hz), SCORING.centres_errors(rate_hz), labels)
             model.calibrations[calibration.key] = calibration
         return model
+
+    def noted(self, provenance: Mapping[str, Any]) -> "NeuralASM":
+        """This model, with where its data came from noted in its provenance (what training
+        found, such as the epoch kept, stays)."""
+        self.provenance = {**provenance, **self.provenance}
+        return self
 
     @property
     def config(self) -> TPCConfig:
@@ -221,18 +226,16 @@ class NeuralASM:
         cue_steps: int = 1,
         fprs: tuple[float, ...] = SCORING.fprs,
         source: str = "held-out normal episodes",
-        covariance: Covariance = SCORING.error_covariance,
         labels: Sequence[str] | None = None,
-        centred: bool | None = None,
+        weighting: Weighting = Weighting(),
     ) -> Calibration:
         """Estimate precisions on one set of normal episodes and thresholds on another; `labels`
         name the skills of the precision episodes (where calibrations centre errors, each
-        skill's mean error is its own; without them, one mean for all). `centred`: whether
-        each skill's mean error is taken out, the skill recognised as a session recognises it
-        (`Calibration.centre`); None: as the rate's default (`ScoringConfig.centres_errors`)."""
-        centred = SCORING.centres_errors(self.rate_hz) if centred is None else centred
-        calibration = estimate(mode, cue_steps, self.errors(precision_sequences, mode, cue_steps), source, covariance,
-                               SCORING.spread_floor(self.rate_hz), centred, labels)
+        skill's mean error is its own; without them, one mean for all); `weighting`, how the
+        errors are weighed (`Weighting`)."""
+        centred = SCORING.centres_errors(self.rate_hz) if weighting.centred is None else weighting.centred
+        calibration = estimate(mode, cue_steps, self.errors(precision_sequences, mode, cue_steps), source,
+                               weighting.covariance, SCORING.spread_floor(self.rate_hz), centred, labels)
         set_thresholds(calibration, self.errors(threshold_sequences, mode, cue_steps), fprs)
         self.calibrations[calibration.key] = calibration
         return calibration

@@ -107,6 +107,17 @@ class Calibration:
         return quadratic(self.weigh(errors, told), precision)
 
 
+@dataclass(frozen=True)
+class Weighting:
+    """How a calibration weighs errors: a full precision matrix per step or one spread per
+    channel (``covariance``), and whether each skill's mean error is taken out, the skill
+    recognised as a session recognises it (``centred``; None: the rate's default,
+    `ScoringConfig.centres_errors`)."""
+
+    covariance: Covariance = SCORING.error_covariance
+    centred: bool | None = None
+
+
 def calibration_key(mode: str, cue_steps: int) -> str:
     return f"{mode}:{cue_steps}"
 

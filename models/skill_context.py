@@ -151,7 +151,7 @@ class SkillMemory:
         cues = cue_names(skills)
         model = NeuralASM.fit(with_cue(np.asarray(sequences, np.float64), index, len(skills)),
                               (*channel_names, *cues), config.with_(context_input=True), progress=progress,
-                              provenance=provenance, labels=labels, context_channels=cues, rate_hz=rate_hz)
+                              labels=labels, context_channels=cues, rate_hz=rate_hz).noted(provenance or {})
         return cls(model, mean_courses(sequences, labels, skills))
 
     @property

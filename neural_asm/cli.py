@@ -38,7 +38,7 @@ COMMANDS = {
                    "robot client does, after the same checks as ``nasm score`` against the served model."),
     "evaluate": Lazy("neural_asm.logs.cli:evaluate_command", "Faults-style evaluation on logs: faulty episodes detected, normal "
                      "ones flagged, AUROC."),
-    "calibrate": Lazy("neural_asm.calibrate:calibrate_command", "Calibrate a checkpoint's precisions and fault thresholds on "
+    "calibrate": Lazy("neural_asm.calibrate_cli:calibrate_command", "Calibrate a checkpoint's precisions and fault thresholds on "
                       "held-out normal episodes."),
     "correction": Lazy("neural_asm.experiments.cli:correction", "the memory's reactive correction of a falling-object "
                        "hit, stiff and compliant arms"),

@@ -121,8 +121,8 @@ class SkillMemory:
             told = skill_context.SkillMemory.fit(seqs.data, seqs.channel_names, seqs.labels, config, progress,
                                                  provenance, rate_hz or seqs.rate_hz)
             return cls(told.model, told)
-        model = NeuralASM.fit(seqs.data, seqs.channel_names, config, progress=progress, provenance=provenance,
-                              labels=seqs.labels, rate_hz=rate_hz or seqs.rate_hz)
+        model = NeuralASM.fit(seqs.data, seqs.channel_names, config, progress=progress, labels=seqs.labels,
+                              rate_hz=rate_hz or seqs.rate_hz).noted(provenance)
         return cls(model)
 
     @classmethod

@@ -36,8 +36,8 @@ def train_calibrated(
     progress: bool = True,
     provenance: dict | None = None,
 ) -> NeuralASM:
-    model = NeuralASM.fit(demos.data, channel_names, config, progress=progress, provenance=provenance,
-                          validation=precision.data, labels=demos.labels, rate_hz=demos.rate_hz)
+    model = NeuralASM.fit(demos.data, channel_names, config, progress=progress, validation=precision.data,
+                          labels=demos.labels, rate_hz=demos.rate_hz).noted(provenance or {})
     return calibrated(model, precision, calibration)
 
 

@@ -21,7 +21,7 @@ from torch import nn
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import COLUMNS, PERIOD_S, Segments, kitting_mapping
 from neural_asm.models.asm import NeuralASM
-from neural_asm.models.calibration import Calibration, conformal_episode_threshold, estimate
+from neural_asm.models.calibration import Calibration, Weighting, conformal_episode_threshold, estimate
 from neural_asm.models.config import SCORING
 from neural_asm.models.cross_fit import group_folds, out_of_fold_energies
 from neural_asm.models.normaliser import Normaliser
@@ -112,15 +112,15 @@ def fit_network(train: Segments, config: KittingConfig, seed: int) -> NeuralASM:
     """The one network, its provenance naming the mapping its data were read through (what `nasm
     replay` checks logs against before streaming them to it)."""
     return NeuralASM.fit(train.data, tuple(COLUMNS), config.network.with_(seed=seed), progress=False,
-                         provenance={"benchmark": "kitting", "seed": seed, "mapping": kitting_mapping().to_dict()},
-                         labels=train.skills, rate_hz=RATE_HZ)
+                         labels=train.skills, rate_hz=RATE_HZ).noted(
+        {"benchmark": "kitting", "seed": seed, "mapping": kitting_mapping().to_dict()})
 
 
 def calibrate_served(model: NeuralASM, sets: Sets, mode: str, centred: bool, fprs: tuple[float, ...]) -> Calibration:
     """Calibrate the network as served: precisions (and each skill's mean error, when ``centred``)
     on one half of the held-out runs, episode thresholds on the other half's own steps."""
     cal = model.calibrate(sets.precision.data, sets.threshold.data, mode, 1, SCORING.fprs, "held-out normal runs",
-                          labels=sets.precision.skills, centred=centred)
+                          labels=sets.precision.skills, weighting=Weighting(centred=centred))
     energies = model.score(sets.threshold.data, mode).energy
     cal.episode_thresholds.update(served_thresholds(energies, sets.threshold.lengths, SCORING.fprs))
     return cal

@@ -23,8 +23,9 @@ def train_neural_asm(bench: VariedBenchmark, config: TPCConfig, progress: bool =
                   "context": bench.context, "demo_seeds": bench.demos.seeds.tolist(),
                   "skills": sorted(set(bench.demos.labels.tolist()))}
     context = [bench.channel_names[i] for i in bench.context_channels]
-    model = NeuralASM.fit(bench.demos.data, bench.channel_names, config, progress=progress, provenance=provenance,
-                          validation=bench.precision.data, labels=bench.demos.labels, context_channels=context)
+    model = NeuralASM.fit(bench.demos.data, bench.channel_names, config, progress=progress,
+                          validation=bench.precision.data, labels=bench.demos.labels,
+                          context_channels=context).noted(provenance)
     for mode in model.recall_modes:
         model.calibrate(bench.precision.data, bench.calibration.data, mode, 1,
                         source="held-out normal episodes of the varied task (simulated Panda)")

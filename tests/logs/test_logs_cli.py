@@ -118,8 +118,8 @@ def served(logs, tmp_path_factory):
     demos = read_mapped(logs["demos"], parse_mapping(bag_mapping("marker"), "m"))
     precision = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(10, 15)])
     thresholds = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in range(20, 25)])
-    model = NeuralASM.fit(demos.data, demos.channel_names, FAST.with_(hidden_size=64, epochs=150), progress=False,
-                          provenance=demos.provenance)
+    model = NeuralASM.fit(demos.data, demos.channel_names, FAST.with_(hidden_size=64, epochs=150),
+                          progress=False).noted(demos.provenance)
     for mode in ("offline", "online"):
         model.calibrate(precision, thresholds, mode, 1)
     path = checkpoint.save(model, folder / "panda.safetensors")

@@ -92,7 +92,7 @@ def test_a_plan_memory_with_too_few_demonstrations_in_a_fold_is_refused_before_t
 
 
 def test_groups_from_where_episodes_were_read():
-    from neural_asm.calibrate import episode_groups, grouping
+    from neural_asm.calibrate_cli import episode_groups, grouping
     from neural_asm.models.sequences import EpisodeFacts, Sequences
 
     origins = ["skill 3/No.0 successful skill from experiment_at_2018y05m19d15H48M03S/a.csv",

@@ -5,7 +5,7 @@ import pytest
 
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import weigh_step
-from neural_asm.models.calibration import error_precision, error_spread
+from neural_asm.models.calibration import Weighting, error_precision, error_spread
 from neural_asm.models.config import SCORING
 from neural_asm.models.fault import isolate, isolate_rows
 from neural_asm.models.scoring import energy
@@ -44,12 +44,12 @@ def test_calibration_whitens_by_default_and_diagonal_on_request(trained, skills)
     full = model.calibrate(train.data, test.data, "offline", 1)
     steps, channels = full.error_std.shape
     assert full.error_precision is not None and full.error_precision.shape == (steps, channels, channels)
-    diagonal = model.calibrate(train.data, test.data, "offline", 1, covariance="diagonal")
+    diagonal = model.calibrate(train.data, test.data, "offline", 1, weighting=Weighting("diagonal"))
     assert diagonal.error_precision is None
     errors = model.errors(test.data, "offline", 1)
     np.testing.assert_allclose(model.score(test.data, "offline").energy, energy(errors, diagonal.error_std))
     with pytest.raises(ValueError, match="covariance"):
-        model.calibrate(train.data, test.data, "offline", 1, covariance="sparse")  # type: ignore[arg-type]
+        model.calibrate(train.data, test.data, "offline", 1, weighting=Weighting("sparse"))  # type: ignore[arg-type]
 
 
 def rms(errors: np.ndarray) -> np.ndarray:
