@@ -91,6 +91,14 @@ VARIANTS = {
     "r2: defaults, Student-t dynamics (ν 4)": DEFAULTS._replace(tails=STUDENT),
     "r2: defaults, Student-t dynamics (ν 4), cross-fitted": DEFAULTS._replace(tails=STUDENT, cross_fitted=True),
     "r2: mean course alone, no forgetting, cross-fitted": Variant(("course",), "mean", (), "surprise", 0.0, (), True),
+    # round 2's H3, written after H1 and H2 had run: the most probable skill's energy
+    "r2: defaults, most probable skill's energy": DEFAULTS._replace(rule="most_probable"),
+    "r2: defaults, most probable skill's energy, cross-fitted": DEFAULTS._replace(rule="most_probable",
+                                                                                  cross_fitted=True),
+    "r2: defaults, most probable skill's energy, Student-t dynamics (ν 4)": DEFAULTS._replace(rule="most_probable",
+                                                                                              tails=STUDENT),
+    "r2: defaults, most probable skill's energy, Student-t dynamics (ν 4), cross-fitted": DEFAULTS._replace(
+        rule="most_probable", tails=STUDENT, cross_fitted=True),
 }
 # The report's likelihood template: each skill's mean course and own spreads, the most probable skill.
 TEMPLATE_LIKELIHOOD = Variant(("course",), "mean", (), "most_probable", 0.0)
@@ -185,13 +193,16 @@ def template_told(sets: Sets, config: KittingConfig) -> Scored:
                                                                                          s.skills), sets, config.fprs)
 
 
-def one_split(config: KittingConfig, cache: Path, only: str = "") -> dict[str, list[dict[str, float]]]:
+def one_split(config: KittingConfig, cache: Path, only: str = "", benchmark: bool = True) -> dict[str, list[dict[str, float]]]:
+    """Every row on one split, three trainings; ``benchmark``: with the benchmark's network's rows."""
     config, _, _, sets, w = setup(config)
     rows: dict[str, list[dict[str, float]]] = {}
     for seed in config.seeds:
         start = time.perf_counter()
         memory = skill_memory(sets, config, seed, cache)
-        one = cached(cache / f"seed{seed}_one.safetensors", lambda: fit_network(sets.train, config, seed))
+        def one() -> NeuralASM:
+            return cached(cache / f"seed{seed}_one.safetensors", lambda: fit_network(sets.train, config, seed))
+
         variants = {k: v for k, v in VARIANTS.items() if only in k}
         needs = {any(t == "dynamics" for t in (*Variant(*v).terms, *Variant(*v).recognised_by))
                  for v in variants.values() if Variant(*v).cross_fitted} | {False}
@@ -208,9 +219,9 @@ def one_split(config: KittingConfig, cache: Path, only: str = "") -> dict[str, l
                 elif "cross-fitted" in name:  # told, the mean course is the told template
                     rows["template (the mean course) (rival), cross-fitted, told"] = [row]
             rows["template_told (rival), told"] = [metrics(template_told(sets, config), sets, w, config)]
-        for mode, name in (("online", "nasm_one_online"), ("offline", "nasm_one")):
+        for mode, name in (("online", "nasm_one_online"), ("offline", "nasm_one")) if benchmark else ():
             rows.setdefault(f"{name} (benchmark), not told", []).append(
-                metrics(score_network(one, sets, mode, True, config.fprs), sets, w, config))
+                metrics(score_network(one(), sets, mode, True, config.fprs), sets, w, config))
         print(f"split {config.split_seed} seed {seed}: {time.perf_counter() - start:.0f} s", flush=True)
     return rows
 
@@ -268,11 +279,12 @@ def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering sche
          splits: list[int] = typer.Option([0, 1, 2]), seeds: int = typer.Option(3, min=1),
          cache: Path = typer.Option(Path("kitting_skills_cache"), help="trained networks, per split and seed"),
          out: Path | None = typer.Option(None, help="also write the table here"),
-         only: str = typer.Option("", help="only the memory's variants whose name holds this text")) -> None:
+         only: str = typer.Option("", help="only the memory's variants whose name holds this text"),
+         benchmark: bool = typer.Option(True, help="also the benchmark's network's rows (nasm_one, nasm_one_online)")) -> None:
     by_split = {}
     for split in splits:
         config = KittingConfig(data=data, out=cache, trainings=seeds, split_seed=split)
-        by_split[split] = one_split(config, cache / f"split{split}", only)
+        by_split[split] = one_split(config, cache / f"split{split}", only, benchmark)
         print(table({split: by_split[split]}), flush=True)
     text = table(by_split) + "\n\n" + paired_table(by_split)
     print(text)
