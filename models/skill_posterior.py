@@ -26,7 +26,10 @@ where q_t is the posterior carried to step t (forgetting applied) and the weight
 When one skill holds the posterior, E_t is that skill's energy. When no plausible skill explains
 the step, every E_k,t is large, and so is E_t: a run that follows no skill's course is a fault,
 not another skill's normal. Unlike the energy of the single most probable skill, E_t does not
-jump when two skills are close.
+jump when two skills are close. But it lets a skill with little posterior mass explain a step
+whose energy under it is lower by more than twice its log-odds, and a term with many
+heavy-tailed channels gives it many such chances: on the kitting data the skill memory scores
+better by the most probable skill's energy (``rule="most_probable"``, its default; docs/kitting.md).
 """
 
 from __future__ import annotations

@@ -155,11 +155,18 @@ def test_a_student_t_term_weighs_residuals_by_the_ts_log_likelihood():
         SkillSpreads(("a",), np.ones((1, 1, 1)), nu=2.0)
 
 
-def test_a_term_can_be_held_to_a_student_t(memory):
+def test_the_dynamics_term_is_held_to_a_student_t_by_default(memory):
     calibrating = (*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
+    x, _ = episodes(1, SKILLS, 12)
     try:
-        cal = memory.calibrate(*calibrating, tails={"dynamics": 4.0})
+        cal = memory.calibrate(*calibrating)
         assert cal.spreads["dynamics"].nu == 4.0 and cal.spreads["course"].nu is None
+        t_energy, _ = memory.score(x, told=["3", "4", "5"])
+        gaussian = memory.calibrate(*calibrating, tails=None)
+        assert gaussian.spreads["dynamics"].nu is None
+        np.testing.assert_allclose(gaussian.spreads["dynamics"].spread, cal.spreads["dynamics"].spread)  # same RMS
+        g_energy, _ = memory.score(x, told=["3", "4", "5"])
+        assert not np.allclose(t_energy, g_energy)
         with pytest.raises(ValueError, match="terms must be among"):
             memory.calibrate(*calibrating, tails={"speed": 4.0})
     finally:
@@ -206,3 +213,12 @@ def test_a_fold_without_a_skill_is_refused(memory):
     runs = np.where(labels == "5", "run-a", "run-b")  # every skill-5 demonstration in one run
     with pytest.raises(ValueError, match=r"skill\(s\) \['5'\].*use fewer folds"):
         OutOfFold.fit(memory, demos, labels, groups=runs, folds=2, fold_memory=lambda k, x, y: memory.fold(x, y, False))
+
+
+def test_not_told_a_step_is_scored_by_the_skill_most_probable_before_it_by_default(memory):
+    x, _ = episodes(1, SKILLS, 13)
+    energies, posterior = memory.score(x)
+    each = np.stack([memory.score(x, told=[str(s)] * len(x))[0] for s in SKILLS], axis=1)  # (N, K, T)
+    before = posterior[:, :, :-1].argmax(axis=1)  # the most probable skill after step t - 1
+    expected = np.take_along_axis(each[:, :, 1:], before[:, None], axis=1)[:, 0]
+    np.testing.assert_allclose(energies[:, 1:], expected, rtol=1e-6)
