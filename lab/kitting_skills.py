@@ -24,6 +24,14 @@ tactile pad, per-skill spreads from 7-14 segments; ε and the shrinkage fixed be
 Variants added after runs are marked where VARIANTS lists them. The answer (docs/kitting.md): the
 hypothesis is wrong; the network's recalled course drifts, and forgetting lets a failing run be
 re-explained by another skill.
+
+Round 2 (docs/kitting.md, "Round 2", each hypothesis and rule written there before its run): the
+rows named "r2: ...": thresholds cross-fitted from fold memories trained without each of `FOLDS`
+folds of the training runs (cached beside the networks), a Student-t dynamics term, the most
+probable skill's energy, and the paired McNemar table; splits 3-5 were first run for H4.
+
+    python -m lab.kitting_skills "$SCHEME" --splits 0 --splits 1 --splits 2 --seeds 3 --cache DIR --only "r2:"
+    python -m lab.kitting_skills "$SCHEME" --splits 3 --splits 4 --splits 5 --seeds 3 --cache DIR --only "r2:" --no-benchmark
 """
 
 from __future__ import annotations
