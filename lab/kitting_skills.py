@@ -24,12 +24,21 @@ tactile pad, per-skill spreads from 7-14 segments; ε and the shrinkage fixed be
 Variants added after runs are marked where VARIANTS lists them. The answer (docs/kitting.md): the
 hypothesis is wrong; the network's recalled course drifts, and forgetting lets a failing run be
 re-explained by another skill.
+
+Round 2 (docs/kitting.md, "Round 2", each hypothesis and rule written there before its run): the
+rows named "r2: ...": thresholds cross-fitted from fold memories trained without each of `FOLDS`
+folds of the training runs (cached beside the networks), a Student-t dynamics term, the most
+probable skill's energy, and the paired McNemar table; splits 3-5 were first run for H4.
+
+    python -m lab.kitting_skills "$SCHEME" --splits 0 --splits 1 --splits 2 --seeds 3 --cache DIR --only "r2:"
+    python -m lab.kitting_skills "$SCHEME" --splits 3 --splits 4 --splits 5 --seeds 3 --cache DIR --only "r2:" --no-benchmark
 """
 
 from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import typer
@@ -42,12 +51,29 @@ from neural_asm.experiments.kitting.methods import (RATE_HZ, Scored, Sets, calib
 from neural_asm.experiments.kitting.metrics import Windows, method_metrics
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
+from neural_asm.models.conformal import mcnemar_exact
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.skill_context import SkillMemory, mean_courses
+from neural_asm.models.skill_context import OutOfFold, SkillMemory, SkillScoring, mean_courses
 from neural_asm.rivals.templates import PerSkillZScore
 
-# Each row: (terms scored, course: recalled by the network or the demonstrations' "mean", terms that
-# recognise the skill (none: the scored ones), rule, forgetting).
+
+
+class Variant(NamedTuple):
+    """A row of the memory: the terms scored, its course (recalled by the network or the
+    demonstrations' "mean"), the terms that recognise the skill (none: the scored ones), the rule,
+    the forgetting; round 2: the terms held to a Student-t (term, ν), and thresholds cross-fitted."""
+
+    terms: tuple[str, ...]
+    course: str
+    recognised_by: tuple[str, ...] = ()
+    rule: str = "surprise"
+    forgetting: float = 0.01
+    tails: tuple[tuple[str, float], ...] = ()
+    cross_fitted: bool = False
+
+
+DEFAULTS = Variant(("course", "dynamics"), "mean", ("course",), "surprise", 0.0)
+STUDENT = (("dynamics", 4.0),)
 VARIANTS = {
     "skill memory (course + dynamics)": (("course", "dynamics"), "recalled", (), "surprise", 0.01),
     "its course alone": (("course",), "recalled", (), "surprise", 0.01),
@@ -66,9 +92,26 @@ VARIANTS = {
     "mean course alone, no forgetting": (("course",), "mean", (), "surprise", 0.0),
     "mean course + its dynamics, recognised by the course, no forgetting": (("course", "dynamics"), "mean", ("course",),
                                                                             "surprise", 0.0),
+    # round 2 (docs/kitting.md, "Round 2"), written before its runs: H1 thresholds cross-fitted, H2 a
+    # Student-t dynamics term
+    "r2: defaults": DEFAULTS,
+    "r2: defaults, cross-fitted": DEFAULTS._replace(cross_fitted=True),
+    "r2: defaults, Student-t dynamics (ν 4)": DEFAULTS._replace(tails=STUDENT),
+    "r2: defaults, Student-t dynamics (ν 4), cross-fitted": DEFAULTS._replace(tails=STUDENT, cross_fitted=True),
+    "r2: mean course alone, no forgetting, cross-fitted": Variant(("course",), "mean", (), "surprise", 0.0, (), True),
+    # round 2's H3, written after H1 and H2 had run: the most probable skill's energy
+    "r2: defaults, most probable skill's energy": DEFAULTS._replace(rule="most_probable"),
+    "r2: defaults, most probable skill's energy, cross-fitted": DEFAULTS._replace(rule="most_probable",
+                                                                                  cross_fitted=True),
+    "r2: defaults, most probable skill's energy, Student-t dynamics (ν 4)": DEFAULTS._replace(rule="most_probable",
+                                                                                              tails=STUDENT),
+    "r2: defaults, most probable skill's energy, Student-t dynamics (ν 4), cross-fitted": DEFAULTS._replace(
+        rule="most_probable", tails=STUDENT, cross_fitted=True),
 }
 # The report's likelihood template: each skill's mean course and own spreads, the most probable skill.
-TEMPLATE_LIKELIHOOD = (("course",), "mean", (), "most_probable", 0.0)
+TEMPLATE_LIKELIHOOD = Variant(("course",), "mean", (), "most_probable", 0.0)
+# Cross-fitting's folds, the benchmark's (`KittingConfig.threshold_folds`): a fold network trains in ~10 s.
+FOLDS = 5
 COLUMNS_OUT = ("auroc", "skill_5", "no_object", "detected", "normal_flagged", "delay_ms", "recognised", "no_object_as_5")
 
 
@@ -92,22 +135,44 @@ def skill_memory(sets: Sets, config: KittingConfig, seed: int, cache: Path) -> S
     return SkillMemory(model, mean_courses(train.data, train.skills, skills))
 
 
+def out_of_fold(memory: SkillMemory, sets: Sets, config: KittingConfig, seed: int, cache: Path,
+                network: bool) -> OutOfFold:
+    """The training runs cut into `FOLDS` folds by run (the benchmark's deal), each fold's memory
+    trained without it and cached (``network``), or this memory's network with the other folds'
+    mean courses (enough for the course term)."""
+    def fold_memory(k: int, x: np.ndarray, y: np.ndarray) -> SkillMemory:
+        if not network:
+            return memory.fold(x, y, network=False)
+        model = cached(cache / f"seed{seed}_fold{k}of{FOLDS}_skill.safetensors", lambda: memory.fold(x, y).model)
+        return SkillMemory(model, mean_courses(x, y, memory.skills))
+
+    train = sets.train
+    return OutOfFold.fit(memory, train.data, train.skills, train.lengths, train.runs, FOLDS, config.split_seed,
+                         fold_memory)
+
+
 def metrics(scored: Scored, sets: Sets, w: Windows, config: KittingConfig) -> dict[str, float]:
-    m, _ = method_metrics(scored, sets.test, w, config, config.headline_skills)
+    """The table's numbers, and the served decisions each item gets right (``correct``: anomalies
+    detected, then normal segments not flagged, at 1 %) for the paired test."""
+    m, correct = method_metrics(scored, sets.test, w, config, config.headline_skills)
     return {"auroc": m["auroc"]["0.5"], "skill_5": m["per_skill"]["5"]["auroc"]["0.5"],
             "no_object": m["per_type"]["no_object"]["auroc_0.5"], "detected": m["detected_1pct"],
             "normal_flagged": m["normal_flagged_1pct"], "delay_ms": float("nan") if m["delay_ms_median"] is None else m["delay_ms_median"],
-            "per_type": {t: v["auroc_0.5"] for t, v in m["per_type"].items()}}
+            "per_type": {t: v["auroc_0.5"] for t, v in m["per_type"].items()}, "correct": correct}
 
 
-def memory_rows(memory: SkillMemory, sets: Sets, w: Windows, config: KittingConfig,
-                variants: dict[str, tuple]) -> dict[str, dict[str, float]]:
-    """Each variant's metrics, not told and told the skill (``(told)`` in the row's name)."""
+def memory_rows(memory: SkillMemory, sets: Sets, w: Windows, config: KittingConfig, variants: dict[str, tuple],
+                folds: dict[bool, OutOfFold]) -> dict[str, dict[str, float]]:
+    """Each variant's metrics, not told and told the skill (``(told)`` in the row's name); ``folds``:
+    the fold memories cross-fitted rows need, with networks (True) or without (False)."""
     out = {}
     n = len(sets.test)
-    for name, (terms, course, recognised_by, rule, forgetting) in variants.items():
+    for name, variant in variants.items():
+        v = Variant(*variant)
+        cross_fit = folds[any(t == "dynamics" for t in (*v.terms, *v.recognised_by))] if v.cross_fitted else None
+        scoring = SkillScoring(tuple(v.terms), v.course, tuple(v.recognised_by), v.forgetting, v.rule, tuple(v.tails))
         cal = memory.calibrate(sets.precision.data, sets.precision.skills, sets.threshold.data, sets.threshold.skills,
-                               sets.threshold.lengths, terms, course, recognised_by, config.fprs, forgetting, rule)
+                               sets.threshold.lengths, scoring, config.fprs, cross_fit=cross_fit)
         inferred, posterior = memory.score(sets.test.data)
         told, _ = memory.score(sets.test.data, told=sets.test.skills)
         index = np.array([memory.index(s) for s in sets.test.skills])
@@ -136,26 +201,61 @@ def template_told(sets: Sets, config: KittingConfig) -> Scored:
                                                                                          s.skills), sets, config.fprs)
 
 
-def one_split(config: KittingConfig, cache: Path, only: str = "") -> dict[str, list[dict[str, float]]]:
+def one_split(config: KittingConfig, cache: Path, only: str = "", benchmark: bool = True) -> dict[str, list[dict[str, float]]]:
+    """Every row on one split, three trainings; ``benchmark``: with the benchmark's network's rows."""
     config, _, _, sets, w = setup(config)
     rows: dict[str, list[dict[str, float]]] = {}
     for seed in config.seeds:
         start = time.perf_counter()
         memory = skill_memory(sets, config, seed, cache)
-        one = cached(cache / f"seed{seed}_one.safetensors", lambda: fit_network(sets.train, config, seed))
+        def one() -> NeuralASM:
+            return cached(cache / f"seed{seed}_one.safetensors", lambda: fit_network(sets.train, config, seed))
+
         variants = {k: v for k, v in VARIANTS.items() if only in k}
-        for name, row in memory_rows(memory, sets, w, config, variants).items():
+        needs = {any(t == "dynamics" for t in (*Variant(*v).terms, *Variant(*v).recognised_by))
+                 for v in variants.values() if Variant(*v).cross_fitted} | {False}
+        folds = {network: out_of_fold(memory, sets, config, seed, cache, network) for network in needs}
+        for name, row in memory_rows(memory, sets, w, config, variants, folds).items():
             rows.setdefault(name, []).append(row)
         if seed == config.seeds[0]:
-            for name, row in memory_rows(memory, sets, w, config, {"template_likelihood": TEMPLATE_LIKELIHOOD}).items():
+            rivals = {"template_likelihood": TEMPLATE_LIKELIHOOD,
+                      "template_likelihood, cross-fitted": TEMPLATE_LIKELIHOOD._replace(cross_fitted=True)}
+            for name, row in memory_rows(memory, sets, w, config, rivals, folds).items():
+                rival = name.replace("template_likelihood", "template_likelihood (rival)")
                 if name.endswith("not told"):
-                    rows["template_likelihood (rival), not told"] = [row]
+                    rows[rival] = [row]
+                elif "cross-fitted" in name:  # told, the mean course is the told template
+                    rows["template (the mean course) (rival), cross-fitted, told"] = [row]
             rows["template_told (rival), told"] = [metrics(template_told(sets, config), sets, w, config)]
-        for mode, name in (("online", "nasm_one_online"), ("offline", "nasm_one")):
+        for mode, name in (("online", "nasm_one_online"), ("offline", "nasm_one")) if benchmark else ():
             rows.setdefault(f"{name} (benchmark), not told", []).append(
-                metrics(score_network(one, sets, mode, True, config.fprs), sets, w, config))
+                metrics(score_network(one(), sets, mode, True, config.fprs), sets, w, config))
         print(f"split {config.split_seed} seed {seed}: {time.perf_counter() - start:.0f} s", flush=True)
     return rows
+
+
+def paired(rows: dict[str, list[dict]], memory: str, rival: str) -> str:
+    """Exact McNemar on the served decisions of ``memory`` (each training) against ``rival`` (its one
+    "training"): the discordant items summed over trainings, and each training's p."""
+    a_runs, (b,) = [r["correct"] for r in rows[memory]], [r["correct"] for r in rows[rival]]
+    a_only = [int((a & ~b).sum()) for a in a_runs]
+    b_only = [int((~a & b).sum()) for a in a_runs]
+    each = ", ".join(f"{x}/{y} p={mcnemar_exact(x, y):.2g}" for x, y in zip(a_only, b_only))
+    return (f"| {memory} | {rival} | {sum(a_only)} | {sum(b_only)} | {mcnemar_exact(sum(a_only), sum(b_only)):.2g} | "
+            f"{each} |")
+
+
+def paired_table(by_split: dict[int, dict[str, list[dict]]]) -> str:
+    """Every round-2 row against the strongest rivals (held-out and cross-fitted thresholds)."""
+    lines = ["| split | memory | rival | memory only right (sum of trainings) | rival only right | p (summed) | "
+             "per training: memory only / rival only, p |", "|---|---|---|---|---|---|---|"]
+    for split, rows in by_split.items():
+        for name in (r for r in rows if r.startswith("r2: ")):
+            rivals = (("template_likelihood (rival), not told", "template_likelihood (rival), cross-fitted, not told")
+                      if name.endswith("not told") else
+                      ("template_told (rival), told", "template (the mean course) (rival), cross-fitted, told"))
+            lines += [f"| {split} " + paired(rows, name, rival) for rival in rivals if rival in rows]
+    return "\n".join(lines)
 
 
 def cell(runs: list[dict[str, float]], key: str) -> str:
@@ -187,13 +287,14 @@ def main(data: Path = typer.Argument(..., help="the clone's 'No.0 filtering sche
          splits: list[int] = typer.Option([0, 1, 2]), seeds: int = typer.Option(3, min=1),
          cache: Path = typer.Option(Path("kitting_skills_cache"), help="trained networks, per split and seed"),
          out: Path | None = typer.Option(None, help="also write the table here"),
-         only: str = typer.Option("", help="only the memory's variants whose name holds this text")) -> None:
+         only: str = typer.Option("", help="only the memory's variants whose name holds this text"),
+         benchmark: bool = typer.Option(True, help="also the benchmark's network's rows (nasm_one, nasm_one_online)")) -> None:
     by_split = {}
     for split in splits:
         config = KittingConfig(data=data, out=cache, trainings=seeds, split_seed=split)
-        by_split[split] = one_split(config, cache / f"split{split}", only)
+        by_split[split] = one_split(config, cache / f"split{split}", only, benchmark)
         print(table({split: by_split[split]}), flush=True)
-    text = table(by_split)
+    text = table(by_split) + "\n\n" + paired_table(by_split)
     print(text)
     if out is not None:
         out.write_text(text + "\n")

@@ -6,7 +6,7 @@ import pytest
 
 from kitting_fixtures import skill_curve
 from neural_asm.models.config import FAST
-from neural_asm.models.skill_context import SkillMemory, skills_of
+from neural_asm.models.skill_context import SkillMemory, SkillScoring, skills_of
 from neural_asm.models.skill_posterior import SkillPosterior, SkillSpreads, infer
 
 SKILLS = (3, 4, 5)
@@ -126,9 +126,9 @@ def test_the_skill_can_be_recognised_by_the_course_alone_while_both_terms_are_sc
     x, _ = episodes(1, SKILLS, 11)
     calibrating = (*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
     try:
-        memory.calibrate(*calibrating, terms=("course",))
+        memory.calibrate(*calibrating, scoring=SkillScoring(terms=("course",)))
         _, by_course = memory.score(x)
-        memory.calibrate(*calibrating, recognised_by=("course",))
+        memory.calibrate(*calibrating, scoring=SkillScoring(recognised_by=("course",)))
         _, posterior = memory.score(x)
         both, _ = memory.score(x, told=["3", "4", "5"])  # scored by both terms: at least the course's energy
         np.testing.assert_allclose(posterior, by_course)  # the dynamics term does not move the posterior
@@ -137,3 +137,88 @@ def test_the_skill_can_be_recognised_by_the_course_alone_while_both_terms_are_sc
             np.arange(3), [0, 1, 2]] - 1e-9).all()
     finally:
         memory.calibrate(*calibrating)
+
+
+def test_a_student_t_term_weighs_residuals_by_the_ts_log_likelihood():
+    from scipy import stats
+
+    spreads = SkillSpreads(("a",), np.full((1, 1, 1), 2.0), nu=4.0)
+    scale = 2.0 * np.sqrt(2 / 4)  # the t's scale of the same variance as the spread
+    residuals = np.array([0.5, 3.0, 30.0]).reshape(3, 1, 1, 1)
+    energy = spreads.energy(residuals, np.array([0]))[:, 0, 0]
+    log_pdf = stats.t.logpdf([0.5, 3.0, 30.0], df=4, scale=scale)
+    np.testing.assert_allclose(energy - energy[0], -2 * (log_pdf - log_pdf[0]))  # -2 log-likelihood up to a constant
+    gaussian = SkillSpreads(("a",), np.full((1, 1, 1), 2.0)).energy(residuals, np.array([0]))[:, 0, 0]
+    assert energy[2] - energy[1] < (gaussian[2] - gaussian[1]) / 10  # a far step adds about its log, not its square
+    assert spreads.log_normaliser(np.array([0]))[0, 0] == pytest.approx(2 * np.log(scale))
+    with pytest.raises(ValueError, match="degrees of freedom must be > 2"):
+        SkillSpreads(("a",), np.ones((1, 1, 1)), nu=2.0)
+
+
+def test_the_dynamics_term_is_held_to_a_student_t_by_default(memory):
+    calibrating = (*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
+    x, _ = episodes(1, SKILLS, 12)
+    try:
+        cal = memory.calibrate(*calibrating)
+        assert cal.spreads["dynamics"].nu == 4.0 and cal.spreads["course"].nu is None
+        t_energy, _ = memory.score(x, told=["3", "4", "5"])
+        gaussian = memory.calibrate(*calibrating, scoring=SkillScoring(tails=()))
+        assert gaussian.spreads["dynamics"].nu is None
+        np.testing.assert_allclose(gaussian.spreads["dynamics"].spread, cal.spreads["dynamics"].spread)  # same RMS
+        g_energy, _ = memory.score(x, told=["3", "4", "5"])
+        assert not np.allclose(t_energy, g_energy)
+        with pytest.raises(ValueError, match="terms must be among"):
+            memory.calibrate(*calibrating, scoring=SkillScoring(tails=(("speed", 4.0),)))
+    finally:
+        memory.calibrate(*calibrating)
+
+
+def test_cross_fitted_thresholds_pool_the_demonstrations_out_of_fold_peaks(memory):
+    from neural_asm.models.calibration import conformal_episode_threshold
+    from neural_asm.models.skill_context import OutOfFold
+
+    demos, labels = episodes(10, SKILLS, 0)  # what the memory learnt
+    precision, (few, few_labels) = episodes(5, SKILLS, 1), episodes(2, SKILLS, 2)  # 6 threshold episodes: < 1 / 0.1 - 1
+    course_only = dict(scoring=SkillScoring(terms=("course",), recognised_by=()), fprs=(0.1,))
+    out_of_fold = OutOfFold.fit(memory, demos, labels, folds=2, fold_memory=lambda k, x, y: memory.fold(x, y, False))
+    for k, fold_memory in enumerate(out_of_fold.memories):  # each fold's course: the other fold's mean
+        for s in SKILLS:
+            inside = (out_of_fold.fold != k) & (labels == str(s))
+            np.testing.assert_allclose(fold_memory.means[fold_memory.index(str(s))], demos[inside].mean(axis=0))
+    # fold memories that are the memory itself: the pool is its own peaks on both sets
+    in_sample = OutOfFold(demos, labels, out_of_fold.lengths, out_of_fold.fold, (memory, memory))
+    try:
+        assert memory.calibrate(*precision, few, few_labels, **course_only).out_of_fold_episodes == 0
+        cal = memory.calibrate(*precision, few, few_labels, **course_only, cross_fit=in_sample)
+        assert cal.out_of_fold_episodes == 30
+        pool = np.r_[memory.score(few)[0].max(axis=1), memory.score(demos)[0].max(axis=1)]
+        assert cal.inferred[0.1] == pytest.approx(conformal_episode_threshold(pool, 0.1))
+        told = np.r_[memory.score(few, told=few_labels)[0].max(axis=1), memory.score(demos, told=labels)[0].max(axis=1)]
+        skills = np.r_[few_labels, labels]
+        for s in SKILLS:  # 12 pooled peaks a skill, >= 1 / 0.1 - 1: each skill its own threshold
+            expected = conformal_episode_threshold(told[skills == str(s)], 0.1)
+            assert cal.told[0.1][memory.index(str(s))] == pytest.approx(expected)
+        crossed = memory.calibrate(*precision, few, few_labels, **course_only, cross_fit=out_of_fold)
+        assert crossed.out_of_fold_episodes == 30 and crossed.inferred[0.1] != cal.inferred[0.1]
+        enough = episodes(4, SKILLS, 2)  # 12 threshold episodes: cross-fitting is not needed
+        assert memory.calibrate(*precision, *enough, **course_only, cross_fit=out_of_fold).out_of_fold_episodes == 0
+    finally:
+        memory.calibrate(*precision, *episodes(5, SKILLS, 2))
+
+
+def test_a_fold_without_a_skill_is_refused(memory):
+    from neural_asm.models.skill_context import OutOfFold
+
+    demos, labels = episodes(4, SKILLS, 0)
+    runs = np.where(labels == "5", "run-a", "run-b")  # every skill-5 demonstration in one run
+    with pytest.raises(ValueError, match=r"skill\(s\) \['5'\].*use fewer folds"):
+        OutOfFold.fit(memory, demos, labels, groups=runs, folds=2, fold_memory=lambda k, x, y: memory.fold(x, y, False))
+
+
+def test_not_told_a_step_is_scored_by_the_skill_most_probable_before_it_by_default(memory):
+    x, _ = episodes(1, SKILLS, 13)
+    energies, posterior = memory.score(x)
+    each = np.stack([memory.score(x, told=[str(s)] * len(x))[0] for s in SKILLS], axis=1)  # (N, K, T)
+    before = posterior[:, :, :-1].argmax(axis=1)  # the most probable skill after step t - 1
+    expected = np.take_along_axis(each[:, :, 1:], before[:, None], axis=1)[:, 0]
+    np.testing.assert_allclose(energies[:, 1:], expected, rtol=1e-6)
