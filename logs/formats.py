@@ -10,6 +10,7 @@ dependencies.
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, Protocol
 
@@ -75,8 +76,19 @@ def described() -> str:
     return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
 
 
-class BagReader:
-    kind = "rosbag"
+class _BuiltIn:
+    """A format of this package: its reader module (``neural_asm.logs.<module>``, imported when a
+    source is read, so that naming the formats loads neither pyarrow nor rosbags) reads it."""
+
+    module: str
+
+    def read(self, source: Path, mapping: Mapping, skip_bad: bool) -> Iterator[Recorded | str]:
+        reader = importlib.import_module(f"neural_asm.logs.{self.module}")
+        return reader.read_episodes(source, mapping, skip_bad)  # type: ignore[no-any-return]
+
+
+class BagReader(_BuiltIn):
+    kind = module = "rosbag"
     named = "a ROS bag source (.mcap, .db3, .bag, a rosbag2 folder or a folder of them)"
     section = Episodes
 
@@ -86,28 +98,19 @@ class BagReader:
         return source.is_dir() and ((source / BAG_METADATA).exists() or any(
             (p.is_file() and p.suffix in BAG_SUFFIXES) or (p / BAG_METADATA).exists() for p in source.iterdir()))
 
-    def read(self, source: Path, mapping: Mapping, skip_bad: bool) -> Iterator[Recorded | str]:
-        from neural_asm.logs import rosbag
 
-        return rosbag.read_episodes(source, mapping, skip_bad)
-
-
-class LeRobotReader:
-    kind = "lerobot"
+class LeRobotReader(_BuiltIn):
+    kind = module = "lerobot"
     named = "a LeRobot dataset"
     section = Dataset
 
     def recognises(self, source: Path) -> bool:
         return (source / LEROBOT_INFO).is_file()
 
-    def read(self, source: Path, mapping: Mapping, skip_bad: bool) -> Iterator[Recorded | str]:
-        from neural_asm.logs import lerobot
 
-        return lerobot.read_episodes(source, mapping, skip_bad)
-
-
-class TableReader:
+class TableReader(_BuiltIn):
     kind = "table"
+    module = "tables"
     named = "a lab's tables (CSV, TSV, text, Parquet: a file or a folder)"
     section = Table
 
@@ -115,11 +118,6 @@ class TableReader:
         if source.is_file():
             return source.suffix.lower() in TABLE_SUFFIXES
         return source.is_dir() and any(p.suffix.lower() in TABLE_SUFFIXES for p in source.rglob("*"))
-
-    def read(self, source: Path, mapping: Mapping, skip_bad: bool) -> Iterator[Recorded | str]:
-        from neural_asm.logs import tables
-
-        return tables.read_episodes(source, mapping, skip_bad)
 
 
 for _builtin in (BagReader(), LeRobotReader(), TableReader()):

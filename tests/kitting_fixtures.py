@@ -126,3 +126,40 @@ def write_voraus(path: Path, samples: int = 12, steps: int = 110, seed: int = 0,
     path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(table, path, row_group_size=row_group)
     return path
+
+
+SKILL_NAMES = ("3", "4", "5")
+SKILL_CHANNELS = tuple(f"c{i}" for i in range(6))
+
+
+def skill_runs(n: int, seed: int, skills: tuple[str, ...] = SKILL_NAMES, steps: int = 40
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` normal runs (steps, 6) of each skill, and each run's skill."""
+    rng = np.random.default_rng(seed)
+    return np.stack([skill_curve(int(s), steps, rng) for s in skills for _ in range(n)]), np.repeat(skills, n)
+
+
+def told_memory():
+    """A public SkillMemory told its skills by a cue, on 10 runs a skill, calibrated on 10 more."""
+    from neural_asm import SkillMemory
+    from neural_asm.models.config import FAST
+
+    x, y = skill_runs(10, 0)
+    memory = SkillMemory.fit(x, SKILL_CHANNELS, y, preset=FAST.with_(hidden_size=32, epochs=40), progress=False,
+                             skill_cue=True)
+    precision, skills = skill_runs(10, 1)
+    memory.calibrate(precision, skills=skills)
+    return memory
+
+
+def served_models(folder: Path, memory) -> Path:
+    """``folder`` holding the skill memory (``kitting``) beside a network trained without skills (``plain``)."""
+    from neural_asm import SkillMemory
+    from neural_asm.models.config import FAST
+
+    memory.save(folder / "kitting.safetensors")
+    plain = SkillMemory.fit(skill_runs(2, 2)[0], SKILL_CHANNELS, preset=FAST.with_(hidden_size=8, epochs=2),
+                            progress=False)
+    plain.calibrate(skill_runs(2, 3)[0])
+    plain.save(folder / "plain.safetensors")
+    return folder

@@ -4,48 +4,28 @@ server on loopback: ``ServiceClient.session(skill=)``, ``nasm replay --tell-skil
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from kitting_fixtures import skill_curve
+from kitting_fixtures import SKILL_CHANNELS as NAMES, served_models, skill_runs as runs, told_memory
 from neural_asm import SkillMemory
 from neural_asm.client.session import ServiceClient
 from neural_asm.client.cli import app as client_cli
 from neural_asm.client.replay import replay_logs
 from neural_asm.client.stream import Connection, StreamOptions
-from neural_asm.models.config import FAST
 from neural_asm.models.sequences import EpisodeFacts, Sequences
 from neural_asm.service.embedded import start_embedded
 from neural_asm.service.settings import Settings
 
-SKILLS = ("3", "4", "5")
-NAMES = tuple(f"c{i}" for i in range(6))
-
-
-def runs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    return np.stack([skill_curve(int(s), 40, rng) for s in SKILLS for _ in range(n)]), np.repeat(SKILLS, n)
-
-
-@pytest.fixture(scope="module")
-def memory() -> SkillMemory:
-    x, y = runs(10, 0)
-    m = SkillMemory.fit(x, NAMES, y, preset=FAST.with_(hidden_size=32, epochs=40), progress=False, skill_cue=True)
-    m.calibrate(*runs(10, 1)[:1], skills=runs(10, 1)[1])
-    return m
+memory = pytest.fixture(scope="module")(told_memory)
 
 
 @pytest.fixture(scope="module")
 def server(memory: SkillMemory, tmp_path_factory: pytest.TempPathFactory):
     """The skill memory (``kitting``) beside a network trained without skills, the default."""
-    folder = tmp_path_factory.mktemp("models")
-    memory.save(folder / "kitting.safetensors")
-    plain = SkillMemory.fit(runs(2, 2)[0], NAMES, preset=FAST.with_(hidden_size=8, epochs=2), progress=False)
-    plain.calibrate(runs(2, 3)[0])
-    plain.save(folder / "plain.safetensors")
+    folder = served_models(tmp_path_factory.mktemp("models"), memory)
     settings = Settings(models_dir=folder, record=False, build_default_model=False, default_model="plain")
     with start_embedded(settings) as srv:
         yield srv

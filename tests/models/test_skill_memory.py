@@ -4,7 +4,7 @@ memory kept whole through its checkpoint, on the tests' own kitting-shaped skill
 import numpy as np
 import pytest
 
-from kitting_fixtures import skill_curve
+from kitting_fixtures import skill_runs, told_memory
 from neural_asm import SkillMemory
 from neural_asm.models import checkpoint
 from neural_asm.models.config import FAST
@@ -15,16 +15,12 @@ NAMES = [f"c{i}" for i in range(6)]
 
 
 def episodes(n: int, skills: tuple[str, ...], seed: int) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    return np.stack([skill_curve(int(s), STEPS, rng) for s in skills for _ in range(n)]), np.repeat(skills, n)
+    return skill_runs(n, seed, skills, STEPS)
 
 
 @pytest.fixture(scope="module")
 def memory() -> SkillMemory:
-    x, y = episodes(10, SKILLS, 0)
-    m = SkillMemory.fit(x, NAMES, y, preset=FAST.with_(hidden_size=32, epochs=40), progress=False, skill_cue=True)
-    m.calibrate(*episodes(10, SKILLS, 1)[:1], skills=episodes(10, SKILLS, 1)[1])
-    return m
+    return told_memory()
 
 
 def peaks(memory: SkillMemory, run: np.ndarray, skill: str | None) -> tuple[float, bool, list]:

@@ -2,44 +2,24 @@
 in-process monitor does, step by step, over HTTP and the websocket; the skills a session cannot be
 told are refused in one line, and the session goes on. On the tests' own kitting-shaped courses."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from kitting_fixtures import skill_curve
+from kitting_fixtures import SKILL_CHANNELS, SKILL_NAMES as SKILLS, served_models, skill_runs as runs, told_memory
 from neural_asm import SkillMemory
 from neural_asm.models.answer import StepAnswer
-from neural_asm.models.config import FAST
 from neural_asm.service.app import create_app
 from neural_asm.service.schemas import FAULT, PREDICT
 from neural_asm.service.settings import Settings
 
-SKILLS = ("3", "4", "5")
-NAMES = [f"c{i}" for i in range(6)]
-
-
-def runs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    return np.stack([skill_curve(int(s), 40, rng) for s in SKILLS for _ in range(n)]), np.repeat(SKILLS, n)
-
-
-@pytest.fixture(scope="module")
-def memory(tmp_path_factory: pytest.TempPathFactory) -> SkillMemory:
-    x, y = runs(10, 0)
-    m = SkillMemory.fit(x, NAMES, y, preset=FAST.with_(hidden_size=32, epochs=40), progress=False, skill_cue=True)
-    m.calibrate(*runs(10, 1)[:1], skills=runs(10, 1)[1])
-    return m
+memory = pytest.fixture(scope="module")(told_memory)
 
 
 @pytest.fixture(scope="module")
 def client(memory: SkillMemory, tmp_path_factory: pytest.TempPathFactory):
-    folder = tmp_path_factory.mktemp("models")
-    memory.save(folder / "kitting.safetensors")
-    plain = SkillMemory.fit(runs(2, 2)[0], NAMES, preset=FAST.with_(hidden_size=8, epochs=2), progress=False)
-    plain.calibrate(runs(2, 3)[0])
-    plain.save(folder / "plain.safetensors")
+    folder = served_models(tmp_path_factory.mktemp("models"), memory)
     settings = Settings(models_dir=folder, record=False, build_default_model=False, default_model="kitting")
     with TestClient(create_app(settings)) as c:
         yield c
@@ -105,7 +85,7 @@ def test_a_skill_the_model_does_not_know_is_refused_naming_it_and_the_known_ones
     assert r.status_code == 422 and "'9'" in r.json()["detail"] and "3, 4, 5" in r.json()["detail"]
     assert "\n" not in r.json()["detail"]
     listed = {m["name"]: m for m in client.get("/models").json()}
-    assert listed["kitting"]["skills"] == list(SKILLS) and listed["kitting"]["channel_names"] == NAMES
+    assert listed["kitting"]["skills"] == list(SKILLS) and listed["kitting"]["channel_names"] == list(SKILL_CHANNELS)
     assert listed["plain"]["skills"] == []
 
 
