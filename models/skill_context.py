@@ -51,6 +51,7 @@ TERMS = ("course", "dynamics")
 # normal residuals are heavy-tailed (docs/kitting.md, "Round 2").
 TAILS = MappingProxyType({"dynamics": 4.0})
 Course = Literal["recalled", "mean"]
+Labels = Sequence[str] | np.ndarray  # each episode's skill: names, or an array of them
 
 
 def segment_peaks(energies: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -211,7 +212,7 @@ class SkillMemory:
         self.calibration: SkillCalibration | None = None
 
     @classmethod
-    def fit(cls, sequences: np.ndarray, channel_names: Sequence[str], labels: Sequence[str], config: TPCConfig,
+    def fit(cls, sequences: np.ndarray, channel_names: Sequence[str], labels: Labels, config: TPCConfig,
             progress: bool = False, provenance: dict | None = None, rate_hz: float = DEFAULT_RATE_HZ) -> "SkillMemory":
         """Train the one network on raw demonstrations (N, T, D) of the named skills, each with its cue."""
         labels = np.asarray(labels).astype(str)
@@ -286,8 +287,8 @@ class SkillMemory:
             out["dynamics"] = errors.reshape(n, k, steps, -1).astype(np.float64)
         return out
 
-    def calibrate(self, precision: np.ndarray, precision_skills: Sequence[str], threshold: np.ndarray,
-                  threshold_skills: Sequence[str], threshold_lengths: np.ndarray | None = None,
+    def calibrate(self, precision: np.ndarray, precision_skills: Labels, threshold: np.ndarray,
+                  threshold_skills: Labels, threshold_lengths: np.ndarray | None = None,
                   scoring: SkillScoring = SkillScoring(), fprs: tuple[float, ...] = SCORING.fprs, *,
                   cross_fit: OutOfFold | None = None) -> SkillCalibration:
         """Spreads per skill on one set of normal episodes (raw, with their skills), episode

@@ -18,7 +18,7 @@ import numpy as np
 
 from neural_asm.models import checkpoint, skill_context
 from neural_asm.models.answer import StepAnswer
-from neural_asm.models.asm import NeuralASM, SkillStream, step_streams
+from neural_asm.models.asm import NeuralASM, SkillStream, StreamStep, step_streams
 from neural_asm.models.calibration import set_energy_thresholds
 from neural_asm.models.config import DEFAULT_RATE_HZ, PRESETS, SCORING, TPCConfig
 from neural_asm.models.cross_fit import CrossFit
@@ -55,13 +55,16 @@ class Monitor:
         """Judge one raw observation (a vector in channel order, or a channel -> value mapping);
         a ValueError names what is wrong with it."""
         stream = self._stream
+        probability: float | None = None
         if isinstance(stream, skill_context.SkillSession):
-            result, probability = skill_context.served_step(stream, stream.memory.check(observation))
-            return StepAnswer.judged(result.score, result.decision, stream.memory.channel_names, self._fpr, probability)
-        result = step_streams([stream], stream.check(observation)[None])[0]
+            served, probability = skill_context.served_step(stream, stream.memory.check(observation))
+            result: StreamStep | None = served
+            names = stream.memory.channel_names
+        else:
+            result, names = step_streams([stream], stream.check(observation)[None])[0], stream.model.channel_names
         if result is None or result.decision is None:
             raise FloatingPointError(f"step {stream.t}: the memory's outputs are not finite")
-        return StepAnswer.judged(result.score, result.decision, stream.model.channel_names, self._fpr)
+        return StepAnswer.judged(result.score, result.decision, names, self._fpr, probability)
 
 
 class SkillMemory:
@@ -186,7 +189,7 @@ class SkillMemory:
         source: str = "held-out normal episodes",
         cross_fit: CrossFit | None = None,
         progress: bool = True,
-        skills: Sequence[str] | None = None,
+        skills: Sequence[str] | np.ndarray | None = None,
     ) -> dict[str, Any]:
         """Set every recall mode's precisions and fault thresholds from normal episodes the memory
         was not trained on: the precisions from ``precision`` and the thresholds from ``normal``,
@@ -237,7 +240,7 @@ class SkillMemory:
         return report
 
     def _calibrate_told(self, normal: Sequences | np.ndarray, precision: Sequences | np.ndarray | None,
-                        skills: Sequence[str] | None, fprs: tuple[float, ...],
+                        skills: Sequence[str] | np.ndarray | None, fprs: tuple[float, ...],
                         cross_fit: CrossFit | None) -> dict[str, Any]:
         """`calibrate` of a memory with a skill cue."""
         told = self._told()
