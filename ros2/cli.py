@@ -1,0 +1,49 @@
+"""``nasm ros2``: the monitor node on a robot's ROS 2 bus (``ros2.node``)."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from pathlib import Path
+
+import typer
+
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.mapping import load_mapping
+from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.runtime.cli import fail
+from neural_asm.runtime.home import home_path
+
+
+def ros2(
+    mapping: Path = typer.Option(..., help="channel mapping (.toml/.yaml) naming the topics, fields and episodes"),
+    model: str = typer.Option(..., help="a checkpoint's path, or a model's name in --models-dir (with --url: a "
+                              "model the service hosts)"),
+    namespace: str = typer.Option("", help="the robot's namespace: the mapping's relative topics are under it"),
+    url: str | None = typer.Option(None, help="judge with a running service (nasm serve) instead of in-process"),
+    fpr: float = typer.Option(0.01, min=0.0, max=1.0, help="false-positive rate of the fault threshold"),
+    out: Path = typer.Option(DEFAULT_DIR, help="recordings folder: one Rerun and one MCAP file per episode"),
+    models_dir: Path = typer.Option(home_path("models"), help="where a model's name is looked up"),
+) -> None:
+    """Monitor a robot on its ROS 2 bus: read the mapping's topics, judge each step and publish
+    the verdict on /diagnostics, nasm/fault and nasm/energy."""
+    try:
+        from neural_asm.ros2.bus import Bus
+        from neural_asm.ros2.node import MonitorNode, load_judge
+    except ImportError as exc:
+        raise fail(f"nasm ros2 needs the ros2 extra (pip install 'neural-asm[ros2]'): {exc}") from None
+    try:
+        judge, names = load_judge(model, url, fpr, models_dir)
+        found = load_mapping(mapping)
+        if names is not None and tuple(names) != found.channel_names:
+            raise LogError(f"the mapping gives channels {list(found.channel_names)} but the model expects {list(names)}")
+        node = MonitorNode(Bus(namespace), found, judge, out)
+    except (LogError, ValueError, OSError) as exc:
+        raise fail(exc) from None
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    typer.echo(f"nasm ros2: monitoring {', '.join(g.source for g in node.groups)} in ROS domain {node.bus.domain_id}")
+    try:
+        node.spin(stop)
+    except KeyboardInterrupt:
+        pass

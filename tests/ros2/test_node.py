@@ -1,0 +1,149 @@
+"""``nasm ros2``'s node against a simulated Panda's driver in another process on loopback: a
+normal episode gives no ERROR on /diagnostics, the same episode with joint 4 locked gives ERROR
+with joint 4 isolated at the step the in-process monitor flags it, every step decided alike; the
+episode is recorded; input the mapping cannot read is a WARN naming it, and the node goes on."""
+
+from __future__ import annotations
+
+import os
+import random
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("cyclonedds")
+
+from neural_asm.logs.mapping import parse_mapping  # noqa: E402
+from neural_asm.memory import SkillMemory  # noqa: E402
+from neural_asm.ros2 import messages as m  # noqa: E402
+from neural_asm.ros2.bus import DEFAULT, Bus  # noqa: E402
+from neural_asm.ros2.node import LocalJudge, MonitorNode  # noqa: E402
+from neural_asm.ros2.verdict import ERROR, OK, WARN  # noqa: E402
+from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_NAMES  # noqa: E402
+
+PUBLISHER = Path(__file__).with_name("panda_publisher.py")
+DOMAIN = str(100 + random.randrange(100))
+LOOPBACK = {"ROS_DOMAIN_ID": DOMAIN, "ROS_LOCALHOST_ONLY": "1"}
+NAMESPACE = "/robot1"
+FPR = 0.01
+STEPS = 15
+
+
+def channel(name: str) -> dict:
+    if name.startswith(("left_", "right_")):
+        side, axis = name.split("_")
+        kind = {"f": "force", "t": "torque"}[axis[0]]
+        return {"name": name, "topic": f"/{side}_pad/wrench", "field": f"wrench.{kind}.{axis[1]}", "units": "1"}
+    return {"name": name, "topic": "/joint_states", "field": "position", "key": name, "units": "rad",
+            "joint": name in JOINT_NAMES}
+
+
+def mapping(label_topic: str | None = None):
+    source = {"kind": "rosbag", "split": "gap", "gap_s": 2.0, "stamp": "header",
+              **({"label_topic": label_topic} if label_topic else {})}
+    return parse_mapping({"timing": {"period_s": 0.5, "steps": STEPS, "max_gap_s": 0.3}, "source": source,
+                          "channels": [channel(n) for n in CHANNEL_NAMES]}, "the test's mapping")
+
+
+@pytest.fixture(scope="module")
+def memory(small_panda_model) -> SkillMemory:
+    return SkillMemory(small_panda_model)
+
+
+def statuses(reader) -> list:
+    return [s for r in reader.take() for s in r.message.status]
+
+
+def values(status) -> dict[str, str]:
+    return {kv.key: kv.value for kv in status.values}
+
+
+class Running:
+    """A node spinning in a thread on the loopback domain, and a listener of /diagnostics."""
+
+    def __init__(self, found, judge, out: Path | None) -> None:
+        self.listener = Bus(env=LOOPBACK)
+        self.diagnostics = self.listener.reader("/diagnostics", m.DIAGNOSTIC_ARRAY, qos=DEFAULT)
+        self.node = MonitorNode(Bus(NAMESPACE, env=LOOPBACK), found, judge, out)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self.node.spin, args=(self.stop,))
+        self.thread.start()
+        self.said: list = []
+
+    def until(self, done, timeout_s: float = 60) -> None:
+        """Collect the statuses until one makes ``done`` true (or ``timeout_s``)."""
+        deadline = time.monotonic() + timeout_s
+        while not any(done(s) for s in self.said) and time.monotonic() < deadline:
+            self.listener.wait(deadline - time.monotonic())
+            self.said += statuses(self.diagnostics)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+
+
+def monitored(memory: SkillMemory, observations: np.ndarray, out: Path, skill: str | None = None):
+    """The node's answers and statuses on one episode published by the driver in another process."""
+    np.save(out / "observations.npy", observations)
+    child = subprocess.Popen([sys.executable, str(PUBLISHER), NAMESPACE, str(out / "observations.npy"),
+                              *([skill] if skill else [])], env={**os.environ, **LOOPBACK}, text=True,
+                             stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    running = Running(mapping("skill" if skill else None), LocalJudge(memory, FPR), out / "recordings")
+    try:
+        node = running.node
+        for reader in [*node.readers, *([node.label] if node.label else [])]:
+            assert reader.wait_for_publishers(1, timeout_s=60), f"no publisher of {reader.topic}"
+        child.stdin.write("go\n")
+        child.stdin.flush()
+        running.until(lambda s: values(s).get("step") == str(STEPS - 1))
+    finally:
+        running.close()
+        child.kill()
+        _, errors = child.communicate()
+    assert len(node.answers) == STEPS, errors
+    return [a for _, a in node.answers], running.said
+
+
+def in_process(memory: SkillMemory, observations: np.ndarray, skill: str | None = None):
+    monitor = memory.monitor(fpr=FPR, skill=skill)
+    return [monitor.step(x) for x in observations]
+
+
+def decisions(answers) -> list[tuple]:
+    return [(a.step, a.fault, a.isolated_joint, a.threshold) for a in answers]
+
+
+@pytest.mark.slow
+def test_a_normal_episode_gives_no_error_and_the_monitors_answers(memory, tmp_path):
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    observations = run_episode(SKILLS[0], 31).observations
+    answers, said = monitored(memory, observations, tmp_path)
+    expected = in_process(memory, observations)
+    assert decisions(answers) == decisions(expected)
+    assert [a.energy for a in answers] == pytest.approx([a.energy for a in expected], rel=1e-9)
+    assert said and all(s.level == OK for s in said)
+    assert len(list((tmp_path / "recordings").rglob("*.rrd"))) == 1
+    assert len(list((tmp_path / "recordings").rglob("*.mcap"))) == 1
+
+
+@pytest.mark.slow
+def test_joint_4_locked_gives_error_with_joint_4_isolated_where_the_monitor_flags_it(memory, tmp_path):
+    from neural_asm.sim.faults import FaultSpec
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    observations = run_episode(SKILLS[0], 31, FaultSpec(joint=4, time_s=3.0, overshoot_deg=15.0)).observations
+    answers, said = monitored(memory, observations, tmp_path)
+    expected = in_process(memory, observations)
+    assert decisions(answers) == decisions(expected)
+    flagged = [a for a in expected if a.fault]
+    assert flagged and flagged[0].isolated_joint == "joint4"
+    first = next(s for s in said if s.level == ERROR)
+    assert values(first)["step"] == str(flagged[0].step) and values(first)["isolated_joint"] == "joint4"
