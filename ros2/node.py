@@ -145,9 +145,9 @@ class MonitorNode:
         for reader, kind in ((self.label, "label"), (self.marker, "marker")):
             for received in reader.take() if reader is not None else ():
                 self._control(kind, received)
-        for g, reader in enumerate(self.readers):
-            for received in reader.take():
-                self._sample(g, received)
+        waiting = [(self._stamp(r), g, r) for g, reader in enumerate(self.readers) for r in reader.take()]
+        for t, g, received in sorted(waiting, key=lambda w: w[0]):  # in time order across topics
+            self._sample(g, t, received)
         ep, gap = self.current, self.split.gap_s
         if ep is not None and self.split.split == "gap" and gap and time.monotonic() - ep.last_rx > gap:
             self.close(None)  # every topic silent for gap_s: the episode is over
@@ -177,8 +177,7 @@ class MonitorNode:
         self.number += 1
         return self.current
 
-    def _sample(self, g: int, received: Received) -> None:
-        t = self._stamp(received)
+    def _sample(self, g: int, t: int, received: Received) -> None:
         ep = self.current
         gap = self.split.gap_s
         if ep is not None and self.split.split == "gap" and gap and t - max(n or 0 for n in ep.last_ns) > gap * NS:

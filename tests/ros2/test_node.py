@@ -147,3 +147,100 @@ def test_joint_4_locked_gives_error_with_joint_4_isolated_where_the_monitor_flag
     assert flagged and flagged[0].isolated_joint == "joint4"
     first = next(s for s in said if s.level == ERROR)
     assert values(first)["step"] == str(flagged[0].step) and values(first)["isolated_joint"] == "joint4"
+
+
+@pytest.fixture(scope="module")
+def skill_memory() -> SkillMemory:
+    """A memory with a skill cue, trained on both simulated skills: it can be told one."""
+    from neural_asm.models.config import FAST
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    def episodes(seeds: range) -> tuple[np.ndarray, np.ndarray]:
+        x = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in seeds])
+        return x, np.repeat(list(SKILLS), len(seeds))
+
+    memory = SkillMemory.fit(*episodes(range(4))[:1], CHANNEL_NAMES, episodes(range(4))[1],
+                             preset=FAST.with_(hidden_size=32, epochs=40), progress=False, skill_cue=True)
+    x, y = episodes(range(10, 14))
+    memory.calibrate(x, skills=list(y), progress=False)
+    return memory
+
+
+@pytest.mark.slow
+def test_the_skill_named_on_the_label_topic_is_told_to_the_memory(skill_memory, tmp_path):
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    skill = SKILLS[1]
+    observations = run_episode(skill, 31).observations
+    answers, _ = monitored(skill_memory, observations, tmp_path, skill=skill)
+    assert [a.skill for a in answers] == [skill] * STEPS
+    assert all(a.skill_probability == 1 for a in answers)
+    told = in_process(skill_memory, observations, skill=skill)
+    assert [a.energy for a in answers] == pytest.approx([a.energy for a in told], rel=1e-9)
+
+
+class Judged:
+    """A judge that answers nothing: the bad input never reaches it."""
+
+    def open(self, skill):
+        raise AssertionError("no step of bad input is judged")
+
+
+def joint_state(names: list[str], sec: int, nanosec: int):
+    T = m.STORE.types
+    header = T[m.HEADER](stamp=T[m.TIME](sec=sec, nanosec=nanosec), frame_id="")
+    return T[m.JOINT_STATE](header=header, name=names, position=np.zeros(len(names)), velocity=np.zeros(0),
+                            effort=np.zeros(0))
+
+
+def wrench(sec: int, nanosec: int):
+    T = m.STORE.types
+    zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+    return T[m.WRENCH_STAMPED](header=T[m.HEADER](stamp=T[m.TIME](sec=sec, nanosec=nanosec), frame_id=""),
+                              wrench=T["geometry_msgs/msg/Wrench"](force=zero, torque=zero))
+
+
+def writers(running: Running) -> dict:
+    bus = Bus(NAMESPACE, env=LOOPBACK)
+    found = {t: bus.writer(t, k) for t, k in (("joint_states", m.JOINT_STATE), ("left_pad/wrench", m.WRENCH_STAMPED),
+                                               ("right_pad/wrench", m.WRENCH_STAMPED))}
+    assert all(w.wait_for_subscribers(1, timeout_s=30) for w in found.values())
+    assert all(r.wait_for_publishers(1, timeout_s=30) for r in running.node.readers)
+    return found
+
+
+STATE = [n for n in CHANNEL_NAMES if not n.startswith(("left_", "right_"))]
+
+
+def test_a_message_missing_a_mapped_joint_is_a_warn_naming_it_and_the_node_goes_on():
+    running = Running(mapping(), Judged(), None)
+    try:
+        out = writers(running)
+        out["joint_states"].write(joint_state([n for n in STATE if n != "joint4"], 1, 0))
+        running.until(lambda s: s.level == WARN)
+        out["joint_states"].write(joint_state([n for n in STATE if n != "joint6"], 2, 0))
+        running.until(lambda s: s.level == WARN and "named 'joint6'" in s.message)
+        assert running.thread.is_alive()
+    finally:
+        running.close()
+    warned = [s.message for s in running.said if s.level == WARN]
+    assert "no element named 'joint4'" in warned[0] and "/joint_states" in warned[0]
+    assert "no element named 'joint6'" in warned[-1]
+
+
+def test_a_topic_silent_longer_than_max_gap_s_inside_an_episode_is_a_warn_naming_it():
+    running = Running(mapping(), Judged(), None)
+    try:
+        out = writers(running)
+        out["right_pad/wrench"].write(wrench(1, 0))
+        for nanosec in (0, 100_000_000, 200_000_000, 350_000_000):
+            out["joint_states"].write(joint_state(STATE, 1, nanosec))
+            out["left_pad/wrench"].write(wrench(1, nanosec))
+        running.until(lambda s: s.level == WARN)
+        assert running.thread.is_alive()
+    finally:
+        running.close()
+    (warned,) = [s.message for s in running.said if s.level == WARN]
+    assert "/right_pad/wrench" in warned and "silent for 0.350 s" in warned and "max_gap_s is 0.3 s" in warned
