@@ -22,7 +22,7 @@ from neural_asm.logs.mapping import parse_mapping  # noqa: E402
 from neural_asm.memory import SkillMemory  # noqa: E402
 from neural_asm.ros2 import messages as m  # noqa: E402
 from neural_asm.ros2.bus import DEFAULT, Bus  # noqa: E402
-from neural_asm.ros2.node import LocalJudge, MonitorNode  # noqa: E402
+from neural_asm.ros2.node import LocalJudge, MonitorNode, RemoteJudge  # noqa: E402
 from neural_asm.ros2.verdict import ERROR, OK, WARN  # noqa: E402
 from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_NAMES  # noqa: E402
 
@@ -87,13 +87,13 @@ class Running:
         self.thread.join()
 
 
-def monitored(memory: SkillMemory, observations: np.ndarray, out: Path, skill: str | None = None):
+def monitored(judge, observations: np.ndarray, out: Path, skill: str | None = None):
     """The node's answers and statuses on one episode published by the driver in another process."""
     np.save(out / "observations.npy", observations)
     child = subprocess.Popen([sys.executable, str(PUBLISHER), NAMESPACE, str(out / "observations.npy"),
                               *([skill] if skill else [])], env={**os.environ, **LOOPBACK}, text=True,
                              stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    running = Running(mapping("skill" if skill else None), LocalJudge(memory, FPR), out / "recordings")
+    running = Running(mapping("skill" if skill else None), judge, out / "recordings")
     try:
         node = running.node
         for reader in [*node.readers, *([node.label] if node.label else [])]:
@@ -124,7 +124,7 @@ def test_a_normal_episode_gives_no_error_and_the_monitors_answers(memory, tmp_pa
     from neural_asm.sim.skills import SKILLS
 
     observations = run_episode(SKILLS[0], 31).observations
-    answers, said = monitored(memory, observations, tmp_path)
+    answers, said = monitored(LocalJudge(memory, FPR), observations, tmp_path)
     expected = in_process(memory, observations)
     assert decisions(answers) == decisions(expected)
     assert [a.energy for a in answers] == pytest.approx([a.energy for a in expected], rel=1e-9)
@@ -133,14 +133,30 @@ def test_a_normal_episode_gives_no_error_and_the_monitors_answers(memory, tmp_pa
     assert len(list((tmp_path / "recordings").rglob("*.mcap"))) == 1
 
 
-@pytest.mark.slow
-def test_joint_4_locked_gives_error_with_joint_4_isolated_where_the_monitor_flags_it(memory, tmp_path):
+def locked() -> np.ndarray:
+    """A normal episode's seed with joint 4 locked 15 degrees past its goal at 3 s."""
     from neural_asm.sim.faults import FaultSpec
     from neural_asm.sim.paper import run_episode
     from neural_asm.sim.skills import SKILLS
 
-    observations = run_episode(SKILLS[0], 31, FaultSpec(joint=4, time_s=3.0, overshoot_deg=15.0)).observations
-    answers, said = monitored(memory, observations, tmp_path)
+    return run_episode(SKILLS[0], 31, FaultSpec(joint=4, time_s=3.0, overshoot_deg=15.0)).observations
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("where", ["in-process", "service"])
+def test_joint_4_locked_gives_error_with_joint_4_isolated_where_the_monitor_flags_it(memory, tmp_path, where):
+    observations = locked()
+    if where == "in-process":
+        answers, said = monitored(LocalJudge(memory, FPR), observations, tmp_path)
+    else:
+        from neural_asm.client.session import ServiceClient
+        from neural_asm.service.embedded import start_embedded
+        from neural_asm.service.settings import Settings
+
+        memory.save(tmp_path / "models" / "panda.safetensors")
+        settings = Settings(models_dir=tmp_path / "models", record=False, build_default_model=False)
+        with start_embedded(settings) as srv:
+            answers, said = monitored(RemoteJudge(ServiceClient(srv.url), "panda", FPR), observations, tmp_path)
     expected = in_process(memory, observations)
     assert decisions(answers) == decisions(expected)
     flagged = [a for a in expected if a.fault]
@@ -174,7 +190,7 @@ def test_the_skill_named_on_the_label_topic_is_told_to_the_memory(skill_memory, 
 
     skill = SKILLS[1]
     observations = run_episode(skill, 31).observations
-    answers, _ = monitored(skill_memory, observations, tmp_path, skill=skill)
+    answers, _ = monitored(LocalJudge(skill_memory, FPR), observations, tmp_path, skill=skill)
     assert [a.skill for a in answers] == [skill] * STEPS
     assert all(a.skill_probability == 1 for a in answers)
     told = in_process(skill_memory, observations, skill=skill)
