@@ -260,3 +260,22 @@ def test_a_topic_silent_longer_than_max_gap_s_inside_an_episode_is_a_warn_naming
         running.close()
     (warned,) = [s.message for s in running.said if s.level == WARN]
     assert "/right_pad/wrench" in warned and "silent for 0.350 s" in warned and "max_gap_s is 0.3 s" in warned
+
+
+def test_the_command_refuses_a_mapping_of_another_source_in_one_line(tmp_path, small_panda_model):
+    from typer.testing import CliRunner
+
+    from neural_asm.cli import app
+
+    SkillMemory(small_panda_model).save(tmp_path / "panda.safetensors")
+    table = tmp_path / "table.toml"
+    table.write_text('[timing]\nperiod_s = 0.5\nsteps = 15\n[source]\nkind = "table"\ntime_column = "t"\n'
+                     + "".join(f'[[channels]]\nname = "{n}"\ncolumn = "{n}"\nunits = "1"\njoint = {str(n in JOINT_NAMES).lower()}\n'
+                             for n in CHANNEL_NAMES))
+    result = CliRunner().invoke(app, ["ros2", "--mapping", str(table), "--model", str(tmp_path / "panda.safetensors")],
+                                env=LOOPBACK)
+    assert result.exit_code == 2
+    assert "the node reads topics: the mapping's source is table" in result.output
+    result = CliRunner().invoke(app, ["ros2", "--mapping", str(table), "--model", "no-such-model",
+                                      "--models-dir", str(tmp_path)], env=LOOPBACK)
+    assert result.exit_code == 2 and "no-such-model" in result.output
