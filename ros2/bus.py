@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 from xml.sax.saxutils import quoteattr
 
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
 from cyclonedds.core import DDSStatus, InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.internal import dds_infinity
@@ -205,6 +206,7 @@ class Bus:
         _domain(self.domain_id, Discovery.from_env(env), env)
         self._participant = DomainParticipant(self.domain_id)
         self._waitset = WaitSet(self._participant)
+        self._publications: BuiltinDataReader | None = None
 
     def reader(self, name: str, msgtype: str, qos: Qos = SENSOR_DATA) -> Reader:
         """A subscription to ``name`` resolved in the bus's namespace (sensor-data QoS unless told)."""
@@ -215,6 +217,18 @@ class Bus:
     def writer(self, name: str, msgtype: str, qos: Qos = DEFAULT) -> Writer:
         """A publisher of ``name`` resolved in the bus's namespace (ROS 2's default QoS unless told)."""
         return Writer(self._participant, resolve(name, self.namespace), msgtype, qos)
+
+    def publications(self) -> list[tuple[str, str]]:
+        """The ROS 2 topics and DDS type names of the writers discovered since the last call (this
+        participant's own and non-ROS topics left out): how a publisher of a mapped topic with
+        another type is found, which DDS would otherwise just never match."""
+        if self._publications is None:
+            self._publications = BuiltinDataReader(self._participant, BuiltinTopicDcpsPublication)
+            self._waitset.attach(ReadCondition(self._publications, SampleState.NotRead | ViewState.Any
+                                               | InstanceState.Any))
+        mine = self._participant.guid
+        return [(p.topic_name.removeprefix(TOPIC_PREFIX), p.type_name) for p in self._publications.take(N=TAKE_AT_ONCE)
+                if p.sample_info.valid_data and p.participant_key != mine and p.topic_name.startswith(TOPIC_PREFIX + "/")]
 
     def wait(self, timeout_s: float) -> bool:
         """Block until a reader holds a message not yet taken, or ``timeout_s``; whether one does."""

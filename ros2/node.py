@@ -4,10 +4,12 @@ the bag reader's own resampler (``logs.resample``), cut into episodes as the map
 (in-process, or a service session), its verdict published (``ros2.verdict``) and the episode
 recorded to Rerun and MCAP as a client episode is.
 
-Input the mapping cannot read (a message without a mapped joint, a topic silent for longer than
-``timing.max_gap_s`` inside an episode, time stamps going back) ends the episode with a WARN
-status naming it; the node keeps running and the next message opens a new episode. An episode
-ends, too, after the ``timing.steps`` steps the model was trained on.
+Input the mapping cannot read (a publisher of a mapped topic with another type, a message
+without a mapped joint, a topic silent for longer than ``timing.max_gap_s`` inside an episode,
+time stamps going back) ends the episode with a WARN status naming it; the node keeps running
+and the next message opens a new episode. An episode ends, too, after the ``timing.steps``
+steps the model was trained on. A mapping's topics are read under the node's namespace
+(``/joint_states`` of a bag's mapping is ``/robot1/joint_states`` with ``--namespace /robot1``).
 """
 
 from __future__ import annotations
@@ -142,6 +144,8 @@ class MonitorNode:
     def spin_once(self, timeout_s: float) -> None:
         """Handle every message waiting (within ``timeout_s``), then the silences and the heartbeat."""
         self.bus.wait(timeout_s)
+        for topic, typename in self.bus.publications():
+            self._check_type(topic, typename)
         for reader, kind in ((self.label, "label"), (self.marker, "marker")):
             for received in reader.take() if reader is not None else ():
                 self._control(kind, received)
@@ -152,6 +156,14 @@ class MonitorNode:
         if ep is not None and self.split.split == "gap" and gap and time.monotonic() - ep.last_rx > gap:
             self.close(None)  # every topic silent for gap_s: the episode is over
         self.verdict.heartbeat()
+
+    def _check_type(self, topic: str, typename: str) -> None:
+        """A publisher of a mapped topic with another type (DDS never matches it: its messages
+        would just not arrive) ends the episode with a WARN naming it."""
+        for reader in self.readers:
+            if reader.topic == topic and typename != m.dds_typename(reader.msgtype):
+                self.close(f"topic {topic} is published as {typename}, but the mapping reads it as "
+                           f"{m.dds_typename(reader.msgtype)} ({reader.msgtype})")
 
     def _stamp(self, received: Received) -> int:
         if self.split.stamp == "header":

@@ -279,3 +279,16 @@ def test_the_command_refuses_a_mapping_of_another_source_in_one_line(tmp_path, s
     result = CliRunner().invoke(app, ["ros2", "--mapping", str(table), "--model", "no-such-model",
                                       "--models-dir", str(tmp_path)], env=LOOPBACK)
     assert result.exit_code == 2 and "no-such-model" in result.output
+
+
+def test_a_topic_published_with_another_type_is_a_warn_naming_it():
+    running = Running(mapping(), Judged(), None)
+    try:
+        wrong = Bus(NAMESPACE, env=LOOPBACK).writer("left_pad/wrench", m.STRING)
+        running.until(lambda s: s.level == WARN)
+        assert running.thread.is_alive() and wrong.subscribers() == 0  # DDS alone would say nothing
+    finally:
+        running.close()
+    (warned,) = [s.message for s in running.said if s.level == WARN]
+    assert warned == ("topic /robot1/left_pad/wrench is published as std_msgs::msg::dds_::String_, but the mapping "
+                      "reads it as geometry_msgs::msg::dds_::WrenchStamped_ (geometry_msgs/msg/WrenchStamped)")
