@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from neural_asm.client.session import ServiceClient
+from neural_asm.client.transport import ServiceError, ServiceLost
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.fields import NS, extractor, header_stamp
 from neural_asm.logs.mapping import Episodes, Mapping
@@ -42,6 +44,10 @@ from neural_asm.ros2.verdict import WARN, VerdictWriter
 
 INPUT_TYPES = (m.JOINT_STATE, m.WRENCH_STAMPED, m.BOOL, m.FLOAT64)  # what a mapped topic may carry
 Step = Callable[[np.ndarray], StepAnswer]
+# what a monitor raises at an input it cannot judge (a skill it does not know, values not finite)
+# and a service session when it refuses or goes away: the episode ends, the node goes on
+JUDGING = (ValueError, FloatingPointError, ServiceError, ServiceLost)
+ANSWERS_KEPT = 1000
 
 
 def topic_type(topic: str, fields: list[str]) -> str:
@@ -109,8 +115,8 @@ def _vector(values: dict[str, float] | None, names: tuple[str, ...]) -> np.ndarr
 
 
 class MonitorNode:
-    """The node on ``bus``: ``spin`` until stopped; each judged step is also kept in ``answers``
-    (episode number, answer) for whoever runs it in-process."""
+    """The node on ``bus``: ``spin`` until stopped; the last ``ANSWERS_KEPT`` steps judged are also
+    kept in ``answers`` (episode number, answer) for whoever runs it in-process."""
 
     def __init__(self, bus: Bus, mapping: Mapping, judge: Judge, out: Path | None) -> None:
         if not isinstance(mapping.source, Episodes):
@@ -131,7 +137,7 @@ class MonitorNode:
         self.current: _Episode | None = None
         self.recent_label: tuple[int, str] | None = None
         self.number = 0
-        self.answers: list[tuple[int, StepAnswer]] = []
+        self.answers: deque[tuple[int, StepAnswer]] = deque(maxlen=ANSWERS_KEPT)
 
     def spin(self, stop: threading.Event, poll_s: float = 0.1) -> None:
         """Read, judge and publish until ``stop`` is set; the open episode is closed at the end."""
@@ -210,7 +216,10 @@ class MonitorNode:
         except LogError as exc:
             self.close(str(exc))
             return
-        self._judge(ep)
+        try:
+            self._judge(ep)
+        except JUDGING as exc:
+            self.close(f"{ep.resampler.what}: the monitor cannot judge it: {exc}")
 
     def _check_silence(self, ep: _Episode) -> None:
         """A topic that has said nothing for longer than ``max_gap_s`` while another spoke."""
@@ -269,7 +278,10 @@ class MonitorNode:
         """End the open episode; ``why``: the input that ended it, said as a WARN status."""
         ep, self.current = self.current, None
         if ep is not None:
-            ep.resources.close()
+            try:
+                ep.resources.close()
+            except JUDGING as exc:  # a service session that cannot be ended
+                why = why or f"{ep.resampler.what}: its session did not end: {exc}"
         if why is not None:
             self.verdict.say(WARN, why, {"episode": str(ep.number) if ep is not None else ""})
 

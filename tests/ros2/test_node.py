@@ -292,3 +292,26 @@ def test_a_topic_published_with_another_type_is_a_warn_naming_it():
     (warned,) = [s.message for s in running.said if s.level == WARN]
     assert warned == ("topic /robot1/left_pad/wrench is published as std_msgs::msg::dds_::String_, but the mapping "
                       "reads it as geometry_msgs::msg::dds_::WrenchStamped_ (geometry_msgs/msg/WrenchStamped)")
+
+
+class Refusing:
+    """A judge refusing the episode's skill, as a skill memory refuses one it does not know."""
+
+    def open(self, skill):
+        raise ValueError(f"no skill {skill!r} in this memory")
+
+
+def test_a_monitor_refusing_the_episode_is_a_warn_and_the_node_goes_on():
+    running = Running(mapping(), Refusing(), None)
+    try:
+        out = writers(running)
+        for nanosec in (0, 100_000_000):
+            for topic, message in (("joint_states", joint_state(STATE, 1, nanosec)),
+                                   ("left_pad/wrench", wrench(1, nanosec)), ("right_pad/wrench", wrench(1, nanosec))):
+                out[topic].write(message)
+        running.until(lambda s: s.level == WARN)
+        assert running.thread.is_alive()
+    finally:
+        running.close()
+    (warned,) = [s.message for s in running.said if s.level == WARN]
+    assert warned == "episode 0: the monitor cannot judge it: no skill None in this memory"
