@@ -180,11 +180,12 @@ class Writer:
         self._writer = DataWriter(participant, _topic(participant, topic, msgtype), qos=qos)
         self._matched = _status_waitset(participant, self._writer, DDSStatus.PublicationMatched)
 
-    def write(self, message: Any) -> None:
-        """Publish a ``rosbags`` message of this writer's type."""
+    def write(self, message: Any, sent_ns: int | None = None) -> None:
+        """Publish a ``rosbags`` message of this writer's type, stamped as sent now or at
+        ``sent_ns`` (a logged message played again keeps its log time)."""
         if message.__msgtype__ != self.msgtype:
             raise TypeError(f"{self.topic} carries {self.msgtype}, not {message.__msgtype__}")
-        self._writer.write(to_idl(message))
+        self._writer.write(to_idl(message), timestamp=sent_ns)
 
     def subscribers(self) -> int:
         """How many subscriptions this publisher is matched with."""

@@ -17,21 +17,34 @@ from neural_asm.runtime.home import home_path
 
 def ros2(
     mapping: Path = typer.Option(..., help="channel mapping (.toml/.yaml) naming the topics, fields and episodes"),
-    model: str = typer.Option(..., help="a checkpoint's path, or a model's name in --models-dir (with --url: a "
-                              "model the service hosts)"),
+    model: str | None = typer.Option(None, help="a checkpoint's path, or a model's name in --models-dir (with "
+                                     "--url: a model the service hosts)"),
     namespace: str = typer.Option("", help="the robot's namespace: the mapping's relative topics are under it"),
     url: str | None = typer.Option(None, help="judge with a running service (nasm serve) instead of in-process"),
     fpr: float = typer.Option(0.01, min=0.0, max=1.0, help="false-positive rate of the fault threshold"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder: one Rerun and one MCAP file per episode"),
     models_dir: Path = typer.Option(home_path("models"), help="where a model's name is looked up"),
+    play: Path | None = typer.Option(None, help="instead of monitoring, play the ROS 2 bags here onto the bus at "
+                                     "their own pace (as ros2 bag play), for a node started with the same mapping"),
+    speed: float = typer.Option(1.0, min=0.01, help="with --play: times the bags' own pace"),
 ) -> None:
     """Monitor a robot on its ROS 2 bus: read the mapping's topics, judge each step and publish
     the verdict on /diagnostics, nasm/fault and nasm/energy."""
     try:
         from neural_asm.ros2.bus import Bus
         from neural_asm.ros2.node import MonitorNode, load_judge
+        from neural_asm.ros2.play import Pace, play_bags
     except ImportError as exc:
         raise fail(f"nasm ros2 needs the ros2 extra (pip install 'neural-asm[ros2]'): {exc}") from None
+    if play is not None:
+        try:
+            sent = play_bags(Bus(namespace), play, load_mapping(mapping), Pace(speed), typer.echo)
+        except (LogError, ValueError) as exc:
+            raise fail(exc) from None
+        typer.echo(f"played {sent} messages")
+        return
+    if model is None:
+        raise fail("give --model (the model that judges), or --play SOURCE to play bags onto the bus")
     try:
         judge, names = load_judge(model, url, fpr, models_dir)
         found = load_mapping(mapping)

@@ -315,3 +315,31 @@ def test_a_monitor_refusing_the_episode_is_a_warn_and_the_node_goes_on():
         running.close()
     (warned,) = [s.message for s in running.said if s.level == WARN]
     assert warned == "episode 0: the monitor cannot judge it: no skill None in this memory"
+
+
+@pytest.mark.slow
+def test_a_bag_played_onto_the_bus_is_judged_as_the_bag_reader_reads_it(memory, tmp_path):
+    """``nasm ros2 --play`` in another process plays a rosbag2 episode at its own pace; the node
+    judges each step as the in-process monitor judges the bag reader's episode."""
+    from neural_asm.experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
+    from neural_asm.logs.cli import read_logs
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    bag = write_bag([run_episode(SKILLS[0], 31)], tmp_path / "bag")
+    doc = bag_mapping(split="gap")
+    path = write_mapping(doc, tmp_path / "mapping.yaml")
+    running = Running(parse_mapping(doc, "the bags' mapping"), LocalJudge(memory, FPR), None)
+    player = subprocess.Popen([str(Path(sys.executable).with_name("nasm")), "ros2", "--mapping", str(path), "--play",
+                               str(bag), "--namespace", NAMESPACE], env={**os.environ, **LOOPBACK}, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        running.until(lambda s: values(s).get("step") == str(STEPS - 1))
+    finally:
+        running.close()
+        player.kill()
+        said, _ = player.communicate()
+    expected = in_process(memory, read_logs(str(bag), path).data[0])
+    answers = [a for _, a in running.node.answers]
+    assert decisions(answers) == decisions(expected), said
+    assert [a.energy for a in answers] == pytest.approx([a.energy for a in expected], rel=1e-9)
