@@ -42,7 +42,8 @@ from neural_asm.ros2 import messages as m
 from neural_asm.ros2.bus import Bus, Reader, Received
 from neural_asm.ros2.verdict import WARN, VerdictWriter
 
-INPUT_TYPES = (m.JOINT_STATE, m.WRENCH_STAMPED, m.POINT_STAMPED, m.BOOL, m.FLOAT64)  # what a mapped topic may carry
+# what a mapped topic may carry, told apart by the fields its channels name (``data``: a Bool)
+INPUT_TYPES = (m.JOINT_STATE, m.WRENCH_STAMPED, m.POINT_STAMPED, m.BOOL)
 Step = Callable[[np.ndarray], StepAnswer]
 # what a monitor raises at an input it cannot judge (a skill it does not know, values not finite)
 # and a service session when it refuses or goes away: the episode ends, the node goes on
