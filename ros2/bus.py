@@ -39,6 +39,9 @@ _COMMON = (Policy.DataRepresentation(use_cdrv0_representation=True), Policy.Writ
 # rclcpp's SensorDataQoS: a subscription that matches reliable and best-effort publishers alike
 # and keeps only the newest samples.
 SENSOR_DATA = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(5), *_COMMON)
+# The monitor's subscriptions: matched as SENSOR_DATA is (history is no part of matching), but
+# holding a second of a 1 kHz stream, so that no sample is dropped while the node is busy judging.
+MONITOR = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(1000), *_COMMON)
 # rclcpp's default QoS (the ``ros2 topic echo`` default): nothing lost while the reader keeps up.
 DEFAULT = Qos(Policy.Reliability.Reliable(max_blocking_time=dds_infinity), Policy.Durability.Volatile,
               Policy.History.KeepLast(10), *_COMMON)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from neural_asm.client.transport import ServiceError, ServiceLost
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.mapping import load_mapping
 from neural_asm.recordings import DEFAULT_DIR
@@ -18,9 +19,10 @@ from neural_asm.runtime.home import home_path
 def ros2(
     mapping: Path = typer.Option(..., help="channel mapping (.toml/.yaml) naming the topics, fields and episodes"),
     model: str | None = typer.Option(None, help="a checkpoint's path, or a model's name in --models-dir (with "
-                                     "--url: a model the service hosts)"),
+                                     "--url: a model the service hosts, default its default)"),
     namespace: str = typer.Option("", help="the robot's namespace: the mapping's relative topics are under it"),
     url: str | None = typer.Option(None, help="judge with a running service (nasm serve) instead of in-process"),
+    api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="the service's API key (X-API-Key header)"),
     fpr: float = typer.Option(0.01, min=0.0, max=1.0, help="false-positive rate of the fault threshold"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder: one Rerun and one MCAP file per episode"),
     models_dir: Path = typer.Option(home_path("models"), help="where a model's name is looked up"),
@@ -43,15 +45,13 @@ def ros2(
             raise fail(exc) from None
         typer.echo(f"played {sent} messages")
         return
-    if model is None:
-        raise fail("give --model (the model that judges), or --play SOURCE to play bags onto the bus")
     try:
-        judge, names = load_judge(model, url, fpr, models_dir)
+        judge, names = load_judge(model, url, fpr, models_dir, api_key)
         found = load_mapping(mapping)
-        if names is not None and tuple(names) != found.channel_names:
+        if names != found.channel_names:
             raise LogError(f"the mapping gives channels {list(found.channel_names)} but the model expects {list(names)}")
         node = MonitorNode(Bus(namespace), found, judge, out)
-    except (LogError, ValueError, OSError) as exc:
+    except (LogError, ValueError, OSError, ServiceError, ServiceLost) as exc:
         raise fail(exc) from None
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -21,10 +21,11 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
+from neural_asm.client.replay import served_model
 from neural_asm.client.session import ServiceClient
 from neural_asm.client.transport import ServiceError, ServiceLost
 from neural_asm.logs.errors import LogError
@@ -39,7 +40,7 @@ from neural_asm.recordings import EpisodeRecorder, new_run_id
 from neural_asm.recordings.episode import View
 from neural_asm.recordings.records import StepRecord
 from neural_asm.ros2 import messages as m
-from neural_asm.ros2.bus import Bus, Reader, Received
+from neural_asm.ros2.bus import MONITOR, Bus, Reader, Received
 from neural_asm.ros2.verdict import WARN, VerdictWriter
 
 # what a mapped topic may carry, told apart by the fields its channels name (``data``: a Bool)
@@ -130,10 +131,11 @@ class MonitorNode:
         for group in self.groups:
             topic = group.source.removeprefix("topic ")
             msgtype = topic_type(topic, [c.field or "" for c in group.channels])
-            self.readers.append(bus.reader(topic.lstrip("/"), msgtype))
+            self.readers.append(bus.reader(topic.lstrip("/"), msgtype, MONITOR))
             self.extract.append(extractor(list(group.channels), topic, msgtype))
-        self.marker = bus.reader(self.split.marker_topic.lstrip("/"), m.STRING) if self.split.marker_topic else None
-        self.label = bus.reader(self.split.label_topic.lstrip("/"), m.STRING) if self.split.label_topic else None
+        split = self.split
+        self.marker = bus.reader(split.marker_topic.lstrip("/"), m.STRING, MONITOR) if split.marker_topic else None
+        self.label = bus.reader(split.label_topic.lstrip("/"), m.STRING, MONITOR) if split.label_topic else None
         self.bus, self.verdict = bus, VerdictWriter(bus, bus.namespace.strip("/") or "robot")
         self.current: _Episode | None = None
         self.recent_label: tuple[int, str] | None = None
@@ -287,11 +289,15 @@ class MonitorNode:
             self.verdict.say(WARN, why, {"episode": str(ep.number) if ep is not None else ""})
 
 
-def load_judge(model: str, url: str | None, fpr: float, models_dir: Path) -> tuple[Judge, Any]:
-    """The judge of ``--model`` (a checkpoint's path or a name in ``models_dir``; with ``url``, a
-    model the service hosts) and the channel names it expects (None: checked by the service)."""
+def load_judge(model: str | None, url: str | None, fpr: float, models_dir: Path,
+               api_key: str | None = None) -> tuple[Judge, tuple[str, ...]]:
+    """The judge of ``model`` (a checkpoint's path or a name in ``models_dir``; with ``url``, a
+    model the service hosts, None: its default) and the channel names it expects."""
     if url is not None:
-        return RemoteJudge(ServiceClient(url), model or None, fpr), None
+        served = served_model(url, api_key, model)
+        return RemoteJudge(ServiceClient(url, api_key), served["name"], fpr), tuple(served.get("channel_names", ()))
+    if model is None:
+        raise LogError("give --model: the checkpoint that judges (or --url, a service whose default model does)")
     path = Path(model)
     if not path.exists():
         path = models_dir / f"{model}.safetensors"

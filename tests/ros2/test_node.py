@@ -22,7 +22,7 @@ from neural_asm.logs.mapping import parse_mapping  # noqa: E402
 from neural_asm.memory import SkillMemory  # noqa: E402
 from neural_asm.ros2 import messages as m  # noqa: E402
 from neural_asm.ros2.bus import DEFAULT, Bus  # noqa: E402
-from neural_asm.ros2.node import LocalJudge, MonitorNode, RemoteJudge  # noqa: E402
+from neural_asm.ros2.node import LocalJudge, MonitorNode, RemoteJudge, load_judge  # noqa: E402
 from neural_asm.ros2.verdict import ERROR, OK, WARN  # noqa: E402
 from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_NAMES  # noqa: E402
 
@@ -105,7 +105,7 @@ def monitored(judge, observations: np.ndarray, out: Path, skill: str | None = No
         running.close()
         child.kill()
         _, errors = child.communicate()
-    assert len(node.answers) == STEPS, errors
+    assert len(node.answers) == STEPS, (errors, [s.message for s in running.said if s.level == WARN])
     return [a for _, a in node.answers], running.said
 
 
@@ -149,14 +149,15 @@ def test_joint_4_locked_gives_error_with_joint_4_isolated_where_the_monitor_flag
     if where == "in-process":
         answers, said = monitored(LocalJudge(memory, FPR), observations, tmp_path)
     else:
-        from neural_asm.client.session import ServiceClient
         from neural_asm.service.embedded import start_embedded
         from neural_asm.service.settings import Settings
 
         memory.save(tmp_path / "models" / "panda.safetensors")
         settings = Settings(models_dir=tmp_path / "models", record=False, build_default_model=False)
         with start_embedded(settings) as srv:
-            answers, said = monitored(RemoteJudge(ServiceClient(srv.url), "panda", FPR), observations, tmp_path)
+            judge, names = load_judge("panda", srv.url, FPR, tmp_path)
+            assert isinstance(judge, RemoteJudge) and names == CHANNEL_NAMES
+            answers, said = monitored(judge, observations, tmp_path)
     expected = in_process(memory, observations)
     assert decisions(answers) == decisions(expected)
     flagged = [a for a in expected if a.fault]
@@ -343,3 +344,13 @@ def test_a_bag_played_onto_the_bus_is_judged_as_the_bag_reader_reads_it(memory, 
     answers = [a for _, a in running.node.answers]
     assert decisions(answers) == decisions(expected), said
     assert [a.energy for a in answers] == pytest.approx([a.energy for a in expected], rel=1e-9)
+
+
+def test_the_node_says_it_is_waiting_before_any_message():
+    running = Running(mapping(), Judged(), None)
+    try:
+        running.until(lambda s: True)
+    finally:
+        running.close()
+    assert running.said[0].level == OK and running.said[0].message == "waiting for the mapped topics"
+    assert running.said[0].hardware_id == "robot1"
