@@ -20,7 +20,8 @@ def ros2(
     mapping: Path = typer.Option(..., help="channel mapping (.toml/.yaml) naming the topics, fields and episodes"),
     model: str | None = typer.Option(None, help="a checkpoint's path, or a model's name in --models-dir (with "
                                      "--url: a model the service hosts, default its default)"),
-    namespace: str = typer.Option("", help="the robot's namespace: the mapping's relative topics are under it"),
+    namespace: str = typer.Option("", help="the robot's namespace, e.g. /robot1: the mapping's topics are read under it "
+                                  "(/joint_states as /robot1/joint_states), and nasm/fault, nasm/energy published"),
     url: str | None = typer.Option(None, help="judge with a running service (nasm serve) instead of in-process"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="the service's API key (X-API-Key header)"),
     fpr: float = typer.Option(0.01, min=0.0, max=1.0, help="false-positive rate of the fault threshold"),

@@ -148,7 +148,7 @@ class MonitorNode:
             while not stop.is_set():
                 self.spin_once(poll_s)
         finally:
-            self.close("the node stopped")
+            self.close("the node stopped in the episode" if self.current is not None else None)
 
     def spin_once(self, timeout_s: float) -> None:
         """Handle every message waiting (within ``timeout_s``), then the silences and the heartbeat."""
