@@ -44,6 +44,8 @@ COMMANDS = {
                        "hit, stiff and compliant arms"),
     "contextual": Lazy("neural_asm.experiments.cli:contextual", "contextual inference (after Sheahan et al. 2016) against "
                        "BPTT-trained RNNs"),
+    "ros2": Lazy("neural_asm.ros2.cli:ros2", "Monitor a robot on its ROS 2 bus: read the mapping's topics, judge each step "
+                 "and publish the verdict on /diagnostics, nasm/fault and nasm/energy."),
     "logs": Lazy("neural_asm.logs_cli:app", "A robot's logs: what the commands would read from them."),
     "recordings": Lazy("neural_asm.recordings.cli:app", "Tools for the .rrd and .mcap recordings."),
     "experiments": Lazy("neural_asm.experiments.cli:app", "The paper's experiments and our benchmarks: list them, run "

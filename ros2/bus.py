@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 from xml.sax.saxutils import quoteattr
 
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
 from cyclonedds.core import DDSStatus, InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.internal import dds_infinity
@@ -38,6 +39,9 @@ _COMMON = (Policy.DataRepresentation(use_cdrv0_representation=True), Policy.Writ
 # rclcpp's SensorDataQoS: a subscription that matches reliable and best-effort publishers alike
 # and keeps only the newest samples.
 SENSOR_DATA = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(5), *_COMMON)
+# The monitor's subscriptions: matched as SENSOR_DATA is (history is no part of matching), but
+# holding a second of a 1 kHz stream, so that no sample is dropped while the node is busy judging.
+MONITOR = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(1000), *_COMMON)
 # rclcpp's default QoS (the ``ros2 topic echo`` default): nothing lost while the reader keeps up.
 DEFAULT = Qos(Policy.Reliability.Reliable(max_blocking_time=dds_infinity), Policy.Durability.Volatile,
               Policy.History.KeepLast(10), *_COMMON)
@@ -179,11 +183,12 @@ class Writer:
         self._writer = DataWriter(participant, _topic(participant, topic, msgtype), qos=qos)
         self._matched = _status_waitset(participant, self._writer, DDSStatus.PublicationMatched)
 
-    def write(self, message: Any) -> None:
-        """Publish a ``rosbags`` message of this writer's type."""
+    def write(self, message: Any, sent_ns: int | None = None) -> None:
+        """Publish a ``rosbags`` message of this writer's type, stamped as sent now or at
+        ``sent_ns`` (a logged message played again keeps its log time)."""
         if message.__msgtype__ != self.msgtype:
             raise TypeError(f"{self.topic} carries {self.msgtype}, not {message.__msgtype__}")
-        self._writer.write(to_idl(message))
+        self._writer.write(to_idl(message), timestamp=sent_ns)
 
     def subscribers(self) -> int:
         """How many subscriptions this publisher is matched with."""
@@ -205,6 +210,7 @@ class Bus:
         _domain(self.domain_id, Discovery.from_env(env), env)
         self._participant = DomainParticipant(self.domain_id)
         self._waitset = WaitSet(self._participant)
+        self._publications: BuiltinDataReader | None = None
 
     def reader(self, name: str, msgtype: str, qos: Qos = SENSOR_DATA) -> Reader:
         """A subscription to ``name`` resolved in the bus's namespace (sensor-data QoS unless told)."""
@@ -215,6 +221,18 @@ class Bus:
     def writer(self, name: str, msgtype: str, qos: Qos = DEFAULT) -> Writer:
         """A publisher of ``name`` resolved in the bus's namespace (ROS 2's default QoS unless told)."""
         return Writer(self._participant, resolve(name, self.namespace), msgtype, qos)
+
+    def publications(self) -> list[tuple[str, str]]:
+        """The ROS 2 topics and DDS type names of the writers discovered since the last call (this
+        participant's own and non-ROS topics left out): how a publisher of a mapped topic with
+        another type is found, which DDS would otherwise just never match."""
+        if self._publications is None:
+            self._publications = BuiltinDataReader(self._participant, BuiltinTopicDcpsPublication)
+            self._waitset.attach(ReadCondition(self._publications, SampleState.NotRead | ViewState.Any
+                                               | InstanceState.Any))
+        mine = self._participant.guid
+        return [(p.topic_name.removeprefix(TOPIC_PREFIX), p.type_name) for p in self._publications.take(N=TAKE_AT_ONCE)
+                if p.sample_info.valid_data and p.participant_key != mine and p.topic_name.startswith(TOPIC_PREFIX + "/")]
 
     def wait(self, timeout_s: float) -> bool:
         """Block until a reader holds a message not yet taken, or ``timeout_s``; whether one does."""

@@ -27,6 +27,7 @@ STORE = get_typestore(DEFAULT_STORE)
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
+POINT_STAMPED = "geometry_msgs/msg/PointStamped"
 STRING = "std_msgs/msg/String"
 BOOL = "std_msgs/msg/Bool"
 FLOAT64 = "std_msgs/msg/Float64"
@@ -35,7 +36,7 @@ DIAGNOSTIC_STATUS = "diagnostic_msgs/msg/DiagnosticStatus"
 KEY_VALUE = "diagnostic_msgs/msg/KeyValue"
 HEADER = "std_msgs/msg/Header"
 TIME = "builtin_interfaces/msg/Time"
-MESSAGES = (JOINT_STATE, WRENCH_STAMPED, STRING, BOOL, FLOAT64, DIAGNOSTIC_ARRAY)  # what the node reads or writes
+MESSAGES = (JOINT_STATE, WRENCH_STAMPED, POINT_STAMPED, STRING, BOOL, FLOAT64, DIAGNOSTIC_ARRAY)  # what the node reads or writes
 
 # ROS 2 primitive types as their IDL types (rosidl maps ``byte`` to octet, ``char`` to uint8).
 PRIMITIVES: dict[str, Any] = {

@@ -1,0 +1,63 @@
+"""``nasm ros2``: the monitor node on a robot's ROS 2 bus (``ros2.node``)."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from pathlib import Path
+
+import typer
+
+from neural_asm.client.transport import ServiceError, ServiceLost
+from neural_asm.logs.errors import LogError
+from neural_asm.logs.mapping import load_mapping
+from neural_asm.recordings import DEFAULT_DIR
+from neural_asm.runtime.cli import fail
+from neural_asm.runtime.home import home_path
+
+
+def ros2(
+    mapping: Path = typer.Option(..., help="channel mapping (.toml/.yaml) naming the topics, fields and episodes"),
+    model: str | None = typer.Option(None, help="a checkpoint's path, or a model's name in --models-dir (with "
+                                     "--url: a model the service hosts, default its default)"),
+    namespace: str = typer.Option("", help="the robot's namespace, e.g. /robot1: the mapping's topics are read under it "
+                                  "(/joint_states as /robot1/joint_states), and nasm/fault, nasm/energy published"),
+    url: str | None = typer.Option(None, help="judge with a running service (nasm serve) instead of in-process"),
+    api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="the service's API key (X-API-Key header)"),
+    fpr: float = typer.Option(0.01, min=0.0, max=1.0, help="false-positive rate of the fault threshold"),
+    out: Path = typer.Option(DEFAULT_DIR, help="recordings folder: one Rerun and one MCAP file per episode"),
+    models_dir: Path = typer.Option(home_path("models"), help="where a model's name is looked up"),
+    play: Path | None = typer.Option(None, help="instead of monitoring, play the ROS 2 bags here onto the bus at "
+                                     "their own pace (as ros2 bag play), for a node started with the same mapping"),
+    speed: float = typer.Option(1.0, min=0.01, help="with --play: times the bags' own pace"),
+) -> None:
+    """Monitor a robot on its ROS 2 bus: read the mapping's topics, judge each step and publish
+    the verdict on /diagnostics, nasm/fault and nasm/energy."""
+    try:
+        from neural_asm.ros2.bus import Bus
+        from neural_asm.ros2.node import MonitorNode, load_judge
+        from neural_asm.ros2.play import Pace, play_bags
+    except ImportError as exc:
+        raise fail(f"nasm ros2 needs the ros2 extra (pip install 'neural-asm[ros2]'): {exc}") from None
+    if play is not None:
+        try:
+            sent = play_bags(Bus(namespace), play, load_mapping(mapping), Pace(speed), typer.echo)
+        except (LogError, ValueError) as exc:
+            raise fail(exc) from None
+        typer.echo(f"played {sent} messages")
+        return
+    try:
+        judge, names = load_judge(model, url, fpr, models_dir, api_key)
+        found = load_mapping(mapping)
+        if names != found.channel_names:
+            raise LogError(f"the mapping gives channels {list(found.channel_names)} but the model expects {list(names)}")
+        node = MonitorNode(Bus(namespace), found, judge, out)
+    except (LogError, ValueError, OSError, ServiceError, ServiceLost) as exc:
+        raise fail(exc) from None
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    typer.echo(f"nasm ros2: monitoring {', '.join(g.source for g in node.groups)} in ROS domain {node.bus.domain_id}")
+    try:
+        node.spin(stop)
+    except KeyboardInterrupt:
+        pass

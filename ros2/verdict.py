@@ -1,0 +1,67 @@
+"""The monitor's verdict where ROS tools look for it: ``/diagnostics`` (``DiagnosticArray``, shown
+by ``rqt_robot_monitor``, the diagnostic aggregator and Foxglove without configuration), and
+``nasm/fault`` (``std_msgs/Bool``) and ``nasm/energy`` (``std_msgs/Float64``) every step."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from neural_asm.models.answer import StepAnswer
+from neural_asm.ros2 import messages as m
+from neural_asm.ros2.bus import Bus
+
+T = m.STORE.types
+STATUS = T[m.DIAGNOSTIC_STATUS]
+OK, WARN, ERROR = int(STATUS.OK), int(STATUS.WARN), int(STATUS.ERROR)
+NAME = "nasm: fault monitor"
+HEARTBEAT_S = 0.5  # the last status again when nothing new was said: ROS tools mark a silent one stale
+
+
+def _stamp(ns: int) -> Any:
+    return T[m.HEADER](stamp=T[m.TIME](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id="")
+
+
+def answer_values(answer: StepAnswer, episode: int) -> dict[str, str]:
+    """A step's verdict as the status's key-values."""
+    return {"episode": str(episode), "step": str(answer.step), "energy": f"{answer.energy:.6g}",
+            "threshold": f"{answer.threshold:.6g}", "isolated_joint": answer.isolated_joint or "",
+            "skill": answer.skill or ""}
+
+
+class VerdictWriter:
+    """The node's publishers; ``status`` is the last one said, repeated by ``heartbeat``."""
+
+    def __init__(self, bus: Bus, hardware_id: str) -> None:
+        self.hardware_id = hardware_id
+        self._diagnostics = bus.writer("/diagnostics", m.DIAGNOSTIC_ARRAY)
+        self._fault = bus.writer("nasm/fault", m.BOOL)
+        self._energy = bus.writer("nasm/energy", m.FLOAT64)
+        self.status: Any = STATUS(level=OK, name=NAME, message="waiting for the mapped topics",
+                                  hardware_id=hardware_id, values=[])
+        self._said = 0.0
+
+    def say(self, level: int, message: str, values: dict[str, str] | None = None) -> None:
+        """Publish a status now (and keep it for the heartbeat)."""
+        kv = [T[m.KEY_VALUE](key=k, value=v) for k, v in (values or {}).items()]
+        self.status = STATUS(level=level, name=NAME, message=message, hardware_id=self.hardware_id, values=kv)
+        self._publish()
+
+    def step(self, answer: StepAnswer, episode: int) -> None:
+        """Every step: its fault and energy, and its status (ERROR when flagged)."""
+        self._fault.write(T[m.BOOL](data=bool(answer.fault)))
+        self._energy.write(T[m.FLOAT64](data=float(answer.energy)))
+        where = f"episode {episode}, step {answer.step}"
+        if answer.fault:
+            self.say(ERROR, f"fault at {where}: joint {answer.isolated_joint} isolated", answer_values(answer, episode))
+        else:
+            self.say(OK, f"normal at {where}", answer_values(answer, episode))
+
+    def heartbeat(self) -> None:
+        """The last status again if nothing was said for ``HEARTBEAT_S``."""
+        if time.monotonic() - self._said >= HEARTBEAT_S:
+            self._publish()
+
+    def _publish(self) -> None:
+        self._diagnostics.write(T[m.DIAGNOSTIC_ARRAY](header=_stamp(time.time_ns()), status=[self.status]))
+        self._said = time.monotonic()

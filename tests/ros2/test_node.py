@@ -1,0 +1,356 @@
+"""``nasm ros2``'s node against a simulated Panda's driver in another process on loopback: a
+normal episode gives no ERROR on /diagnostics, the same episode with joint 4 locked gives ERROR
+with joint 4 isolated at the step the in-process monitor flags it, every step decided alike; the
+episode is recorded; input the mapping cannot read is a WARN naming it, and the node goes on."""
+
+from __future__ import annotations
+
+import os
+import random
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("cyclonedds")
+
+from neural_asm.logs.mapping import parse_mapping  # noqa: E402
+from neural_asm.memory import SkillMemory  # noqa: E402
+from neural_asm.ros2 import messages as m  # noqa: E402
+from neural_asm.ros2.bus import DEFAULT, Bus  # noqa: E402
+from neural_asm.ros2.node import LocalJudge, MonitorNode, RemoteJudge, load_judge  # noqa: E402
+from neural_asm.ros2.verdict import ERROR, OK, WARN  # noqa: E402
+from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_NAMES  # noqa: E402
+
+PUBLISHER = Path(__file__).with_name("panda_publisher.py")
+DOMAIN = str(100 + random.randrange(100))
+LOOPBACK = {"ROS_DOMAIN_ID": DOMAIN, "ROS_LOCALHOST_ONLY": "1"}
+NAMESPACE = "/robot1"
+FPR = 0.01
+STEPS = 15
+
+
+def channel(name: str) -> dict:
+    if name.startswith(("left_", "right_")):
+        side, axis = name.split("_")
+        kind = {"f": "force", "t": "torque"}[axis[0]]
+        return {"name": name, "topic": f"/{side}_pad/wrench", "field": f"wrench.{kind}.{axis[1]}", "units": "1"}
+    return {"name": name, "topic": "/joint_states", "field": "position", "key": name, "units": "rad",
+            "joint": name in JOINT_NAMES}
+
+
+def mapping(label_topic: str | None = None):
+    source = {"kind": "rosbag", "split": "gap", "gap_s": 2.0, "stamp": "header",
+              **({"label_topic": label_topic} if label_topic else {})}
+    return parse_mapping({"timing": {"period_s": 0.5, "steps": STEPS, "max_gap_s": 0.3}, "source": source,
+                          "channels": [channel(n) for n in CHANNEL_NAMES]}, "the test's mapping")
+
+
+@pytest.fixture(scope="module")
+def memory(small_panda_model) -> SkillMemory:
+    return SkillMemory(small_panda_model)
+
+
+def statuses(reader) -> list:
+    return [s for r in reader.take() for s in r.message.status]
+
+
+def values(status) -> dict[str, str]:
+    return {kv.key: kv.value for kv in status.values}
+
+
+class Running:
+    """A node spinning in a thread on the loopback domain, and a listener of /diagnostics."""
+
+    def __init__(self, found, judge, out: Path | None) -> None:
+        self.listener = Bus(env=LOOPBACK)
+        self.diagnostics = self.listener.reader("/diagnostics", m.DIAGNOSTIC_ARRAY, qos=DEFAULT)
+        self.node = MonitorNode(Bus(NAMESPACE, env=LOOPBACK), found, judge, out)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self.node.spin, args=(self.stop,))
+        self.thread.start()
+        self.said: list = []
+
+    def until(self, done, timeout_s: float = 60) -> None:
+        """Collect the statuses until one makes ``done`` true (or ``timeout_s``)."""
+        deadline = time.monotonic() + timeout_s
+        while not any(done(s) for s in self.said) and time.monotonic() < deadline:
+            self.listener.wait(deadline - time.monotonic())
+            self.said += statuses(self.diagnostics)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+
+
+def monitored(judge, observations: np.ndarray, out: Path, skill: str | None = None):
+    """The node's answers and statuses on one episode published by the driver in another process."""
+    np.save(out / "observations.npy", observations)
+    child = subprocess.Popen([sys.executable, str(PUBLISHER), NAMESPACE, str(out / "observations.npy"),
+                              *([skill] if skill else [])], env={**os.environ, **LOOPBACK}, text=True,
+                             stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    running = Running(mapping("skill" if skill else None), judge, out / "recordings")
+    try:
+        node = running.node
+        for reader in [*node.readers, *([node.label] if node.label else [])]:
+            assert reader.wait_for_publishers(1, timeout_s=60), f"no publisher of {reader.topic}"
+        child.stdin.write("go\n")
+        child.stdin.flush()
+        running.until(lambda s: values(s).get("step") == str(STEPS - 1))
+    finally:
+        running.close()
+        child.kill()
+        _, errors = child.communicate()
+    assert len(node.answers) == STEPS, (errors, [s.message for s in running.said if s.level == WARN])
+    return [a for _, a in node.answers], running.said
+
+
+def in_process(memory: SkillMemory, observations: np.ndarray, skill: str | None = None):
+    monitor = memory.monitor(fpr=FPR, skill=skill)
+    return [monitor.step(x) for x in observations]
+
+
+def decisions(answers) -> list[tuple]:
+    return [(a.step, a.fault, a.isolated_joint, a.threshold) for a in answers]
+
+
+@pytest.mark.slow
+def test_a_normal_episode_gives_no_error_and_the_monitors_answers(memory, tmp_path):
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    observations = run_episode(SKILLS[0], 31).observations
+    answers, said = monitored(LocalJudge(memory, FPR), observations, tmp_path)
+    expected = in_process(memory, observations)
+    assert decisions(answers) == decisions(expected)
+    assert [a.energy for a in answers] == pytest.approx([a.energy for a in expected], rel=1e-9)
+    assert said and all(s.level == OK for s in said)
+    assert len(list((tmp_path / "recordings").rglob("*.rrd"))) == 1
+    assert len(list((tmp_path / "recordings").rglob("*.mcap"))) == 1
+
+
+def locked() -> np.ndarray:
+    """A normal episode's seed with joint 4 locked 15 degrees past its goal at 3 s."""
+    from neural_asm.sim.faults import FaultSpec
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    return run_episode(SKILLS[0], 31, FaultSpec(joint=4, time_s=3.0, overshoot_deg=15.0)).observations
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("where", ["in-process", "service"])
+def test_joint_4_locked_gives_error_with_joint_4_isolated_where_the_monitor_flags_it(memory, tmp_path, where):
+    observations = locked()
+    if where == "in-process":
+        answers, said = monitored(LocalJudge(memory, FPR), observations, tmp_path)
+    else:
+        from neural_asm.service.embedded import start_embedded
+        from neural_asm.service.settings import Settings
+
+        memory.save(tmp_path / "models" / "panda.safetensors")
+        settings = Settings(models_dir=tmp_path / "models", record=False, build_default_model=False)
+        with start_embedded(settings) as srv:
+            judge, names = load_judge("panda", srv.url, FPR, tmp_path)
+            assert isinstance(judge, RemoteJudge) and names == CHANNEL_NAMES
+            answers, said = monitored(judge, observations, tmp_path)
+    expected = in_process(memory, observations)
+    assert decisions(answers) == decisions(expected)
+    flagged = [a for a in expected if a.fault]
+    assert flagged and flagged[0].isolated_joint == "joint4"
+    first = next(s for s in said if s.level == ERROR)
+    assert values(first)["step"] == str(flagged[0].step) and values(first)["isolated_joint"] == "joint4"
+
+
+@pytest.fixture(scope="module")
+def skill_memory() -> SkillMemory:
+    """A memory with a skill cue, trained on both simulated skills: it can be told one."""
+    from neural_asm.models.config import FAST
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    def episodes(seeds: range) -> tuple[np.ndarray, np.ndarray]:
+        x = np.stack([run_episode(s, seed).observations for s in SKILLS for seed in seeds])
+        return x, np.repeat(list(SKILLS), len(seeds))
+
+    memory = SkillMemory.fit(*episodes(range(4))[:1], CHANNEL_NAMES, episodes(range(4))[1],
+                             preset=FAST.with_(hidden_size=32, epochs=40), progress=False, skill_cue=True)
+    x, y = episodes(range(10, 14))
+    memory.calibrate(x, skills=list(y), progress=False)
+    return memory
+
+
+@pytest.mark.slow
+def test_the_skill_named_on_the_label_topic_is_told_to_the_memory(skill_memory, tmp_path):
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    skill = SKILLS[1]
+    observations = run_episode(skill, 31).observations
+    answers, _ = monitored(LocalJudge(skill_memory, FPR), observations, tmp_path, skill=skill)
+    assert [a.skill for a in answers] == [skill] * STEPS
+    assert all(a.skill_probability == 1 for a in answers)
+    told = in_process(skill_memory, observations, skill=skill)
+    assert [a.energy for a in answers] == pytest.approx([a.energy for a in told], rel=1e-9)
+
+
+class Judged:
+    """A judge that answers nothing: the bad input never reaches it."""
+
+    def open(self, skill):
+        raise AssertionError("no step of bad input is judged")
+
+
+def joint_state(names: list[str], sec: int, nanosec: int):
+    T = m.STORE.types
+    header = T[m.HEADER](stamp=T[m.TIME](sec=sec, nanosec=nanosec), frame_id="")
+    return T[m.JOINT_STATE](header=header, name=names, position=np.zeros(len(names)), velocity=np.zeros(0),
+                            effort=np.zeros(0))
+
+
+def wrench(sec: int, nanosec: int):
+    T = m.STORE.types
+    zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+    return T[m.WRENCH_STAMPED](header=T[m.HEADER](stamp=T[m.TIME](sec=sec, nanosec=nanosec), frame_id=""),
+                              wrench=T["geometry_msgs/msg/Wrench"](force=zero, torque=zero))
+
+
+def writers(running: Running) -> dict:
+    bus = Bus(NAMESPACE, env=LOOPBACK)
+    found = {t: bus.writer(t, k) for t, k in (("joint_states", m.JOINT_STATE), ("left_pad/wrench", m.WRENCH_STAMPED),
+                                               ("right_pad/wrench", m.WRENCH_STAMPED))}
+    assert all(w.wait_for_subscribers(1, timeout_s=30) for w in found.values())
+    assert all(r.wait_for_publishers(1, timeout_s=30) for r in running.node.readers)
+    return found
+
+
+STATE = [n for n in CHANNEL_NAMES if not n.startswith(("left_", "right_"))]
+
+
+def test_a_message_missing_a_mapped_joint_is_a_warn_naming_it_and_the_node_goes_on():
+    running = Running(mapping(), Judged(), None)
+    try:
+        out = writers(running)
+        out["joint_states"].write(joint_state([n for n in STATE if n != "joint4"], 1, 0))
+        running.until(lambda s: s.level == WARN)
+        out["joint_states"].write(joint_state([n for n in STATE if n != "joint6"], 2, 0))
+        running.until(lambda s: s.level == WARN and "named 'joint6'" in s.message)
+        assert running.thread.is_alive()
+    finally:
+        running.close()
+    warned = [s.message for s in running.said if s.level == WARN]
+    assert "no element named 'joint4'" in warned[0] and "/joint_states" in warned[0]
+    assert "no element named 'joint6'" in warned[-1]
+
+
+def test_a_topic_silent_longer_than_max_gap_s_inside_an_episode_is_a_warn_naming_it():
+    running = Running(mapping(), Judged(), None)
+    try:
+        out = writers(running)
+        out["right_pad/wrench"].write(wrench(1, 0))
+        for nanosec in (0, 100_000_000, 200_000_000, 350_000_000):
+            out["joint_states"].write(joint_state(STATE, 1, nanosec))
+            out["left_pad/wrench"].write(wrench(1, nanosec))
+        running.until(lambda s: s.level == WARN)
+        assert running.thread.is_alive()
+    finally:
+        running.close()
+    (warned,) = [s.message for s in running.said if s.level == WARN]
+    assert "/right_pad/wrench" in warned and "silent for 0.350 s" in warned and "max_gap_s is 0.3 s" in warned
+
+
+def test_the_command_refuses_a_mapping_of_another_source_in_one_line(tmp_path, small_panda_model):
+    from typer.testing import CliRunner
+
+    from neural_asm.cli import app
+
+    SkillMemory(small_panda_model).save(tmp_path / "panda.safetensors")
+    table = tmp_path / "table.toml"
+    table.write_text('[timing]\nperiod_s = 0.5\nsteps = 15\n[source]\nkind = "table"\ntime_column = "t"\n'
+                     + "".join(f'[[channels]]\nname = "{n}"\ncolumn = "{n}"\nunits = "1"\njoint = {str(n in JOINT_NAMES).lower()}\n'
+                             for n in CHANNEL_NAMES))
+    result = CliRunner().invoke(app, ["ros2", "--mapping", str(table), "--model", str(tmp_path / "panda.safetensors")],
+                                env=LOOPBACK)
+    assert result.exit_code == 2
+    assert "the node reads topics: the mapping's source is table" in result.output
+    result = CliRunner().invoke(app, ["ros2", "--mapping", str(table), "--model", "no-such-model",
+                                      "--models-dir", str(tmp_path)], env=LOOPBACK)
+    assert result.exit_code == 2 and "no-such-model" in result.output
+
+
+def test_a_topic_published_with_another_type_is_a_warn_naming_it():
+    running = Running(mapping(), Judged(), None)
+    try:
+        wrong = Bus(NAMESPACE, env=LOOPBACK).writer("left_pad/wrench", m.STRING)
+        running.until(lambda s: s.level == WARN)
+        assert running.thread.is_alive() and wrong.subscribers() == 0  # DDS alone would say nothing
+    finally:
+        running.close()
+    (warned,) = [s.message for s in running.said if s.level == WARN]
+    assert warned == ("topic /robot1/left_pad/wrench is published as std_msgs::msg::dds_::String_, but the mapping "
+                      "reads it as geometry_msgs::msg::dds_::WrenchStamped_ (geometry_msgs/msg/WrenchStamped)")
+
+
+class Refusing:
+    """A judge refusing the episode's skill, as a skill memory refuses one it does not know."""
+
+    def open(self, skill):
+        raise ValueError(f"no skill {skill!r} in this memory")
+
+
+def test_a_monitor_refusing_the_episode_is_a_warn_and_the_node_goes_on():
+    running = Running(mapping(), Refusing(), None)
+    try:
+        out = writers(running)
+        for nanosec in (0, 100_000_000):
+            for topic, message in (("joint_states", joint_state(STATE, 1, nanosec)),
+                                   ("left_pad/wrench", wrench(1, nanosec)), ("right_pad/wrench", wrench(1, nanosec))):
+                out[topic].write(message)
+        running.until(lambda s: s.level == WARN)
+        assert running.thread.is_alive()
+    finally:
+        running.close()
+    (warned,) = [s.message for s in running.said if s.level == WARN]
+    assert warned == "episode 0: the monitor cannot judge it: no skill None in this memory"
+
+
+@pytest.mark.slow
+def test_a_bag_played_onto_the_bus_is_judged_as_the_bag_reader_reads_it(memory, tmp_path):
+    """``nasm ros2 --play`` in another process plays a rosbag2 episode at its own pace; the node
+    judges each step as the in-process monitor judges the bag reader's episode."""
+    from neural_asm.experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
+    from neural_asm.logs.cli import read_logs
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    bag = write_bag([run_episode(SKILLS[0], 31)], tmp_path / "bag")
+    doc = bag_mapping(split="gap")
+    path = write_mapping(doc, tmp_path / "mapping.yaml")
+    running = Running(parse_mapping(doc, "the bags' mapping"), LocalJudge(memory, FPR), None)
+    player = subprocess.Popen([str(Path(sys.executable).with_name("nasm")), "ros2", "--mapping", str(path), "--play",
+                               str(bag), "--namespace", NAMESPACE], env={**os.environ, **LOOPBACK}, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        running.until(lambda s: values(s).get("step") == str(STEPS - 1))
+    finally:
+        running.close()
+        player.kill()
+        said, _ = player.communicate()
+    expected = in_process(memory, read_logs(str(bag), path).data[0])
+    answers = [a for _, a in running.node.answers]
+    assert decisions(answers) == decisions(expected), said
+    assert [a.energy for a in answers] == pytest.approx([a.energy for a in expected], rel=1e-9)
+
+
+def test_the_node_says_it_is_waiting_before_any_message():
+    running = Running(mapping(), Judged(), None)
+    try:
+        running.until(lambda s: True)
+    finally:
+        running.close()
+    assert running.said[0].level == OK and running.said[0].message == "waiting for the mapped topics"
+    assert running.said[0].hardware_id == "robot1"
