@@ -125,7 +125,7 @@ def run_split(segs: Segments, config: KittingConfig, progress: tqdm) -> SplitRun
     test = sets.test
     out.counts = {"segments": len(segs), "train_normal": len(sets.train), "precision_normal": len(sets.precision),
                   "threshold_normal": len(sets.threshold), "test_normal": int(test.normal.sum()),
-                  "test_anomalous_scored": len(w.anomalous),
+                  "test_anomalous_scored": len(w.anomalous), "test_normal_scored": len(w.normal),
                   "n_normal_train": {str(s): int((sets.train.skills == s).sum()) for s in sorted(set(segs.skills))},
                   "anomalies_from_test_runs": len(w_own.anomalous),
                   "anomalies_from_test_runs_per_skill": {s: int((test.skills[w_own.anomalous] == s).sum())
@@ -172,8 +172,9 @@ def run(config: KittingConfig) -> KittingResult:
         runs = [run_split(segs, replace(config, split_seed=k), progress) for k in config.split_seeds]
     pooled = {name: [m for one in runs for m in one.per_training[name]] for name in INFO}
     own = {name: [m for one in runs for m in one.own_training[name]] for name in INFO}
-    counts = across([one.counts for one in runs])[0]
+    counts = across([one.counts for one in runs])[0]  # the mean over the splits; each split's in by_split
     counts["n_normal_train"] = {s: min(one.counts["n_normal_train"][s] for one in runs) for s in counts["n_normal_train"]}
+    counts["by_split"] = {str(one.split.seed): one.counts for one in runs}
     methods = {}
     for m in METHODS:
         mean, spread = across(pooled[m.name])
