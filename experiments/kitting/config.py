@@ -62,9 +62,9 @@ class KittingRun:
     epochs: int = option(KITTING_NETWORK.epochs, "their training epochs", min=1)
     split_seed: int = option(0, "the seed that shuffles the runs before they are split into train, calibration "
                              "and test (another split, the same protocol)", min=0)
-    splits: tuple[int, ...] = option((), "several run-wise splits' seeds (repeatable, or several values after one "
-                                     "--splits), each trained and scored in turn; the headline pools them and gives "
-                                     "each in by_split (instead of --split-seed)")
+    splits: tuple[int, ...] = option((), "several run-wise splits' seeds (the option repeated, or several values "
+                                     "after it), each trained and scored in turn; the headline pools them and gives "
+                                     "each in by_split (instead of one split seed)")
     # The command's --out: the run writes its model there, then serves it to the whole runs.
     out: Path | None = None
 

@@ -31,7 +31,8 @@ def markdown(result: KittingResult) -> str:
     deltas = [str(d) for d in h["deltas_s"]]
     sides = "; ".join(f"split {k}: {len(v['train'])} training, {len(v['calibration'])} calibration, {len(v['test'])} test "
                       "runs" for k, v in result.split["by_split"].items())
-    lines = ["# Baxter kitting: anomalies scored from their onset\n", f"`{COMMAND}`, {result.seconds:.0f} s; "
+    splits = " ".join(map(str, result.split["seeds"]))
+    lines = ["# Baxter kitting: anomalies scored from their onset\n", f"`{COMMAND} --splits {splits}`, {result.seconds:.0f} s; "
              f"trainings per learned method and split: {result.config['trainings']} (mean over every split's "
              f"trainings, range); {sides}. Segments (mean over the splits): {result.counts}\n",
              "## Mean AUROC over skills 3, 4, 5 against delta (s after the onset)\n",
