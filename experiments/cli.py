@@ -43,10 +43,24 @@ class ExperimentCommand(Command):
 
     def parse_args(self, ctx: typer.Context, args: list[str]) -> list[str]:
         try:
-            return super().parse_args(ctx, args)
+            return super().parse_args(ctx, self._repeated(args))
         except UsageError as exc:
             typer.secho(f"{ctx.command_path}: {exc.format_message()}", fg="red", err=True)  # type: ignore[attr-defined]
             raise typer.Exit(2) from None
+
+    def _repeated(self, args: list[str]) -> list[str]:
+        """Several values after one repeatable option (``--splits 0 1 2``) as that option repeated:
+        an experiment's command takes no positional argument, so a bare value after one is another."""
+        flags = {name for p in self.params if getattr(p, "multiple", False) for name in p.opts}
+        out: list[str] = []
+        current = None
+        for arg in args:
+            if arg.startswith("-"):
+                current = arg if arg in flags else None
+            elif current is not None and out[-1] != current:
+                out.append(current)
+            out.append(arg)
+        return out
 
 
 def _choices(name: str, hint: Any) -> type[Enum]:

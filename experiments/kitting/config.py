@@ -26,6 +26,7 @@ class KittingConfig:
     network: TPCConfig = KITTING_NETWORK
     trainings: int = 3  # seeds 0..trainings-1 of every learned method
     split_seed: int = 0
+    splits: tuple[int, ...] = ()  # several run-wise splits' seeds, each run as ``split_seed`` (none: that one)
     train_fraction: float = 0.6  # of the runs (date stamps); the rest halved: calibration, test
     deltas_s: tuple[float, ...] = (0.0, 0.25, 0.5, 1.0)
     headline_delta_s: float = 0.5
@@ -42,6 +43,10 @@ class KittingConfig:
     def seeds(self) -> tuple[int, ...]:
         return tuple(range(self.trainings))
 
+    @property
+    def split_seeds(self) -> tuple[int, ...]:
+        return self.splits or (self.split_seed,)
+
 
 @dataclass(frozen=True)
 class KittingRun:
@@ -57,8 +62,17 @@ class KittingRun:
     epochs: int = option(KITTING_NETWORK.epochs, "their training epochs", min=1)
     split_seed: int = option(0, "the seed that shuffles the runs before they are split into train, calibration "
                              "and test (another split, the same protocol)", min=0)
+    splits: tuple[int, ...] = option((), "several run-wise splits' seeds (the option repeated, or several values "
+                                     "after it), each trained and scored in turn; the headline pools them and gives "
+                                     "each in by_split (instead of one split seed)")
     # The command's --out: the run writes its model there, then serves it to the whole runs.
     out: Path | None = None
+
+    def __post_init__(self) -> None:
+        if self.splits and self.split_seed:
+            raise ValueError("give --splits or --split-seed, not both")
+        if any(k < 0 for k in self.splits) or len(set(self.splits)) != len(self.splits):
+            raise ValueError(f"--splits: distinct seeds >= 0, got {list(self.splits)}")
 
     def config(self) -> KittingConfig:
         """The benchmark's configuration; a folder that is not the clone's is refused in one line."""
@@ -67,4 +81,4 @@ class KittingRun:
                            "'anomaly_detection_feature_selection_folder/No.0 filtering scheme' folder")
         network = KITTING_NETWORK.with_(hidden_size=self.hidden_size, epochs=self.epochs)
         return KittingConfig(data=self.data, out=self.out or home_path("kitting"), trainings=self.trainings,
-                             network=network, split_seed=self.split_seed)
+                             network=network, split_seed=self.split_seed, splits=tuple(self.splits))

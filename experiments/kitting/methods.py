@@ -1,8 +1,9 @@
 """The monitors compared on the kitting segments, each reduced to an energy per step and the
-served episode thresholds (`models.calibration`): the one Neural ASM for every skill (not told
-the skill; with the served threshold, or one cross-fitted on the training runs' out-of-fold peaks),
-per-skill networks, templates told the skill or picking the nearest one, the linear
-one-step predictor, an LSTM predictor trained by BPTT, and two trivial detectors.
+served episode thresholds (`models.calibration`): the skill memory told or not told the skill
+and the likelihood template (`skill_methods`), the one Neural ASM for every skill (not told the
+skill; with the served threshold, or one cross-fitted on the training runs' out-of-fold peaks),
+per-skill networks, templates told the skill or picking the nearest one, the linear one-step
+predictor, an LSTM predictor trained by BPTT, and two trivial detectors.
 
 Every learned or template method is calibrated as the product calibrates a model: precisions on
 one half of the held-out normal runs (`models.calibration.estimate`), episode thresholds on the
@@ -44,6 +45,10 @@ class MethodInfo:
 
 
 METHODS = (
+    MethodInfo("skill_memory", "the skill memory: one Neural ASM told each demonstration's skill by a cue, each skill's "
+               "mean course and dynamics, not told (a posterior over the skills); thresholds cross-fitted", True, False,
+               True),
+    MethodInfo("skill_memory_told", "the same skill memory told each segment's skill", True, True, True),
     MethodInfo("nasm_one", "one Neural ASM for every skill, skill recognised (offline recall)", True, False, True),
     MethodInfo("nasm_one_cross_fitted", "one Neural ASM (offline), its threshold also from out-of-fold peaks of the "
                "training runs (cross-fitted)", True, False, True),
@@ -55,6 +60,8 @@ METHODS = (
     MethodInfo("nasm_per_skill", "a Neural ASM per skill, told the skill", True, True, True),
     MethodInfo("template_told", "per-skill z-score template, told the skill", False, True, False),
     MethodInfo("template_nearest", "template picking the nearest skill itself", False, False, False),
+    MethodInfo("template_likelihood", "rival: each skill's mean course and own spreads, the most probable skill step "
+               "by step (not told)", False, False, False),
     MethodInfo("linear_one_step", "linear one-step predictor (ridge), told the skill", False, True, True),
     MethodInfo("lstm", "LSTM one-step predictor (BPTT), told the skill", False, True, True),
     MethodInfo("length", "trivial: segment length so far", False, False, False, True),

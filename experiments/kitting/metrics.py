@@ -135,10 +135,12 @@ def _delays(scored: Scored, test: Segments, rows: np.ndarray, fpr: float) -> dic
 
 
 def across(trainings: list[Any]) -> tuple[Any, Any]:
-    """The mean of each number over trainings, and its [min, max]: trees of equal shape."""
+    """The mean of each number over trainings, and its [min, max]: trees of one shape, a key
+    missing from some (an anomaly type no test run of a split holds) taken over those that have it."""
     first = trainings[0]
     if isinstance(first, dict):
-        pairs = {k: across([t[k] for t in trainings]) for k in first}
+        keys = dict.fromkeys(k for t in trainings for k in t)
+        pairs = {k: across([t[k] for t in trainings if k in t]) for k in keys}
         return {k: m for k, (m, _) in pairs.items()}, {k: r for k, (_, r) in pairs.items()}
     if isinstance(first, (int, float)) and not isinstance(first, bool) and all(t is not None for t in trainings):
         values = np.array(trainings, float)

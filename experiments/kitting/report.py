@@ -29,10 +29,12 @@ def _range(m: dict[str, Any], *keys: str) -> str:
 def markdown(result: KittingResult) -> str:
     h = result.headline
     deltas = [str(d) for d in h["deltas_s"]]
-    lines = ["# Baxter kitting: anomalies scored from their onset\n", f"`{COMMAND}`, {result.seconds:.0f} s; "
-             f"trainings per learned method: {result.config['trainings']} (mean, range); split seed "
-             f"{result.split['seed']}: {len(result.split['train'])} training, {len(result.split['calibration'])} "
-             f"calibration, {len(result.split['test'])} test runs. Segments: {result.counts}\n",
+    sides = "; ".join(f"split {k}: {len(v['train'])} training, {len(v['calibration'])} calibration, {len(v['test'])} test "
+                      "runs" for k, v in result.split["by_split"].items())
+    splits = " ".join(map(str, result.split["seeds"]))
+    lines = ["# Baxter kitting: anomalies scored from their onset\n", f"`{COMMAND} --splits {splits}`, {result.seconds:.0f} s; "
+             f"trainings per learned method and split: {result.config['trainings']} (mean over every split's "
+             f"trainings, range); {sides}. Segments (mean over the splits): {result.counts}\n",
              "## Mean AUROC over skills 3, 4, 5 against delta (s after the onset)\n",
              "| method | told skill | " + " | ".join(f"δ={d}" for d in deltas) + " | detected 1 % | normal flagged 1 % "
              "| delay median / p95 (ms) |", "|---|---|" + "---|" * (len(deltas) + 3)]
@@ -54,13 +56,27 @@ def markdown(result: KittingResult) -> str:
     for name, m in result.methods.items():
         lines.append(f"| {name} | " + " | ".join(_f(v["auroc_0.5"]) for v in m["per_type"].values()) + " |")
     lines += _own_runs_table(result)
-    p = result.paired
-    lines += ["", f"## Paired: nasm_one against {p['baseline']}\n",
-              f"{p['nasm_only']} items right only for the one network, {p['baseline_only']} only for {p['baseline']}; "
-              f"exact McNemar p = {p['p_value']:.3g} ({p['items']}).", "",
-              "## Few demonstrations (skills 7-9)\n", "```", json.dumps(result.few, indent=1)[:4000], "```", "",
-              "## Whole runs of the test split\n", "```", json.dumps(result.whole_runs, indent=1), "```"]
+    lines += _by_split_table(result)
+    for p in (result.paired, result.paired_told):
+        lines += ["", f"## Paired: {p['featured']} against {p['baseline']}\n",
+                  f"{p['nasm_only']} items right only for {p['featured']}, {p['baseline_only']} only for "
+                  f"{p['baseline']}; exact McNemar p = {p['p_value']:.3g} ({p['items']})."]
+    lines += ["", "## Few demonstrations (skills 7-9)\n", "```", json.dumps(result.few, indent=1)[:4000], "```", "",
+              "## Whole runs of the test splits, not told and told the skill\n", "```",
+              json.dumps(result.whole_runs, indent=1), "```"]
     return "\n".join(lines) + "\n"
+
+
+def _by_split_table(result: KittingResult) -> list[str]:
+    """Each split's mean AUROC at δ = 0.5 s, detected and normal flagged at the served 1 % threshold."""
+    splits = list(result.by_split)
+    lines = ["", "## Each split, δ = 0.5 s: AUROC / detected 1 % / normal flagged 1 %\n",
+             "| method | " + " | ".join(f"split {k}" for k in splits) + " |", "|---|" + "---|" * len(splits)]
+    for name in result.methods:
+        lines.append(f"| {name} | " + " | ".join(
+            f"{_f(r['auroc'])} / {_f(r['detected_1pct'])} / {_f(r['normal_flagged_1pct'])}"
+            for r in (result.by_split[k][name] for k in splits)) + " |")
+    return lines
 
 
 def _own_runs_table(result: KittingResult) -> list[str]:
@@ -68,8 +84,8 @@ def _own_runs_table(result: KittingResult) -> list[str]:
     normal segments; anomalous ones come from every run)."""
     n = result.counts["anomalies_from_test_runs_per_skill"]
     skills = list(n)
-    lines = ["", f"## Anomalies of test runs only ({result.counts['anomalies_from_test_runs']} of "
-             f"{result.counts['test_anomalous_scored']}: " + ", ".join(f"skill {s}: {k}" for s, k in n.items())
+    lines = ["", f"## Anomalies of test runs only ({result.counts['anomalies_from_test_runs']:g} of "
+             f"{result.counts['test_anomalous_scored']:g}: " + ", ".join(f"skill {s}: {k:g}" for s, k in n.items())
              + "), δ = 0.5 s\n",
              "| method | AUROC all anomalies | AUROC test runs only | " + " | ".join(f"skill {s}" for s in skills)
              + " | detected 1 % all | detected 1 % test runs only |", "|---|---|---|" + "---|" * (len(skills) + 2)]
@@ -97,7 +113,7 @@ def write_figures(result: KittingResult, out: Path) -> None:
     tl = result.timeline
     t = np.arange(len(tl["energies"])) * PERIOD_S
     fig, ax = plt.subplots(figsize=(8, 3.5))
-    ax.semilogy(t, tl["energies"], label="energy (one network)")
+    ax.semilogy(t, tl["energies"], label="energy (one network, nasm_one)")
     ax.axhline(tl["threshold"], color="r", ls="--", label="served 1 % threshold")
     ax.axvline(tl["onset_step"] * PERIOD_S, color="k", label=f"onset ({tl['anomaly']})")
     ax.set(xlabel="s", title=f"skill {tl['skill']}: {tl['origin'][:70]}")

@@ -1,6 +1,7 @@
-"""Whole runs of the test split through the product: each training's model of the benchmark in turn
-hosted by a real ``nasm serve`` (`runtime.serving`), every tagged skill phase of each run streamed to it by a real
-``nasm replay`` through the whole-runs mapping (`data.WHOLE_RUNS_DOC`: one episode, so one
+"""Whole runs of the test split through the product: each training's skill memory of the benchmark
+in turn hosted by a real ``nasm serve`` (`runtime.serving`), every tagged skill phase of each run
+streamed to it by a real ``nasm replay``, not told the skill and told it (``--tell-skill``: the
+phase's tag), through the whole-runs mapping (`data.WHOLE_RUNS_DOC`: one episode, so one
 session, per phase of ``tag_ranges.pkl``; the robot's task program marks each skill's start, as a
 bag's marker topic does), and the issue's ``whole_runs`` counts taken from the served answers:
 each step's fault flag and the skill the service recognised at it.
@@ -17,7 +18,9 @@ Counting (`count_whole_runs`):
 - a clean phase is a tagged phase without a labelled anomaly (one labelled ``false_positive``
   included: the dataset's authors say it held none); it is flagged if any of its steps is;
 - the skill is recognised in a phase of a skill the model was trained on when the service's
-  answer at the phase's last step names the phase's tag.
+  answer at the phase's last step names the phase's tag (told, it is the tag);
+- told, a phase of a skill the memory does not know is not replayed (the service refuses the
+  skill): an anomaly in it counts as missed, the phase in no count of clean phases.
 """
 
 from __future__ import annotations
@@ -41,13 +44,14 @@ from neural_asm.logs.label_pickle import Anomaly, Phase, read_anomalies, read_ph
 from neural_asm.logs.sources import read_mapped
 from neural_asm.logs.tables import phase_keys
 from neural_asm.models import checkpoint
-from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import SCORING
 from neural_asm.models.sequences import EpisodeFacts
+from neural_asm.models.skill_context import SkillMemory
 from neural_asm.runtime.serving import serving
 
 MODEL_NAME = "kitting"
 WITHIN_S = 1.0
+WELL_DEMONSTRATED = 20  # demonstrations of a skill whose phases the served skill is judged on alone
 
 
 @dataclass(frozen=True)
@@ -78,26 +82,37 @@ def run_labels(folder: Path) -> RunLabels:
                      tuple(read_anomalies(folder / ANOMALIES_FILE)))
 
 
-def replay_runs(runs: list[Path], model: NeuralASM, folder: Path, mode: str) -> list[PhaseAnswer]:
-    """Serve ``model`` with ``nasm serve`` and stream every tagged phase of ``runs`` (whole-run
-    folders) to it with ``nasm replay``; the answers, phase by phase. Files go under ``folder``:
-    the served model, the replayed runs (links), the mapping, the replay's recordings and summaries."""
+def replay_runs(runs: list[Path], memory: SkillMemory, folder: Path) -> dict[bool, list[PhaseAnswer]]:
+    """Serve the skill ``memory`` with ``nasm serve`` and stream every tagged phase of ``runs``
+    (whole-run folders) to it with ``nasm replay``, not told the skill (False) and told it (True:
+    ``--tell-skill``, each phase's tag; only phases of skills the memory knows, as the service
+    refuses another); the answers, phase by phase. Files go under ``folder``: the served model,
+    the replayed runs (links), the mapping, the replays' recordings and summaries."""
     source = folder / "runs"
     shutil.rmtree(source, ignore_errors=True)  # links of an earlier run's split
     source.mkdir(parents=True)
     for run in runs:
         (source / run.name).symlink_to(run.resolve(), target_is_directory=True)
-    checkpoint.save(model, folder / "models" / f"{MODEL_NAME}.safetensors")
+    checkpoint.save(memory, folder / "models" / f"{MODEL_NAME}.safetensors")  # as the public SkillMemory.save does
     mapping = folder / "whole_runs.yaml"
     mapping.write_text(yaml.safe_dump(WHOLE_RUNS_DOC, sort_keys=False))
-    summaries = folder / "replayed.json"
-    with serving(folder / "models", log=folder / "serve.log") as url, (folder / "replay.log").open("wb") as log:
-        done = subprocess.run([sys.executable, "-m", "neural_asm.cli", "replay", str(source), "--mapping", str(mapping),
-                               "--url", url, "--model", MODEL_NAME, "--mode", mode, "--out", str(folder / "recordings"),
-                               "--json", str(summaries)], stdout=log, stderr=subprocess.STDOUT)
-    if done.returncode != 0:
-        raise RuntimeError(f"nasm replay exited with {done.returncode}; see {folder / 'replay.log'}")
-    return answers(json.loads(summaries.read_text()), read_mapped(source, whole_runs_mapping()).episodes)
+    seqs = read_mapped(source, whole_runs_mapping())
+    known = [str(e.number) for e, label in zip(seqs.episodes, seqs.labels) if str(label) in memory.skills]
+    out = {}
+    with serving(folder / "models", log=folder / "serve.log") as url:
+        for told in (False, True):
+            name = "replayed_told" if told else "replayed"
+            summaries = folder / f"{name}.json"
+            extra = [a for n in known for a in ("--episode", n)] + ["--tell-skill"] if told else []
+            with (folder / f"{name}.log").open("wb") as log:
+                done = subprocess.run([sys.executable, "-m", "neural_asm.cli", "replay", str(source), "--mapping",
+                                       str(mapping), "--url", url, "--model", MODEL_NAME, "--out",
+                                       str(folder / "recordings"), "--json", str(summaries), *extra],
+                                      stdout=log, stderr=subprocess.STDOUT)
+            if done.returncode != 0:
+                raise RuntimeError(f"nasm replay exited with {done.returncode}; see {folder / f'{name}.log'}")
+            out[told] = answers(json.loads(summaries.read_text()), seqs.episodes)
+    return out
 
 
 def answers(summaries: list[dict[str, Any]], episodes: Sequence[EpisodeFacts]) -> list[PhaseAnswer]:
@@ -115,8 +130,10 @@ def answers(summaries: list[dict[str, Any]], episodes: Sequence[EpisodeFacts]) -
 
 
 def count_whole_runs(answered: list[PhaseAnswer], labels: dict[str, RunLabels], known_skills: tuple[str, ...],
-                     not_anomalies: tuple[str, ...]) -> dict[str, Any]:
-    """The issue's whole-run counts (see the module's docstring for how each case is counted)."""
+                     not_anomalies: tuple[str, ...], demonstrated: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The whole-run counts (see the module's docstring for how each case is counted);
+    ``demonstrated``: the skills with enough demonstrations whose phases the served skill is
+    also judged on alone (``skill_recognised_demonstrated``)."""
     by_phase = {(a.run, _phase_of(a, labels[a.run].phases)): a for a in answered}
     within = early = outside = n_anomalies = clean = clean_flagged = recognised = known = 0
     several = empty = 0
@@ -160,6 +177,8 @@ def count_whole_runs(answered: list[PhaseAnswer], labels: dict[str, RunLabels], 
             "clean_phases_flagged": share(clean_flagged, clean), "skill_recognised": share(recognised, known),
             "n_phases_replayed": len(answered), "phases_of_known_skills": known,
             "skill_recognised_per_skill": {s: share(sum(v), len(v)) for s, v in sorted(per_skill.items())},
+            "skill_recognised_demonstrated": share(sum(sum(v) for s, v in per_skill.items() if s in demonstrated),
+                                                   sum(len(v) for s, v in per_skill.items() if s in demonstrated)),
             "runs_without_labelled_anomaly": empty, "runs_with_several_anomalies": several,
             "outside_phases": outside, "delay_ms_median": float(np.median(delays)) if delays else None}
 
@@ -173,20 +192,29 @@ def _phase_of(answer: PhaseAnswer, phases: tuple[Phase, ...]) -> int:
     return k
 
 
-def score_whole_runs(config: KittingConfig, split: Split, models: Sequence[NeuralASM]) -> dict[str, Any]:
-    """The test runs' whole recordings through ``nasm serve`` + ``nasm replay``, once for each
-    training's model (files under ``OUT/whole_runs/seed_<seed>``), counted: the mean over the
-    trainings, each count's [min, max] in ``range`` and every training's counts."""
-    folders = [f for f in (config.data / "whole_experiment" / f"experiment_at_{r}" for r in split.test) if f.is_dir()]
-    labels = {run_of(f.name): run_labels(f) for f in folders}
-    per_training = []
-    for seed, model in zip(config.seeds, models):
-        answered = replay_runs(folders, model, config.out / "whole_runs" / f"seed_{seed}", config.recall_mode)
-        calibration = model.calibration(config.recall_mode, 1)
-        known = calibration.skills if calibration is not None else ()
-        per_training.append(count_whole_runs(answered, labels, known, config.not_anomalies))
-    mean, spread = across(per_training)
-    return {**mean, "range": spread, "trainings": len(per_training), "per_training": per_training,
-            "fpr": SCORING.default_fpr, "mode": config.recall_mode,
-            "scored_as": "each tagged skill phase one session of each training's model, hosted by nasm serve and "
-                         "streamed by nasm replay through the whole-runs mapping (the service's default threshold)"}
+def score_whole_runs(config: KittingConfig,
+                     splits: Sequence[tuple[Split, Sequence[SkillMemory], tuple[str, ...]]]) -> dict[str, Any]:
+    """The test runs' whole recordings of each split through ``nasm serve`` + ``nasm replay``, once
+    for each training's skill memory (files under ``OUT/whole_runs/split_<K>/seed_<S>``), not told
+    and told the skill, counted: for each, the mean over every split's trainings, each count's
+    [min, max] in ``range`` and every training's counts (with its split). Each split comes with
+    its memories and the skills with enough demonstrations (`count_whole_runs`)."""
+    per_training: dict[bool, list[dict[str, Any]]] = {False: [], True: []}
+    for split, memories, demonstrated in splits:
+        folders = [f for f in (config.data / "whole_experiment" / f"experiment_at_{r}" for r in split.test) if f.is_dir()]
+        labels = {run_of(f.name): run_labels(f) for f in folders}
+        for seed, memory in zip(config.seeds, memories):
+            answered = replay_runs(folders, memory, config.out / "whole_runs" / f"split_{split.seed}" / f"seed_{seed}")
+            for told, phases in answered.items():
+                counts = count_whole_runs(phases, labels, memory.skills, config.not_anomalies, demonstrated)
+                per_training[told].append({"split": split.seed, "seed": seed, **counts})
+    out = {}
+    for told, counted in per_training.items():
+        mean, spread = across([{k: v for k, v in c.items() if k not in ("split", "seed")} for c in counted])
+        out["told" if told else "not_told"] = {
+            **mean, "range": spread, "trainings": len(counted), "per_training": counted, "fpr": SCORING.default_fpr,
+            "scored_as": "each tagged skill phase one session of each training's skill memory, hosted by nasm serve "
+                         "and streamed by nasm replay through the whole-runs mapping (the service's default threshold)"
+                         + (", told the phase's tag (--tell-skill; phases of skills the memory knows)" if told else
+                            ", not told the skill")}
+    return out

@@ -74,38 +74,81 @@ def test_the_split_seed_reaches_the_protocol_and_moves_runs(kitting):
 @pytest.mark.slow
 def test_the_kitting_benchmark_writes_its_headline(kitting, tmp_path):
     from neural_asm.experiments.kitting.experiment import KittingReport
+    from neural_asm.experiments.kitting.methods import INFO
     from neural_asm.experiments.kitting.run import run
     from neural_asm.experiments.writer import write_report
 
     config = KittingConfig(data=kitting, out=tmp_path, network=KITTING_NETWORK.with_(epochs=30, hidden_size=32),
-                           trainings=2, lstm_epochs=5)
+                           trainings=2, lstm_epochs=5, splits=(0, 2))
     report = KittingReport(run(config))
     written = write_report(report, tmp_path)
-    assert "Paired" in (tmp_path / "fault_sweep.md").read_text()
+    assert "Paired: skill_memory against" in (tmp_path / "fault_sweep.md").read_text()
     document = json.loads((tmp_path / "fault_sweep.json").read_text())
     assert list(document)[0] == "headline" and {"split", "methods", "whole_runs", "model_path"} <= set(document)
     head = document["headline"]
-    assert head["task"] == "kitting" and head["featured"] == "nasm_one"
-    one = head["methods"]["nasm_one"]
-    assert one["is_neural_asm"] and not one["told_skill"] and one["trainings"] == 2
-    assert head["methods"]["template_told"]["trainings"] == 1
+    assert head["task"] == "kitting" and head["splits"] == [0, 2]
+    assert (head["featured"], head["featured_told"]) == ("skill_memory", "skill_memory_told")
+    one, told = head["methods"]["skill_memory"], head["methods"]["skill_memory_told"]
+    assert one["is_neural_asm"] and not one["told_skill"] and told["told_skill"]
+    assert one["trainings"] == told["trainings"] == 4  # two trainings on each of two splits
+    assert head["methods"]["template_told"]["trainings"] == 2  # no training: once per split
+    rival = head["methods"]["template_likelihood"]
+    assert not rival["is_neural_asm"] and not rival["told_skill"] and rival["trainings"] == 2
     # the synthetic anomaly (a force step) is plain half a second after its onset
-    assert head["methods"]["template_told"]["auroc"]["0.5"] > 0.9
+    assert head["methods"]["template_told"]["auroc"]["0.5"] > 0.9 and one["auroc"]["0.5"] > 0.9
+    for row in (one, told, rival):
+        assert all(np.isfinite(row[k]) for k in ("detected_1pct", "normal_flagged_1pct"))
+    # each split's numbers, whose mean (equal trainings per split) is the pooled one
+    assert set(head["by_split"]) == {"0", "2"}
+    for name, pooled in head["methods"].items():
+        rows = [head["by_split"][k][name] for k in ("0", "2")]
+        assert all(set(r) == {"auroc", "detected_1pct", "normal_flagged_1pct"} for r in rows)
+        for key, value in (("auroc", pooled["auroc"]["0.5"]), ("detected_1pct", pooled["detected_1pct"]),
+                           ("normal_flagged_1pct", pooled["normal_flagged_1pct"])):
+            if value is not None:
+                assert np.mean([r[key] for r in rows]) == pytest.approx(value)
     # the cross-fitted threshold ranks as the served one (the same energies); on fewer than 99 peaks
     # it is the highest of a pool holding the held-out ones, so it flags no more than the served one
-    crossed = head["methods"]["nasm_one_cross_fitted"]
-    assert crossed["auroc"] == one["auroc"]
-    assert document["counts"]["train_normal"] + document["counts"]["threshold_normal"] < 99
-    assert crossed["detected_1pct"] <= one["detected_1pct"] and crossed["normal_flagged_1pct"] <= one["normal_flagged_1pct"]
-    assert set(head["whole_runs"]) >= {"n_runs", "n_anomalies", "skill_recognised"}
-    assert head["whole_runs"]["n_runs"] > 0
-    whole = json.loads((tmp_path / "fault_sweep.json").read_text())["whole_runs"]
-    assert whole["trainings"] == 2 and len(whole["per_training"]) == 2  # each training's model replayed
-    assert all((tmp_path / "whole_runs" / f"seed_{s}" / "replayed.json").stat().st_size > 0 for s in (0, 1))
-    low, high = whole["range"]["skill_recognised"]
-    assert low <= whole["skill_recognised"] <= high
+    crossed, nasm = head["methods"]["nasm_one_cross_fitted"], head["methods"]["nasm_one"]
+    assert crossed["auroc"] == nasm["auroc"]
+    assert crossed["detected_1pct"] <= nasm["detected_1pct"] and crossed["normal_flagged_1pct"] <= nasm["normal_flagged_1pct"]
+    _the_paired_tests_add_up(head, document["counts"]["by_split"], INFO, trainings=2)
+    _whole_runs_both_told_and_not(head, document["whole_runs"], tmp_path)
     for name in ("auroc_vs_delta.png", "timeline.png", "timeline.rrd", "kitting_model.safetensors"):
         assert tmp_path / name in written and (tmp_path / name).stat().st_size > 0
+
+
+def _the_paired_tests_add_up(head, counts, info, trainings):
+    """Each row against the strongest rival told as it is: the discordant counts' difference is the
+    difference of right decisions, from each split's detected and flagged shares and its items."""
+    for key, featured, told in (("paired", "skill_memory", False), ("paired_told", "skill_memory_told", True)):
+        paired = head[key]
+        rivals = [m for m, i in info.items() if not i.is_neural_asm and not i.trivial and i.told_skill == told]
+        assert paired["baseline"] == max(rivals, key=lambda m: head["methods"][m]["auroc"]["0.5"])
+
+        def right(name):
+            return sum(trainings * (r[name]["detected_1pct"] * counts[k]["test_anomalous_scored"]
+                                    + (1 - r[name]["normal_flagged_1pct"]) * counts[k]["test_normal_scored"])
+                       for k, r in head["by_split"].items())
+
+        assert paired["nasm_only"] - paired["baseline_only"] == pytest.approx(right(featured) - right(paired["baseline"]))
+        items = sum(trainings * (c["test_anomalous_scored"] + c["test_normal_scored"]) for c in counts.values())
+        assert 0 <= paired["nasm_only"] + paired["baseline_only"] <= items and 0 < paired["p_value"] <= 1
+
+
+def _whole_runs_both_told_and_not(head, whole, out):
+    """Every training of every split replayed to the served skill memory, not told and told."""
+    for key, told in (("whole_runs", "not_told"), ("whole_runs_told", "told")):
+        assert head[key]["n_runs"] > 0 and set(head[key]) >= {"flagged_within_1s", "clean_phases_flagged",
+                                                              "skill_recognised_demonstrated"}
+        assert all(v is None or np.isfinite(v) for v in head[key].values())
+        assert whole[told]["trainings"] == 4 and {(c["split"], c["seed"]) for c in whole[told]["per_training"]} == {
+            (k, s) for k in (0, 2) for s in (0, 1)}
+        low, high = whole[told]["range"]["clean_phases_flagged"]
+        assert low <= head[key]["clean_phases_flagged"] <= high
+    assert head["whole_runs_told"]["skill_recognised"] == 1.0  # told, the served skill is the tag
+    assert all((out / "whole_runs" / f"split_{k}" / f"seed_{s}" / name).stat().st_size > 0
+               for k in (0, 2) for s in (0, 1) for name in ("replayed.json", "replayed_told.json"))
 
 
 @pytest.mark.slow
@@ -128,6 +171,24 @@ def test_a_real_robots_experiment_without_its_data_is_refused_in_one_line(args, 
     assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("splits, message", [(["--splits", "0", "1", "1"], "error: --splits: distinct seeds >= 0"),
+                                             (["--splits", "0", "1", "--split-seed", "2"], "error: give --splits or "
+                                              "--split-seed, not both"),
+                                             (["--splits", "0", "1", "2"], "error: no --data")])
+def test_several_splits_follow_one_splits_option(splits, message, tmp_path):
+    """`--splits 0 1 2` reaches the configuration (refused there for what is wrong, or for the data)."""
+    result = CliRunner().invoke(app, ["faults", "--task", "kitting", *splits, "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2 and result.output.startswith(message), result.output
+    assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_the_splits_reach_the_protocol(kitting):
+    from neural_asm.experiments.kitting.config import KittingRun
+
+    assert KittingRun(data=kitting, splits=(0, 1, 2)).config().split_seeds == (0, 1, 2)
+    assert KittingRun(data=kitting, split_seed=4).config().split_seeds == (4,)
+
+
 @pytest.mark.parametrize("args", [["faults", "--task", "kitting"], ["experiments", "run", "kitting"]])
 def test_nasm_faults_kitting_refuses_a_wrong_folder(args, tmp_path):
     result = CliRunner().invoke(app, [*args, "--data", str(tmp_path), "--out", str(tmp_path / "o")])
@@ -138,18 +199,29 @@ def test_nasm_faults_kitting_refuses_a_wrong_folder(args, tmp_path):
 def test_the_readme_cell_says_which_targets_are_missed_and_by_how_much():
     from neural_asm.experiments.kitting.experiment import _misses
 
-    per_type = {"no_object": {"n": 14, "auroc_0.5": 0.48}, "rare": {"n": 2, "auroc_0.5": 0.10}}
-    per_skill = {"3": {"balanced_accuracy": 0.96, "n_normal_train": 86}, "8": {"balanced_accuracy": 0.2, "n_normal_train": 5}}
-    one = {"auroc": {"0.5": 0.83}, "per_type": per_type, "per_skill": per_skill, "detected_1pct": 0.27,
-           "normal_flagged_1pct": 0.005, "delay_ms_median": 217.0}
-    runs = {"flagged_within_1s": 0.95, "flagged_early": 0.08, "clean_phases_flagged": 0.0, "skill_recognised": 0.96}
-    head = {"featured": "nasm_one", "methods": {"nasm_one": one}, "whole_runs": runs,
-            "paired": {"baseline": "template_told", "nasm_only": 2, "baseline_only": 57, "p_value": 6e-15}}
-    assert _misses(head) == ["mean AUROC >= 0.99 by 0.16", "every anomaly type's AUROC >= 0.95 by 0.47",
-                             "detected >= 95 % by 68 points", "median delay <= 100 ms by 117 ms",
-                             "flagged early <= 5 % by 3 points",
-                             "no rival significantly ahead: template_told is (p = 6e-15)"]
+    per_type = {"no_object": {"n": 14, "auroc_0.5": 0.85}, "object_slip": {"n": 12, "auroc_0.5": 0.97},
+                "human_collision": {"n": 15, "auroc_0.5": 0.93}, "rare": {"n": 2, "auroc_0.5": 0.10}}
+    one = {"auroc": {"0.5": 0.96}, "per_type": per_type, "detected_1pct": 0.9, "normal_flagged_1pct": 0.01,
+           "delay_ms_median": 50.0, "delay_ms_p95": 400.0}
+    told = {**one, "auroc": {"0.5": 0.99}, "delay_ms_median": 150.0}
+    by_split = {"0": {"m": {"auroc": 0.98, "detected_1pct": 0.9, "normal_flagged_1pct": 0.0},
+                      "t": {"auroc": 0.99, "detected_1pct": 0.9, "normal_flagged_1pct": 0.0}},
+                "1": {"m": {"auroc": 0.95, "detected_1pct": 0.8, "normal_flagged_1pct": 0.03},
+                      "t": {"auroc": 0.99, "detected_1pct": 0.9, "normal_flagged_1pct": 0.01}}}
+    runs = {"flagged_within_1s": 0.85, "flagged_early": 0.08, "clean_phases_flagged": 0.0,
+            "skill_recognised_demonstrated": 0.95}
+    head = {"featured": "m", "featured_told": "t", "methods": {"m": one, "t": told}, "by_split": by_split,
+            "whole_runs": runs, "whole_runs_told": {"flagged_within_1s": 0.95},
+            "paired": {"baseline": "template_likelihood", "nasm_only": 2, "baseline_only": 57, "p_value": 6e-15},
+            "paired_told": {"baseline": "template_told", "nasm_only": 5, "baseline_only": 3, "p_value": 0.7}}
+    assert _misses(head) == ["mean AUROC (not told, every split) >= 0.97 by 0.02",
+                             "no_object's AUROC (not told) >= 0.9 by 0.05",
+                             "every other anomaly type's AUROC (not told) >= 0.95 by 0.02",
+                             "detected (not told, every split) >= 85 % by 5 points",
+                             "normal flagged (not told, every split) <= 2 % by 1 points",
+                             "median delay (told) <= 100 ms by 50 ms", "flagged early (not told) <= 5 % by 3 points",
+                             "no rival not told significantly ahead: template_likelihood is (p = 6e-15)"]
     head["paired"].update(nasm_only=57, baseline_only=2)
     assert not any(m.startswith("no rival") for m in _misses(head))
-    one["delay_ms_median"], one["per_skill"]["3"] = None, {"n_normal_train": 86}  # not measured: not judged
-    assert not any(m.startswith(("median delay", "balanced accuracy")) for m in _misses(head))
+    told["delay_ms_median"], runs["skill_recognised_demonstrated"] = None, None  # not measured: not judged
+    assert not any(m.startswith(("median delay", "skill served")) for m in _misses(head))

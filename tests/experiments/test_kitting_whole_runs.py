@@ -10,8 +10,8 @@ import pytest
 from kitting_fixtures import tag_ranges_pickle, write_csv, write_kitting
 from neural_asm.experiments.kitting.config import KITTING_NETWORK, KittingConfig
 from neural_asm.experiments.kitting.data import read_segments, split_runs, whole_runs_mapping
-from neural_asm.experiments.kitting.methods import calibrate_served, fit_network
 from neural_asm.experiments.kitting.run import make_sets
+from neural_asm.experiments.kitting.skill_methods import fit_skill_memory
 from neural_asm.experiments.kitting.whole_runs import PhaseAnswer, RunLabels, count_whole_runs, replay_runs, run_labels
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.label_pickle import Anomaly, Phase
@@ -93,27 +93,33 @@ def test_whole_run_counts_from_served_answers():
 
 
 @pytest.mark.slow
-def test_test_runs_through_nasm_serve_and_nasm_replay_answer_as_the_model_does(tmp_path):
-    """Every tagged phase of the test runs is one served session whose flags and recognised skills
-    are those of the same model scoring the phase in process; the counts follow from them."""
+def test_test_runs_through_nasm_serve_and_nasm_replay_answer_as_the_skill_memory_does(tmp_path):
+    """Every tagged phase of the test runs is one served session, not told the skill and told it,
+    whose flags and served skills are those of the same skill memory scoring the phase in process;
+    the counts follow from them."""
     root = write_kitting(tmp_path / "data", runs=12, anomalous_every=2)
     segs = read_segments(root)
     split = split_runs(segs.runs, 0.6, 0)
     sets = make_sets(segs, split)
     config = KittingConfig(data=root, out=tmp_path / "out", network=KITTING_NETWORK.with_(hidden_size=16, epochs=20))
-    model = fit_network(sets.train, config, 0)
-    cal = calibrate_served(model, sets, "offline", True, config.fprs)
+    memory = fit_skill_memory(sets.train, config, 0)
+    p, t = sets.precision, sets.threshold
+    cal = memory.calibrate(p.data, p.skills, t.data, t.skills, t.lengths)
     folders = [root / "whole_experiment" / f"experiment_at_{r}" for r in split.test]
-    answered = replay_runs(folders, model, tmp_path / "out" / "whole_runs", "offline")
+    answered = replay_runs(folders, memory, tmp_path / "out" / "whole_runs")
     seqs = read_mapped(tmp_path / "out" / "whole_runs" / "runs", whole_runs_mapping())
-    assert len(answered) == len(seqs.data) == 3 * len(folders)
-    for i, answer in enumerate(answered):
-        x = seqs.data[i, : seqs.own_steps(i)]
-        assert len(answer.flags) == len(x) and answer.skill == seqs.labels[i]
-        errors = model.errors(x[None], "offline", 1)
-        np.testing.assert_array_equal(answer.flags, is_fault(cal.energy(errors)[0], cal.episode_thresholds[0.01]))
-        assert answer.recognised == tuple(None if k < 0 else cal.skills[k] for k in cal.recognised(errors)[0])
-    counts = count_whole_runs(answered, {f.name[len("experiment_at_"):]: run_labels(f) for f in folders}, cal.skills,
-                              config.not_anomalies)
+    assert len(answered[False]) == len(answered[True]) == len(seqs.data) == 3 * len(folders)
+    for i, (inferred, told) in enumerate(zip(answered[False], answered[True])):
+        x, skill = seqs.data[i, : seqs.own_steps(i)], str(seqs.labels[i])
+        assert len(inferred.flags) == len(told.flags) == len(x) and inferred.skill == told.skill == skill
+        energies, posterior = memory.score(x[None])
+        np.testing.assert_array_equal(inferred.flags, is_fault(energies[0], cal.inferred[0.01]))
+        assert inferred.recognised == tuple(memory.skills[k] for k in posterior[0].argmax(axis=0))
+        energies, _ = memory.score(x[None], told=[skill])
+        np.testing.assert_array_equal(told.flags, is_fault(energies[0], cal.told[0.01][memory.index(skill)]))
+        assert set(told.recognised) == {skill}
+    labels = {f.name[len("experiment_at_"):]: run_labels(f) for f in folders}
+    counts = count_whole_runs(answered[False], labels, memory.skills, config.not_anomalies, ("3",))
     assert counts["n_runs"] == len(folders) and counts["n_clean_phases"] + counts["n_anomalies"] == 3 * len(folders)
     assert counts["runs_without_labelled_anomaly"] >= 1  # the fixture's runs without an anomaly have empty files
+    assert counts["skill_recognised_demonstrated"] == counts["skill_recognised_per_skill"]["3"]

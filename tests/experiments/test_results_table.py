@@ -66,24 +66,30 @@ WRITTEN = {
     "robot_logs": ({"results": {"native": {"nasm_offline": {"detection_rate": {"0.01": 1.0}, "auroc": 1.0}},
                                 "bags": {"nasm_offline": {"detection_rate": {"0.01": 0.99}, "auroc": 0.999}}}},
                    ["from native: 100.0 %", "from bags: 99.0 %", "AUROC 0.999"]),
-    "kitting": ({"split": {"seed": 2}, "headline": {
-        "featured": "nasm_one", "paired": {"baseline": "template_told", "p_value": 1e-14, "nasm_only": 2,
-                                           "baseline_only": 57},
+    "kitting": ({"headline": {
+        "featured": "skill_memory", "featured_told": "skill_memory_told", "splits": [0, 1, 2],
+        "paired": {"baseline": "template_likelihood", "p_value": 1e-14, "nasm_only": 2, "baseline_only": 57},
+        "paired_told": {"baseline": "template_told", "p_value": 0.5, "nasm_only": 4, "baseline_only": 6},
         "whole_runs": {"flagged_within_1s": 0.33, "clean_phases_flagged": 0.0, "flagged_early": 0.04,
-                       "skill_recognised": 0.59},
-        "methods": {"nasm_one": {"trainings": 3, "auroc": {"0.5": 0.83}, "detected_1pct": 0.27,
-                                 "normal_flagged_1pct": 0.005, "delay_ms_median": 217.0,
-                                 "per_skill": {"3": {"auroc": {"0.5": 0.97}, "balanced_accuracy": 0.61,
-                                                     "n_normal_train": 86},
-                                               "5": {"auroc": {"0.5": 0.51}, "balanced_accuracy": 0.5,
-                                                     "n_normal_train": 53}},
-                                 "per_type": {"object_slip": {"auroc_0.5": 0.96, "n": 12},
-                                              "no_object": {"auroc_0.5": 0.48, "n": 14}}},
-                    "template_told": {"auroc": {"0.5": 0.97}}}}},
-                ["3 trainings, run-wise split 2", "skills 3, 5 0.83 (skill 5 0.51, no_object 0.48)", "27 % detected",
-                 "0.5 % of normal", "template_told 0.97 (p = 1e-14)", "33 % of anomalies", "0 % of clean phases",
-                 "Targets missed", "mean AUROC >= 0.99 by 0.16", "detected >= 95 % by 68 points",
-                 "skill recognised >= 95 % by 36 points", "no rival significantly ahead: template_told is"]),
+                       "skill_recognised_demonstrated": 0.59},
+        "whole_runs_told": {"flagged_within_1s": 0.95},
+        "by_split": {k: {"skill_memory": {"auroc": 0.95, "detected_1pct": 0.27, "normal_flagged_1pct": 0.005},
+                         "skill_memory_told": {"auroc": 0.98, "detected_1pct": 0.9, "normal_flagged_1pct": 0.0}}
+                     for k in ("0", "1", "2")},
+        "methods": {"skill_memory": {"trainings": 9, "auroc": {"0.5": 0.95}, "detected_1pct": 0.27,
+                                     "normal_flagged_1pct": 0.005, "delay_ms_median": 50.0, "delay_ms_p95": 300.0,
+                                     "per_skill": {"3": {}, "5": {}},
+                                     "per_type": {"object_slip": {"auroc_0.5": 0.96, "n": 12},
+                                                  "no_object": {"auroc_0.5": 0.88, "n": 14}}},
+                    "skill_memory_told": {"auroc": {"0.5": 0.98}, "detected_1pct": 0.9, "normal_flagged_1pct": 0.0,
+                                          "delay_ms_median": 50.0, "delay_ms_p95": 300.0},
+                    "template_likelihood": {"auroc": {"0.5": 0.97}}, "template_told": {"auroc": {"0.5": 0.97}}}}},
+                ["9 trainings over run-wise splits 0, 1, 2", "skills 3, 5 0.95 (no_object 0.88)", "27 % detected",
+                 "0.5 % of normal", "template_likelihood 0.97 (p = 1e-14)", "template_told 0.97 (p = 0.5)",
+                 "33 % of anomalies", "0 % of clean phases", "Targets missed",
+                 "mean AUROC (not told, every split) >= 0.97 by 0.02", "detected (not told, every split) >= 85 % by 58 points",
+                 "skill served right (skills with >= 20 demonstrations) >= 90 % by 31 points",
+                 "no rival not told significantly ahead: template_likelihood is"]),
     "voraus": ({"headline": {"trainings": 3, "per_category": {"0": {}, "1": {}},
                              "auroc_mean": {"mean": 0.9, "range": [0.85, 0.95]},
                              "detected_1pct": {"mean": 0.5, "range": [0.4, 0.6]}}},
@@ -127,7 +133,7 @@ def test_without_results_every_row_says_not_run_here_and_voraus_why(tmp_path):
 def test_a_file_in_another_layout_is_named_not_a_crash(tmp_path):
     path = tmp_path / "kitting" / "fault_sweep.json"
     path.parent.mkdir()
-    path.write_text(json.dumps({"headline": {"featured": "nasm_one"}}))
+    path.write_text(json.dumps({"headline": {"featured": "skill_memory"}}))
     assert "fault_sweep.json unreadable here (KeyError" in rows(table(EXPERIMENTS, tmp_path))["kitting"]
 
 
