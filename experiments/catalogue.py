@@ -62,8 +62,8 @@ for _experiment in (
                "from the native files", RobotLogsConfig, robot_logs.run_robot_logs, lambda c: "robot_logs",
                ("beyond",), figures=False,
                headline=Headline("results.json", robot_logs.headline, "docs/robot_logs.md")),
-    Experiment("kitting", "a real Baxter's labelled failures (Wu et al. 2022) scored from their onset: one network "
-               "not told the skill against per-skill networks, templates and an LSTM", KittingRun, kitting.run_kitting,
+    Experiment("kitting", "a real Baxter's labelled failures (Wu et al. 2022) scored from their onset: the skill "
+               "memory, not told and told the skill, against networks, templates and an LSTM", KittingRun, kitting.run_kitting,
                lambda c: "kitting", ("beyond", "real"),
                headline=Headline("fault_sweep.json", kitting.headline, "docs/kitting.md#against-the-targets",
                                  kitting.PUBLISHED_CELL)),
