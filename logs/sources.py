@@ -26,7 +26,7 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
     with ``skip_bad`` a warning kept in the provenance."""
     path = Path(source)
     if not path.exists():
-        raise LogError(f"nothing at {path}: no {formats.described()}")
+        raise LogError(f"nothing at {path} (expected {formats.described()})")
     reader = formats.reader(mapping.kind)
     if not reader.recognises(path):
         other = formats.recognised(path)
