@@ -6,10 +6,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from neural_asm.experiments.options import option
+from neural_asm.experiments.options import Simulates, option
 from neural_asm.logs.errors import LogError
 from neural_asm.models.config import FAST, TPCConfig
 from neural_asm.runtime.home import home_path
+from neural_asm.runtime.parallel import Parallel
 
 # A smaller, shorter-trained default network: the 2-core budget of 20 minutes holds three trainings
 # of the one network, of the per-skill networks and of the LSTM (the default H = 256 costs ~1.4 s
@@ -38,6 +39,8 @@ class KittingConfig:
     lstm_epochs: int = 150
     not_anomalies: tuple[str, ...] = ("false_positive",)  # labelled by the dataset's authors as no anomaly
     whole_runs: bool = True
+    parallel: Parallel = Parallel(1)  # where the splits run, each in one process
+
 
     @property
     def seeds(self) -> tuple[int, ...]:
@@ -49,10 +52,10 @@ class KittingConfig:
 
 
 @dataclass(frozen=True)
-class KittingRun:
+class KittingRun(Simulates):
     """What `nasm experiments run kitting` (and `nasm faults --task kitting`) is given; the rest of
     the protocol is `KittingConfig`'s. The size is an option because docs/kitting.md measures a
-    larger network than the default."""
+    larger network than the default; the workers, because the splits run side by side."""
 
     data: Path | None = option(None, "the clone's 'anomaly_detection_feature_selection_folder/No.0 filtering "
                                "scheme' folder")
@@ -81,4 +84,5 @@ class KittingRun:
                            "'anomaly_detection_feature_selection_folder/No.0 filtering scheme' folder")
         network = KITTING_NETWORK.with_(hidden_size=self.hidden_size, epochs=self.epochs)
         return KittingConfig(data=self.data, out=self.out or home_path("kitting"), trainings=self.trainings,
-                             network=network, split_seed=self.split_seed, splits=tuple(self.splits))
+                             network=network, split_seed=self.split_seed, splits=tuple(self.splits),
+                             parallel=self.parallel)

@@ -128,13 +128,15 @@ def headline(doc: dict[str, Any]) -> str:
     rivals = "; ".join(f"strongest rival {'told' if key.endswith('told') else 'not told'} {h[key]['baseline']} "
                        f"{h['methods'][h[key]['baseline']]['auroc'][delta]:.2f} (p = {h[key]['p_value']:.2g})"
                        for key in ("paired", "paired_told"))
+    matched = "; ".join(f"{h[key]['baseline']} p = {h[key]['p_value']:.2g}"
+                        for key in ("paired_cross_fitted", "paired_told_cross_fitted") if key in h) or "not run"
     return (f"one skill memory (one network told each demonstration's skill by a cue, each skill's course and "
             f"dynamics), {one['trainings']} trainings over run-wise splits {splits}, 0.5 s after the onset: not told "
             f"the skill, mean AUROC over skills {', '.join(one['per_skill'])} {one['auroc'][delta]:.2f} ({kind} "
             f"{one['per_type'][kind]['auroc_0.5']:.2f}), {100 * one['detected_1pct']:.0f} % detected and "
             f"{100 * one['normal_flagged_1pct']:.1f} % of normal segments flagged at the served 1 % threshold; told, "
             f"{told['auroc'][delta]:.2f}, {100 * told['detected_1pct']:.0f} % and {100 * told['normal_flagged_1pct']:.1f} %; "
-            f"{rivals}; whole runs through `nasm replay` to `nasm serve`, not told: "
+            f"{rivals} (at the memory's cross-fitted threshold rule: {matched}); whole runs through `nasm replay` to `nasm serve`, not told: "
             f"{100 * runs['flagged_within_1s']:.0f} % of anomalies flagged within 1 s, "
             f"{100 * runs['clean_phases_flagged']:.0f} % of clean phases flagged. Targets missed (why, and the "
             f"experiments that show it: the report's \"Against the targets\"): " + "; ".join(_misses(h)))

@@ -42,16 +42,18 @@ class MethodInfo:
     told_skill: bool
     learned: bool  # depends on a training seed
     trivial: bool = False
+    cross_fitted: bool = False  # its thresholds also from out-of-fold peaks of the training runs
 
 
 METHODS = (
     MethodInfo("skill_memory", "the skill memory: one Neural ASM told each demonstration's skill by a cue, each skill's "
                "mean course and dynamics, not told (a posterior over the skills); thresholds cross-fitted", True, False,
-               True),
-    MethodInfo("skill_memory_told", "the same skill memory told each segment's skill", True, True, True),
+               True, cross_fitted=True),
+    MethodInfo("skill_memory_told", "the same skill memory told each segment's skill", True, True, True,
+               cross_fitted=True),
     MethodInfo("nasm_one", "one Neural ASM for every skill, skill recognised (offline recall)", True, False, True),
     MethodInfo("nasm_one_cross_fitted", "one Neural ASM (offline), its threshold also from out-of-fold peaks of the "
-               "training runs (cross-fitted)", True, False, True),
+               "training runs (cross-fitted)", True, False, True, cross_fitted=True),
     MethodInfo("nasm_one_online", "one Neural ASM, skill recognised (online recall)", True, False, True),
     MethodInfo("nasm_one_pooled", "one Neural ASM, one calibration for every skill (the 20 Hz default)", True, False, True),
     MethodInfo("nasm_one_plan", "one Neural ASM, plan recall: the skill recognised at the cue", True, False, True),
@@ -59,9 +61,13 @@ METHODS = (
                True, True),
     MethodInfo("nasm_per_skill", "a Neural ASM per skill, told the skill", True, True, True),
     MethodInfo("template_told", "per-skill z-score template, told the skill", False, True, False),
+    MethodInfo("template_told_cross_fitted", "the same template, its threshold cross-fitted as the skill memory's "
+               "(fold templates of the training runs)", False, True, False, cross_fitted=True),
     MethodInfo("template_nearest", "template picking the nearest skill itself", False, False, False),
     MethodInfo("template_likelihood", "rival: each skill's mean course and own spreads, the most probable skill step "
                "by step (not told)", False, False, False),
+    MethodInfo("template_likelihood_cross_fitted", "the same rival, its threshold cross-fitted as the skill memory's "
+               "(fold templates of the training runs)", False, False, False, cross_fitted=True),
     MethodInfo("linear_one_step", "linear one-step predictor (ridge), told the skill", False, True, True),
     MethodInfo("lstm", "LSTM one-step predictor (BPTT), told the skill", False, True, True),
     MethodInfo("length", "trivial: segment length so far", False, False, False, True),
@@ -106,11 +112,15 @@ def _broadcast(thresholds: dict[float, float], n: int) -> dict[float, np.ndarray
     return {f: np.full(n, t) for f, t in thresholds.items()}
 
 
-def calibrated_energies(errors: Callable[[Segments], np.ndarray], sets: Sets, fprs: tuple[float, ...],
-                        centred: bool = False) -> Scored:
+def error_calibration(errors: Callable[[Segments], np.ndarray], sets: Sets) -> Calibration:
+    """The product's calibration of a predictor's errors, on the precision half."""
+    return estimate("baseline", 1, errors(sets.precision), "held-out normal runs", SCORING.error_covariance,
+                    SCORING.spread_floor(RATE_HZ), False, sets.precision.skills)
+
+
+def calibrated_energies(errors: Callable[[Segments], np.ndarray], sets: Sets, fprs: tuple[float, ...]) -> Scored:
     """Energies of the test segments under the product's calibration of a predictor's errors."""
-    cal = estimate("baseline", 1, errors(sets.precision), "held-out normal runs", SCORING.error_covariance,
-                   SCORING.spread_floor(RATE_HZ), centred, sets.precision.skills)
+    cal = error_calibration(errors, sets)
     thresholds = served_thresholds(cal.energy(errors(sets.threshold)), sets.threshold.lengths, fprs)
     return Scored(cal.energy(errors(sets.test)), _broadcast(thresholds, len(sets.test)))
 
@@ -139,15 +149,19 @@ def score_network(model: NeuralASM, sets: Sets, mode: str, centred: bool, fprs: 
     return Scored(energies, _broadcast({f: cal.episode_thresholds[f] for f in fprs}, len(sets.test)))
 
 
+def training_folds(train: Segments, config: KittingConfig) -> np.ndarray:
+    """Each training segment's fold for cross-fitting: ``config.threshold_folds`` folds by run."""
+    return group_folds(train.runs, min(config.threshold_folds, len(set(train.runs.tolist()))), config.split_seed)
+
+
 def training_energies_out_of_fold(model: NeuralASM, sets: Sets, config: KittingConfig) -> np.ndarray:
     """(N, T) energies of the training segments, each under a network fitted as ``model`` was
-    without its run's fold (of ``config.threshold_folds``), calibrated as it is served: the
-    product's cross-fitting (`models.cross_fit`, what `nasm calibrate --cross-fit` runs)."""
-    fold = group_folds(sets.train.runs, min(config.threshold_folds, len(set(sets.train.runs.tolist()))),
-                       config.split_seed)
+    without its run's fold (`training_folds`), calibrated as it is served: the product's
+    cross-fitting (`models.cross_fit`, what `nasm calibrate --cross-fit` runs)."""
     mode = config.recall_mode
     return out_of_fold_energies(model, sets.train.data, sets.train.skills, sets.precision.data,
-                                list(sets.precision.skills), (mode,), fold, progress=False)[mode]
+                                list(sets.precision.skills), (mode,), training_folds(sets.train, config),
+                                progress=False)[mode]
 
 
 def out_of_fold_peaks(model: NeuralASM, sets: Sets, config: KittingConfig) -> np.ndarray:
@@ -155,15 +169,21 @@ def out_of_fold_peaks(model: NeuralASM, sets: Sets, config: KittingConfig) -> np
     return segment_peaks(training_energies_out_of_fold(model, sets, config), sets.train.lengths)
 
 
+def cross_fitted(served: Scored, held_out: np.ndarray, out_of_fold: np.ndarray, fprs: tuple[float, ...]) -> Scored:
+    """``served``'s energies with episode thresholds from the held-out peaks and the training runs'
+    out-of-fold peaks. With the 36-40 held-out peaks alone a 1 % threshold is their highest and
+    promises nothing; with ~260 it is a split-conformal quantile (docs/kitting.md, "Thresholds from
+    more normal runs")."""
+    pool = np.concatenate([held_out, out_of_fold])
+    return Scored(served.energies, _broadcast({f: conformal_episode_threshold(pool, f) for f in fprs},
+                                              len(served.energies)))
+
+
 def score_cross_fitted(model: NeuralASM, served: Scored, sets: Sets, config: KittingConfig) -> Scored:
     """The served network's energies (``served``, from `score_network` with its served calibration)
-    with episode thresholds from the held-out peaks and the training runs' out-of-fold peaks. With
-    the 36 held-out peaks alone a 1 % threshold is their highest and promises nothing; with ~260 it
-    is a split-conformal quantile (docs/kitting.md, "Thresholds from more normal runs")."""
-    held_out = network_peaks(model, sets.threshold, config.recall_mode)
-    pool = np.concatenate([held_out, out_of_fold_peaks(model, sets, config)])
-    thresholds = {f: conformal_episode_threshold(pool, f) for f in config.fprs}
-    return Scored(served.energies, _broadcast(thresholds, len(sets.test)))
+    with its threshold cross-fitted (`cross_fitted`)."""
+    return cross_fitted(served, network_peaks(model, sets.threshold, config.recall_mode),
+                        out_of_fold_peaks(model, sets, config), config.fprs)
 
 
 def score_told(model: NeuralASM, sets: Sets, mode: str, fprs: tuple[float, ...]) -> Scored:
@@ -217,18 +237,40 @@ class LSTMOneStep(GRUOneStep):
         return net
 
 
+def errors_of(normaliser: Normaliser, predictor) -> Callable[[Segments], np.ndarray]:
+    """A predictor's errors on segments, in the normalised units it learnt in, told each one's skill."""
+    return lambda s: normaliser.normalise(s.data) - predictor.expected(normaliser.normalise(s.data), s.skills)
+
+
+def fit_template(train: Segments, seed: int) -> tuple[Normaliser, PerSkillZScore]:
+    """The per-skill z-score template of normalised training segments, with its normaliser."""
+    normaliser = Normaliser.fit(train.data)
+    return normaliser, PerSkillZScore().fit(normaliser.normalise(train.data), train.skills, [], seed)
+
+
+def score_template_told_cross_fitted(served: Scored, sets: Sets, config: KittingConfig, seed: int) -> Scored:
+    """The told template's energies (``served``) with its threshold cross-fitted as the skill
+    memory's is: each training segment's peak under a template fitted without its run's fold
+    (`training_folds`) and calibrated as served, beside the held-out peaks."""
+    errors = errors_of(*fit_template(sets.train, seed))
+    held_out = segment_peaks(error_calibration(errors, sets).energy(errors(sets.threshold)), sets.threshold.lengths)
+    fold = training_folds(sets.train, config)
+    out_of_fold = np.empty(len(sets.train))
+    for k in np.unique(fold):
+        fold_errors, left_out = errors_of(*fit_template(sets.train.take(fold != k), seed)), sets.train.take(fold == k)
+        energies = error_calibration(fold_errors, sets).energy(fold_errors(left_out))
+        out_of_fold[fold == k] = segment_peaks(energies, left_out.lengths)
+    return cross_fitted(served, held_out, out_of_fold, config.fprs)
+
+
 def score_baselines(sets: Sets, config: KittingConfig, seed: int, learned_only: bool) -> dict[str, Scored]:
     """The templates and predictors (those that depend on ``seed`` only, with ``learned_only``)."""
-    normaliser = Normaliser.fit(sets.train.data)
+    normaliser, template = fit_template(sets.train, seed)
     train_x = normaliser.normalise(sets.train.data)
     out: dict[str, Scored] = {}
-
-    def by(detector) -> Callable[[Segments], np.ndarray]:
-        return lambda s: normaliser.normalise(s.data) - detector.expected(normaliser.normalise(s.data), s.skills)
-
     if not learned_only:
-        template = PerSkillZScore().fit(train_x, sets.train.skills, [], seed)
-        out["template_told"] = calibrated_energies(by(template), sets, config.fprs)
+        out["template_told"] = calibrated_energies(errors_of(normaliser, template), sets, config.fprs)
+        out["template_told_cross_fitted"] = score_template_told_cross_fitted(out["template_told"], sets, config, seed)
         out["template_nearest"] = calibrated_energies(
             lambda s: normaliser.normalise(s.data) - nearest_template(template.means, normaliser.normalise(s.data)),
             sets, config.fprs)
@@ -236,9 +278,9 @@ def score_baselines(sets: Sets, config: KittingConfig, seed: int, learned_only: 
                                  sets, config.fprs)
         out["peak_force"] = _trivial(lambda s: s.data[..., FORCE], sets, config.fprs)
     linear = LinearOneStep().fit(train_x, sets.train.skills, [], seed)
-    out["linear_one_step"] = calibrated_energies(by(linear), sets, config.fprs)
+    out["linear_one_step"] = calibrated_energies(errors_of(normaliser, linear), sets, config.fprs)
     lstm = LSTMOneStep(RecurrentConfig(max_epochs=config.lstm_epochs, patience=15)).fit(train_x, sets.train.skills, [], seed)
-    out["lstm"] = calibrated_energies(by(lstm), sets, config.fprs)
+    out["lstm"] = calibrated_energies(errors_of(normaliser, lstm), sets, config.fprs)
     return out
 
 

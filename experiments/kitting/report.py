@@ -57,7 +57,7 @@ def markdown(result: KittingResult) -> str:
         lines.append(f"| {name} | " + " | ".join(_f(v["auroc_0.5"]) for v in m["per_type"].values()) + " |")
     lines += _own_runs_table(result)
     lines += _by_split_table(result)
-    for p in (result.paired, result.paired_told):
+    for p in (result.paired, result.paired_told, result.paired_cross_fitted, result.paired_told_cross_fitted):
         lines += ["", f"## Paired: {p['featured']} against {p['baseline']}\n",
                   f"{p['nasm_only']} items right only for {p['featured']}, {p['baseline_only']} only for "
                   f"{p['baseline']}; exact McNemar p = {p['p_value']:.3g} ({p['items']})."]

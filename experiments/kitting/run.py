@@ -44,6 +44,9 @@ class KittingResult:
     seconds: float
     model_path: str = ""
     paired_told: dict[str, Any] = field(default_factory=dict)  # the memory told against the strongest rival told
+    # the same tests against the strongest rivals at the memory's own (cross-fitted) threshold rule
+    paired_cross_fitted: dict[str, Any] = field(default_factory=dict)
+    paired_told_cross_fitted: dict[str, Any] = field(default_factory=dict)
     by_split: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)  # split -> method -> headline numbers
     headline: dict[str, Any] = field(default_factory=dict)
 
@@ -77,7 +80,7 @@ def _one_training(sets: Sets, config: KittingConfig, seed: int,
     scored.update(score_baselines(sets, config, seed, learned_only=seed != config.seeds[0]))
     memory = fit_skill_memory(sets.train, config, seed)
     if seed == config.seeds[0]:
-        scored["template_likelihood"] = score_template_likelihood(memory, sets, config)
+        scored.update(score_template_likelihood(memory, sets, config))
     scored.update(score_skill_memory(memory, sets, config))
     progress.update()
     return scored, model, memory
@@ -99,8 +102,14 @@ class SplitRun:
     timeline: dict[str, Any]
 
 
-def run_split(segs: Segments, config: KittingConfig, progress: tqdm) -> SplitRun:
-    """Every method's trainings on the split ``config.split_seed`` draws."""
+def run_split(segs: Segments, config: KittingConfig, progress: bool = True) -> SplitRun:
+    """Every method's trainings on the split ``config.split_seed`` draws (one process: a worker's job)."""
+    with tqdm(total=3 * len(config.seeds), desc=f"kitting split {config.split_seed}: trainings", unit="step",
+              disable=not progress) as bar:
+        return _trainings(segs, config, bar)
+
+
+def _trainings(segs: Segments, config: KittingConfig, progress: tqdm) -> SplitRun:
     split = split_runs(segs.runs, config.train_fraction, config.split_seed)
     sets = make_sets(segs, split)
     skills = config.headline_skills
@@ -133,12 +142,15 @@ def run_split(segs: Segments, config: KittingConfig, progress: tqdm) -> SplitRun
     return out
 
 
-def _paired(runs: list[SplitRun], methods: dict[str, dict[str, Any]], featured: str, delta: str) -> dict[str, Any]:
+def _paired(runs: list[SplitRun], methods: dict[str, dict[str, Any]], featured: str, delta: str,
+            cross_fitted: bool = False) -> dict[str, Any]:
     """``featured`` against the rival told the skill as it is (or not) with the highest AUROC at
-    the headline delta (not a trivial one, not itself a Neural ASM): items one gets right and the
-    other wrong, summed over the trainings and splits they share; exact McNemar p-value."""
+    the headline delta (not a trivial one, not itself a Neural ASM), at its own held-out threshold
+    or, ``cross_fitted``, at the featured memory's rule: items one gets right and the other wrong,
+    summed over the trainings and splits they share; exact McNemar p-value."""
     told = INFO[featured].told_skill
-    rivals = [m for m in methods if not INFO[m].is_neural_asm and not INFO[m].trivial and INFO[m].told_skill == told]
+    rivals = [m for m in methods if not INFO[m].is_neural_asm and not INFO[m].trivial and INFO[m].told_skill == told
+              and INFO[m].cross_fitted == cross_fitted]
     best = max(rivals, key=lambda m: methods[m]["auroc"][delta] or 0.0)
     pairs = []
     for one in runs:  # the items of one split; a template's one "training" faces each of the network's
@@ -168,8 +180,9 @@ def _by_split(runs: list[SplitRun], config: KittingConfig) -> dict[str, dict[str
 def run(config: KittingConfig) -> KittingResult:
     start = time.perf_counter()
     segs = read_segments(config.data)
-    with tqdm(total=3 * len(config.seeds) * len(config.split_seeds), desc="kitting: trainings", unit="step") as progress:
-        runs = [run_split(segs, replace(config, split_seed=k), progress) for k in config.split_seeds]
+    alone = config.parallel.workers == 1 or len(config.split_seeds) == 1  # one process: its trainings' bar
+    runs = config.parallel.map(run_split, [(segs, replace(config, split_seed=k), alone) for k in config.split_seeds],
+                               desc="kitting: splits", unit="split", progress=not alone)
     pooled = {name: [m for one in runs for m in one.per_training[name]] for name in INFO}
     own = {name: [m for one in runs for m in one.own_training[name]] for name in INFO}
     counts = across([one.counts for one in runs])[0]  # the mean over the splits; each split's in by_split
@@ -201,7 +214,9 @@ def run(config: KittingConfig) -> KittingResult:
         counts=counts, methods=methods, few={name: {"trainings": len(v), **across(v)[0]} for name, v in few.items() if v},
         paired=_paired(runs, methods, "skill_memory", delta),
         whole_runs={}, timeline=runs[0].timeline, seconds=0.0, model_path=str(path),
-        paired_told=_paired(runs, methods, "skill_memory_told", delta), by_split=_by_split(runs, config))
+        paired_told=_paired(runs, methods, "skill_memory_told", delta), by_split=_by_split(runs, config),
+        paired_cross_fitted=_paired(runs, methods, "skill_memory", delta, cross_fitted=True),
+        paired_told_cross_fitted=_paired(runs, methods, "skill_memory_told", delta, cross_fitted=True))
     if config.whole_runs:
         from neural_asm.experiments.kitting.whole_runs import WELL_DEMONSTRATED, score_whole_runs
 
@@ -246,6 +261,8 @@ def headline(result: KittingResult, config: KittingConfig) -> dict[str, Any]:
             "by_split": result.by_split,
             "paired": {k: result.paired[k] for k in PAIRED_KEYS},
             "paired_told": {k: result.paired_told[k] for k in PAIRED_KEYS},
+            "paired_cross_fitted": {k: result.paired_cross_fitted[k] for k in PAIRED_KEYS},
+            "paired_told_cross_fitted": {k: result.paired_told_cross_fitted[k] for k in PAIRED_KEYS},
             "anomalies_from_test_runs": {name: m["anomalies_from_test_runs"] for name, m in result.methods.items()},
             "whole_runs": {k: runs.get("not_told", {}).get(k) for k in WHOLE_RUN_KEYS},
             "whole_runs_told": {k: runs.get("told", {}).get(k) for k in WHOLE_RUN_KEYS},

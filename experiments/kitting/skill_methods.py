@@ -7,7 +7,7 @@ given the demonstrations (`OutOfFold`, folds by run: the benchmark's `group_fold
 Beside it, the rival ``template_likelihood``: each skill's mean course held to its own spreads,
 the most probable skill step by step, not told; scored through the same `SkillMemory` with the
 course term alone (its network unused), its threshold the served one from the held-out peaks, as
-every rival's.
+every rival's, and beside it cross-fitted as the memory's (fold templates: each fold's mean courses).
 """
 
 from __future__ import annotations
@@ -31,10 +31,12 @@ def fit_skill_memory(train: Segments, config: KittingConfig, seed: int) -> Skill
                            provenance={"benchmark": "kitting", "seed": seed, "mapping": kitting_mapping().to_dict()})
 
 
-def out_of_fold(memory: SkillMemory, train: Segments, config: KittingConfig) -> OutOfFold:
-    """Fold memories, each trained as ``memory`` was without one fold of the training runs."""
+def out_of_fold(memory: SkillMemory, train: Segments, config: KittingConfig, network: bool = True) -> OutOfFold:
+    """Fold memories, each trained as ``memory`` was without one fold of the training runs (without
+    ``network``: ``memory``'s network with each fold's mean courses, all a template needs)."""
     folds = min(config.threshold_folds, len(set(train.runs.tolist())))
-    return OutOfFold.fit(memory, train.data, train.skills, train.lengths, train.runs, folds, config.split_seed)
+    return OutOfFold.fit(memory, train.data, train.skills, train.lengths, train.runs, folds, config.split_seed,
+                         fold_memory=lambda k, x, y: memory.fold(x, y, network=network))
 
 
 def _scored(memory: SkillMemory, test: Segments, fprs: tuple[float, ...]) -> tuple[Scored, Scored]:
@@ -59,10 +61,17 @@ def score_skill_memory(memory: SkillMemory, sets: Sets, config: KittingConfig) -
     return {"skill_memory": inferred, "skill_memory_told": told}
 
 
-def score_template_likelihood(memory: SkillMemory, sets: Sets, config: KittingConfig) -> Scored:
+def score_template_likelihood(memory: SkillMemory, sets: Sets, config: KittingConfig) -> dict[str, Scored]:
     """The rival: the training runs' mean courses and held-out spreads, not told, scored by the
-    most probable skill's course term (``memory``'s network is not used)."""
+    most probable skill's course term (``memory``'s network is not used); its threshold from the
+    held-out peaks as every rival's (``template_likelihood``), and cross-fitted as the memory's from
+    fold templates (``template_likelihood_cross_fitted``)."""
     template = SkillMemory(memory.model, memory.means)
     p, t = sets.precision, sets.threshold
-    template.calibrate(p.data, p.skills, t.data, t.skills, t.lengths, TEMPLATE_LIKELIHOOD, config.fprs)
-    return _scored(template, sets.test, config.fprs)[0]
+    out = {}
+    for name, crossing in (("template_likelihood", None),
+                           ("template_likelihood_cross_fitted", out_of_fold(template, sets.train, config, False))):
+        template.calibrate(p.data, p.skills, t.data, t.skills, t.lengths, TEMPLATE_LIKELIHOOD, config.fprs,
+                           cross_fit=crossing)
+        out[name] = _scored(template, sets.test, config.fprs)[0]
+    return out

@@ -18,6 +18,7 @@ from neural_asm.experiments.kitting.metrics import windows
 from neural_asm.experiments.kitting.run import make_sets
 from neural_asm.experiments.voraus.run import voraus_mapping_doc
 from neural_asm.logs.mapping import load_mapping, parse_mapping
+from neural_asm.runtime.parallel import Parallel
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -79,7 +80,7 @@ def test_the_kitting_benchmark_writes_its_headline(kitting, tmp_path):
     from neural_asm.experiments.writer import write_report
 
     config = KittingConfig(data=kitting, out=tmp_path, network=KITTING_NETWORK.with_(epochs=30, hidden_size=32),
-                           trainings=2, lstm_epochs=5, splits=(0, 2))
+                           trainings=2, lstm_epochs=5, splits=(0, 2), parallel=Parallel(2))  # the splits side by side
     report = KittingReport(run(config))
     written = write_report(report, tmp_path)
     assert "Paired: skill_memory against" in (tmp_path / "fault_sweep.md").read_text()
@@ -109,9 +110,11 @@ def test_the_kitting_benchmark_writes_its_headline(kitting, tmp_path):
                 assert np.mean([r[key] for r in rows]) == pytest.approx(value)
     # the cross-fitted threshold ranks as the served one (the same energies); on fewer than 99 peaks
     # it is the highest of a pool holding the held-out ones, so it flags no more than the served one
-    crossed, nasm = head["methods"]["nasm_one_cross_fitted"], head["methods"]["nasm_one"]
-    assert crossed["auroc"] == nasm["auroc"]
-    assert crossed["detected_1pct"] <= nasm["detected_1pct"] and crossed["normal_flagged_1pct"] <= nasm["normal_flagged_1pct"]
+    for served in ("nasm_one", "template_told", "template_likelihood"):
+        crossed, held_out = head["methods"][f"{served}_cross_fitted"], head["methods"][served]
+        assert crossed["auroc"] == held_out["auroc"]
+        assert crossed["detected_1pct"] <= held_out["detected_1pct"]
+        assert crossed["normal_flagged_1pct"] <= held_out["normal_flagged_1pct"]
     _the_paired_tests_add_up(head, document["counts"]["by_split"], INFO, trainings=2)
     _whole_runs_both_told_and_not(head, document["whole_runs"], tmp_path)
     for name in ("auroc_vs_delta.png", "timeline.png", "timeline.rrd", "kitting_model.safetensors"):
@@ -121,9 +124,13 @@ def test_the_kitting_benchmark_writes_its_headline(kitting, tmp_path):
 def _the_paired_tests_add_up(head, counts, info, trainings):
     """Each row against the strongest rival told as it is: the discordant counts' difference is the
     difference of right decisions, from each split's detected and flagged shares and its items."""
-    for key, featured, told in (("paired", "skill_memory", False), ("paired_told", "skill_memory_told", True)):
+    for key, featured, told, crossed in (("paired", "skill_memory", False, False),
+                                         ("paired_told", "skill_memory_told", True, False),
+                                         ("paired_cross_fitted", "skill_memory", False, True),
+                                         ("paired_told_cross_fitted", "skill_memory_told", True, True)):
         paired = head[key]
-        rivals = [m for m, i in info.items() if not i.is_neural_asm and not i.trivial and i.told_skill == told]
+        rivals = [m for m, i in info.items()
+                  if not i.is_neural_asm and not i.trivial and i.told_skill == told and i.cross_fitted == crossed]
         assert paired["baseline"] == max(rivals, key=lambda m: head["methods"][m]["auroc"]["0.5"])
 
         def right(name):
