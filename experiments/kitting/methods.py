@@ -112,15 +112,15 @@ def _broadcast(thresholds: dict[float, float], n: int) -> dict[float, np.ndarray
     return {f: np.full(n, t) for f, t in thresholds.items()}
 
 
-def error_calibration(errors: Callable[[Segments], np.ndarray], sets: Sets) -> Calibration:
+def error_calibration(errors: Callable[[Segments], np.ndarray], precision: Segments) -> Calibration:
     """The product's calibration of a predictor's errors, on the precision half."""
-    return estimate("baseline", 1, errors(sets.precision), "held-out normal runs", SCORING.error_covariance,
-                    SCORING.spread_floor(RATE_HZ), False, sets.precision.skills)
+    return estimate("baseline", 1, errors(precision), "held-out normal runs", SCORING.error_covariance,
+                    SCORING.spread_floor(RATE_HZ), False, precision.skills)
 
 
 def calibrated_energies(errors: Callable[[Segments], np.ndarray], sets: Sets, fprs: tuple[float, ...]) -> Scored:
     """Energies of the test segments under the product's calibration of a predictor's errors."""
-    cal = error_calibration(errors, sets)
+    cal = error_calibration(errors, sets.precision)
     thresholds = served_thresholds(cal.energy(errors(sets.threshold)), sets.threshold.lengths, fprs)
     return Scored(cal.energy(errors(sets.test)), _broadcast(thresholds, len(sets.test)))
 
@@ -251,16 +251,23 @@ def fit_template(train: Segments, seed: int) -> tuple[Normaliser, PerSkillZScore
 def score_template_told_cross_fitted(served: Scored, sets: Sets, config: KittingConfig, seed: int) -> Scored:
     """The told template's energies (``served``) with its threshold cross-fitted as the skill
     memory's is: each training segment's peak under a template fitted without its run's fold
-    (`training_folds`) and calibrated as served, beside the held-out peaks."""
+    (`training_folds`) and calibrated as served, beside the held-out peaks. A template needs two
+    demonstrations of a skill: a fold's segments of a skill with fewer in the fold's training part
+    (of the few-demonstration skills) add no peak."""
     errors = errors_of(*fit_template(sets.train, seed))
-    held_out = segment_peaks(error_calibration(errors, sets).energy(errors(sets.threshold)), sets.threshold.lengths)
-    fold = training_folds(sets.train, config)
-    out_of_fold = np.empty(len(sets.train))
+    held_out = segment_peaks(error_calibration(errors, sets.precision).energy(errors(sets.threshold)),
+                             sets.threshold.lengths)
+    fold, peaks = training_folds(sets.train, config), [held_out]
     for k in np.unique(fold):
-        fold_errors, left_out = errors_of(*fit_template(sets.train.take(fold != k), seed)), sets.train.take(fold == k)
-        energies = error_calibration(fold_errors, sets).energy(fold_errors(left_out))
-        out_of_fold[fold == k] = segment_peaks(energies, left_out.lengths)
-    return cross_fitted(served, held_out, out_of_fold, config.fprs)
+        part = sets.train.take(fold != k)
+        names, counts = np.unique(part.skills, return_counts=True)
+        modelled = names[counts >= 2]
+        fold_errors = errors_of(*fit_template(part.take(np.isin(part.skills, modelled)), seed))
+        left_out = sets.train.take((fold == k) & np.isin(sets.train.skills, modelled))
+        precision = sets.precision.take(np.isin(sets.precision.skills, modelled))
+        peaks.append(segment_peaks(error_calibration(fold_errors, precision).energy(fold_errors(left_out)),
+                                   left_out.lengths))
+    return cross_fitted(served, peaks[0], np.concatenate(peaks[1:]), config.fprs)
 
 
 def score_baselines(sets: Sets, config: KittingConfig, seed: int, learned_only: bool) -> dict[str, Scored]:

@@ -47,6 +47,25 @@ def test_the_split_never_puts_one_run_on_both_sides(kitting):
     assert set(sets.test.runs[sets.test.normal]) <= sides[2]
 
 
+def test_the_told_templates_threshold_cross_fits_past_a_skill_too_rare_for_a_fold(kitting):
+    """A skill with two training segments (in two runs) leaves some fold's training part one: the
+    fold template leaves that skill out instead of refusing; the pool grows past the held-out peaks."""
+    from neural_asm.experiments.kitting.methods import Scored, Sets, score_template_told_cross_fitted
+
+    segs = read_segments(kitting)
+    sets = make_sets(segs, split_runs(segs.runs, 0.6, 0))
+    rare = sets.train.skills == "4"
+    keep = ~rare | (np.cumsum(rare) <= 2) & np.isin(sets.train.runs, np.unique(sets.train.runs[rare])[:2])
+    first_two = np.flatnonzero(rare & keep)
+    assert len(first_two) == 2 and len(set(sets.train.runs[first_two])) == 2  # two runs: some fold has one
+    sets = Sets(sets.train.take(keep), sets.precision, sets.threshold, sets.test)
+    served = Scored(np.zeros((len(sets.test), sets.test.data.shape[1])), {})
+    config = KittingConfig(data=kitting, out=kitting, fprs=(0.5,))
+    crossed = score_template_told_cross_fitted(served, sets, config, seed=0)
+    assert np.isfinite(crossed.thresholds[0.5]).all() and crossed.thresholds[0.5].shape == (len(sets.test),)
+    assert crossed.energies is served.energies
+
+
 def test_windows_end_at_onset_plus_delta_and_normals_share_their_lengths(kitting):
     segs = read_segments(kitting)
     config = KittingConfig(data=kitting, out=kitting)
