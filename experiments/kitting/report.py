@@ -60,7 +60,9 @@ def markdown(result: KittingResult) -> str:
     for p in (result.paired, result.paired_told, result.paired_cross_fitted, result.paired_told_cross_fitted):
         lines += ["", f"## Paired: {p['featured']} against {p['baseline']}\n",
                   f"{p['nasm_only']} items right only for {p['featured']}, {p['baseline_only']} only for "
-                  f"{p['baseline']}; exact McNemar p = {p['p_value']:.3g} ({p['items']})."]
+                  f"{p['baseline']}; exact McNemar p = {p['p_value']:.3g} ({p['items']}). By split: "
+                  + "; ".join(f"{k}: {c['nasm_only']} / {c['baseline_only']}, p = {c['p_value']:.2g}"
+                              for k, c in p["by_split"].items()) + "."]
     lines += ["", "## Few demonstrations (skills 7-9)\n", "```", json.dumps(result.few, indent=1)[:4000], "```", "",
               "## Whole runs of the test splits, not told and told the skill\n", "```",
               json.dumps(result.whole_runs, indent=1), "```"]

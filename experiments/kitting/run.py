@@ -152,16 +152,23 @@ def _paired(runs: list[SplitRun], methods: dict[str, dict[str, Any]], featured: 
     rivals = [m for m in methods if not INFO[m].is_neural_asm and not INFO[m].trivial and INFO[m].told_skill == told
               and INFO[m].cross_fitted == cross_fitted]
     best = max(rivals, key=lambda m: methods[m]["auroc"][delta] or 0.0)
-    pairs = []
-    for one in runs:  # the items of one split; a template's one "training" faces each of the network's
-        rival = one.correct[best]
-        pairs += [(a, rival[k % len(rival)]) for k, a in enumerate(one.correct[featured])]
-    nasm_only = int(sum((a & ~b).sum() for a, b in pairs))
-    rival_only = int(sum((~a & b).sum() for a, b in pairs))
+    counts = {str(one.split.seed): _discordant(one, featured, best) for one in runs}
+    nasm_only = sum(c["nasm_only"] for c in counts.values())
+    rival_only = sum(c["baseline_only"] for c in counts.values())
     return {"featured": featured, "baseline": best, "nasm_only": nasm_only, "baseline_only": rival_only,
-            "p_value": float(mcnemar_exact(nasm_only, rival_only)), "trainings": len(pairs),
+            "p_value": float(mcnemar_exact(nasm_only, rival_only)),
+            "trainings": sum(len(one.correct[featured]) for one in runs), "by_split": counts,
             "items": "anomalies detected and normal test segments not flagged, served 1 % threshold, delta "
-                     f"{delta} s, summed over trainings and splits"}
+                     f"{delta} s, summed over trainings and splits (by_split: each split's)"}
+
+
+def _discordant(one: SplitRun, featured: str, rival: str) -> dict[str, Any]:
+    """One split's items ``featured`` gets right and ``rival`` wrong and the reverse, summed over
+    its trainings (a template's one "training" faces each of the network's), and their p-value."""
+    theirs = one.correct[rival]
+    pairs = [(a, theirs[k % len(theirs)]) for k, a in enumerate(one.correct[featured])]
+    ours, others = int(sum((a & ~b).sum() for a, b in pairs)), int(sum((~a & b).sum() for a, b in pairs))
+    return {"nasm_only": ours, "baseline_only": others, "p_value": float(mcnemar_exact(ours, others))}
 
 
 def _by_split(runs: list[SplitRun], config: KittingConfig) -> dict[str, dict[str, dict[str, Any]]]:
@@ -246,7 +253,7 @@ def _timeline(scored: Scored, test: Segments, w: Windows, config: KittingConfig)
 
 WHOLE_RUN_KEYS = ("n_runs", "n_anomalies", "n_clean_phases", "flagged_within_1s", "flagged_early",
                   "clean_phases_flagged", "skill_recognised", "skill_recognised_demonstrated")
-PAIRED_KEYS = ("baseline", "nasm_only", "baseline_only", "p_value")
+PAIRED_KEYS = ("baseline", "nasm_only", "baseline_only", "p_value", "by_split")
 
 
 def headline(result: KittingResult, config: KittingConfig) -> dict[str, Any]:

@@ -160,6 +160,9 @@ def _the_paired_tests_add_up(head, counts, info, trainings):
         assert paired["nasm_only"] - paired["baseline_only"] == pytest.approx(right(featured) - right(paired["baseline"]))
         items = sum(trainings * (c["test_anomalous_scored"] + c["test_normal_scored"]) for c in counts.values())
         assert 0 <= paired["nasm_only"] + paired["baseline_only"] <= items and 0 < paired["p_value"] <= 1
+        assert set(paired["by_split"]) == set(counts)  # each split's counts, which sum to the pooled ones
+        for key in ("nasm_only", "baseline_only"):
+            assert sum(c[key] for c in paired["by_split"].values()) == paired[key]
 
 
 def _whole_runs_both_told_and_not(head, whole, out):
