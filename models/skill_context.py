@@ -40,7 +40,7 @@ import numpy as np
 from neural_asm.models.asm import NeuralASM, StreamStep
 from neural_asm.models.calibration import conformal_episode_threshold
 from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
-from neural_asm.models.cross_fit import group_folds
+from neural_asm.models.cross_fit import conformal_minimum, group_folds
 from neural_asm.models.fault import FaultDecision, isolate
 from neural_asm.models.scoring import StepScore
 from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, SkillSpreads, infer
@@ -168,6 +168,15 @@ class SkillCalibration:
                    {float(f): told[i] for i, f in enumerate(meta["told_fprs"])}, int(meta.get("out_of_fold_episodes", 0)))
 
 
+def check_alike(demonstrations: np.ndarray, threshold: np.ndarray) -> None:
+    """A ValueError unless the demonstrations cross-fitted and the threshold episodes have the same
+    steps and channels: their peaks are pooled as peaks of one kind of episode."""
+    if np.shape(demonstrations)[1:] != np.shape(threshold)[1:]:
+        raise ValueError(f"cross-fitting pools peaks of episodes alike: the demonstrations are "
+                         f"{np.shape(demonstrations)[1:]} (steps, channels), the threshold episodes "
+                         f"{np.shape(threshold)[1:]}")
+
+
 @dataclass(frozen=True)
 class OutOfFold:
     """The raw demonstrations (N, T, D) a memory learnt, their skills and real steps, each one's
@@ -244,6 +253,20 @@ class SkillMemory:
         return SkillMemory.fit(demonstrations, self.channel_names, labels, self.model.config.with_(epochs=epochs),
                                provenance={"cross_fit": "fold network"}, rate_hz=self.model.rate_hz)
 
+    def check_learnt(self, demonstrations: np.ndarray, labels: Labels) -> None:
+        """A ValueError unless these raw demonstrations (N, T, D) and skills are those the memory
+        learnt (their count and each skill's mean course): cross-fitting scores each with a memory
+        trained as this one was without it, which other episodes would not test."""
+        data, labels = np.asarray(demonstrations, np.float64), np.asarray(labels).astype(str)
+        trained = self.model.provenance.get("sequences", len(data))
+        learnt = (trained == len(data) == len(labels) and data.shape[1:] == self.means.shape[1:]
+                  and set(labels.tolist()) == set(self.skills)
+                  and np.allclose(mean_courses(data, labels, self.skills), self.means, rtol=1e-6, atol=1e-9))
+        if not learnt:
+            raise ValueError(f"cross-fitting needs the demonstrations the memory learnt ({trained} sequences of the "
+                             f"skills {', '.join(self.skills)}); these {len(data)} are not: their count, skills or "
+                             f"mean courses differ")
+
     @property
     def channel_names(self) -> tuple[str, ...]:
         return self.model.channel_names[: self.width]
@@ -305,14 +328,12 @@ class SkillMemory:
         scoring.check()
         for skill in {*map(str, precision_skills), *map(str, threshold_skills)}:
             self.index(skill)
-        if cross_fit is not None and cross_fit.demonstrations.shape[1:] != np.asarray(threshold).shape[1:]:
-            raise ValueError(f"cross-fitting pools peaks of episodes alike: the demonstrations are "
-                             f"{cross_fit.demonstrations.shape[1:]} (steps, channels), the threshold episodes "
-                             f"{np.asarray(threshold).shape[1:]}")
+        if cross_fit is not None:
+            check_alike(cross_fit.demonstrations, threshold)
         cal = self._spreads(precision, precision_skills, scoring)
         lengths = np.full(len(threshold), np.asarray(threshold).shape[1]) if threshold_lengths is None else threshold_lengths
         inferred, told, told_skill = self._peaks(cal, threshold, threshold_skills, lengths)
-        if cross_fit is not None and len(threshold) < 1 / min(fprs) - 1:
+        if cross_fit is not None and len(threshold) < conformal_minimum(min(fprs)):
             for k, memory in enumerate(cross_fit.memories):
                 out = cross_fit.fold == k
                 peaks = memory._peaks(memory._spreads(precision, precision_skills, scoring),
