@@ -13,8 +13,8 @@ alternating rounds, in the same run.
 ``posterior_vs_single`` = the single model's step time / the skill memory's not told: 0.5 is
 twice the cost. The single model is timed in offline recall, what a session gets when it names
 no mode, and in online recall (``posterior_vs_single_online``); ``told_vs_single`` is the
-skill memory told the skill (one row). Ratios, because these machines are shared and noisy:
-each is the median over rounds of the ratio within a round. One JSON object is the last line.
+skill memory told the skill (one row). Times are CPU time, and ratios, because these machines
+are shared and noisy: each ratio is the median over rounds of the ratio within a round. One JSON object is the last line.
 
     python benchmarks/bench_skills.py [--rounds 15] [--quick]
 
@@ -44,13 +44,15 @@ SKILLS, STEPS, CHANNELS = 7, 40, 12
 
 
 def step_ms(monitor: Callable[[], Monitor], episodes: np.ndarray) -> float:
-    """Milliseconds per served step over every observation of ``episodes``, a new monitor for each."""
-    start = time.perf_counter()
+    """CPU milliseconds per served step over every observation of ``episodes``, a new monitor for
+    each: this process's CPU time, so that the time it waits for a core of a shared machine does
+    not count (the steps run on one thread)."""
+    start = time.process_time()
     for episode in episodes:
         stepping = monitor()
         for x in episode:
             stepping.step(x)
-    return (time.perf_counter() - start) / (episodes.shape[0] * episodes.shape[1]) * 1e3
+    return (time.process_time() - start) / (episodes.shape[0] * episodes.shape[1]) * 1e3
 
 
 def main() -> None:
