@@ -42,6 +42,7 @@ from neural_asm.models.calibration import conformal_episode_threshold
 from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
 from neural_asm.models.cross_fit import conformal_minimum, group_folds
 from neural_asm.models.fault import FaultDecision, isolate
+from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.scoring import StepScore
 from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, SkillSpreads, infer
 
@@ -128,21 +129,21 @@ class SkillCalibration:
     told: dict[float, np.ndarray] = field(default_factory=dict)  # fpr -> (K,)
     out_of_fold_episodes: int = 0  # demonstrations whose out-of-fold peaks joined the threshold episodes'
 
-    def energies(self, residuals: dict[str, np.ndarray], steps: np.ndarray, rows: np.ndarray | slice = slice(None),
-                 terms: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def scored(self, residuals: dict[str, np.ndarray], steps: np.ndarray, rows: np.ndarray | slice = slice(None)
+               ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
         """The energies (..., R, S) of residuals per term (..., R, S, D) against the skills ``rows``
-        (all K by default) at ``steps``, and those skills' log normalisers (R, S), summed over
-        ``terms`` (None: every term scored)."""
-        terms = self.terms if terms is None else terms
-        energy = sum(self.spreads[t].energy(residuals[t], steps, rows) for t in terms)
-        return energy, sum(self.spreads[t].log_normaliser(steps, rows) for t in terms)
+        (all K by default) at ``steps`` and those skills' log normalisers (R, S), summed over the
+        terms scored; and what updates the posterior where it is not those (the same sums over
+        `recognised_by`; None: the scored ones). Each term is weighed once."""
+        used = dict.fromkeys((*self.terms, *self.recognised_by))
+        parts = {t: (self.spreads[t].energy(residuals[t], steps, rows), self.spreads[t].log_normaliser(steps, rows))
+                 for t in used}
 
-    def evidence(self, residuals: dict[str, np.ndarray], steps: np.ndarray,
-                 rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray] | None:
-        """What updates the posterior, where it is not the scored energies (`recognised_by`)."""
-        if not self.recognised_by or set(self.recognised_by) == set(self.terms):
-            return None
-        return self.energies(residuals, steps, rows, self.recognised_by)
+        def summed(terms: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+            return sum(parts[t][0] for t in terms), sum(parts[t][1] for t in terms)
+
+        own = bool(self.recognised_by) and set(self.recognised_by) != set(self.terms)
+        return (*summed(self.terms), summed(self.recognised_by) if own else None)
 
     def to_parts(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """The calibration as JSON metadata and named arrays, as a checkpoint stores it (no pickle)."""
@@ -370,9 +371,8 @@ class SkillMemory:
     def _energies(self, cal: SkillCalibration, sequences: np.ndarray, told: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, T) not told and told energies of raw episodes, each told its skill in ``told`` (N,)."""
         steps = np.arange(np.asarray(sequences).shape[1])
-        residuals = self.residuals(sequences, cal.courses, tuple(cal.spreads))
-        energies, norm = cal.energies(residuals, steps)
-        inferred, _ = infer(energies, norm, cal.forgetting, cal.rule, cal.evidence(residuals, steps))
+        energies, norm, evidence = cal.scored(self.residuals(sequences, cal.courses, tuple(cal.spreads)), steps)
+        inferred, _ = infer(energies, norm, cal.forgetting, cal.rule, evidence)
         return inferred, energies[np.arange(len(told)), told]
 
     def score(self, sequences: np.ndarray, told: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -380,10 +380,9 @@ class SkillMemory:
         not told (``told`` None) as a session infers them, or each told its skill."""
         cal = self._calibrated()
         steps = np.arange(np.asarray(sequences).shape[1])
-        residuals = self.residuals(sequences, cal.courses, tuple(cal.spreads))
-        energies, norm = cal.energies(residuals, steps)
+        energies, norm, evidence = cal.scored(self.residuals(sequences, cal.courses, tuple(cal.spreads)), steps)
         if told is None:
-            return infer(energies, norm, cal.forgetting, cal.rule, cal.evidence(residuals, steps))
+            return infer(energies, norm, cal.forgetting, cal.rule, evidence)
         index = np.array([self.index(str(s)) for s in told])
         posterior = np.zeros(energies.shape)
         posterior[np.arange(len(index)), index] = 1.0
@@ -436,6 +435,7 @@ class SkillSession:
         self.memory, self.calibration = memory, cal
         self.told = None if skill is None else memory.index(skill)
         self.rows = np.arange(len(memory.skills)) if self.told is None else np.array([self.told])
+        self.picked = slice(None) if self.told is None else slice(self.told, self.told + 1)  # rows, as tables' slices
         thresholds = cal.inferred if self.told is None else {f: float(t[self.told]) for f, t in cal.told.items()}
         if fpr not in thresholds:
             raise ValueError(f"no threshold at false-positive rate {fpr}; calibrated at {sorted(thresholds)}")
@@ -443,6 +443,11 @@ class SkillSession:
         self.recaller = memory.model.recaller(len(self.rows), "online") if "dynamics" in cal.spreads else None
         self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
         self.t = 0
+        # each row's cue as the network reads it (normalised), the same at every step
+        normaliser, width = memory.model.normaliser, memory.width
+        cues = with_cue(np.zeros((len(self.rows), width)), self.rows, len(memory.skills))[:, width:]
+        self.cues = Normaliser(normaliser.mean[width:], normaliser.std[width:]).normalise(cues)
+        self.observed = Normaliser(normaliser.mean[:width], normaliser.std[:width])
 
     def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
         memory, cal, t = self.memory, self.calibration, np.array([self.t])
@@ -453,14 +458,14 @@ class SkillSession:
         x = memory.normalise(raw)
         residuals = {}
         if "course" in cal.spreads:
-            residuals["course"] = (x - cal.courses[self.rows, min(self.t, cal.courses.shape[1] - 1)])[:, None]
+            residuals["course"] = (x - cal.courses[self.picked, min(self.t, cal.courses.shape[1] - 1)])[:, None]
         if self.recaller is not None:
-            cued = with_cue(np.repeat(raw[None], len(self.rows), axis=0), self.rows, len(memory.skills))
-            expected = self.recaller.step(memory.model.normaliser.normalise(cued))
+            observed = np.repeat(self.observed.normalise(raw)[None], len(self.rows), axis=0)
+            expected = self.recaller.step(np.concatenate([observed, self.cues], axis=1))  # what with_cue gives, normalised
             residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
-        energies, norm = (a[:, 0] for a in cal.energies(residuals, t, self.rows))  # (R,) each
+        energies, norm, evidence = cal.scored(residuals, t, self.picked)
+        energies, norm = energies[:, 0], norm[:, 0]  # (R,) each
         if self.told is None:
-            evidence = cal.evidence(residuals, t, self.rows)
             seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
             energy = float(self.posterior.step(energies[None], norm, cal.rule, self.t == 0, seen)[0])
             p = self.posterior.probabilities[0]
