@@ -36,11 +36,12 @@ from types import MappingProxyType
 from typing import Any, Callable, Literal, Mapping, Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from neural_asm.models.asm import NeuralASM, StreamStep
 from neural_asm.models.calibration import conformal_episode_threshold
 from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
-from neural_asm.models.cross_fit import conformal_minimum, group_folds
+from neural_asm.models.cross_fit import CrossFit, conformal_minimum, group_folds
 from neural_asm.models.fault import FaultDecision, isolate
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.scoring import StepScore
@@ -192,7 +193,7 @@ class OutOfFold:
     memories: tuple["SkillMemory", ...]
 
     @classmethod
-    def fit(cls, memory: "SkillMemory", demonstrations: np.ndarray, labels: Sequence[str],
+    def fit(cls, memory: "SkillMemory", demonstrations: np.ndarray, labels: Labels,
             lengths: np.ndarray | None = None, groups: Sequence[object] | np.ndarray | None = None, folds: int = 5,
             seed: int = 0, fold_memory: Callable[[int, np.ndarray, np.ndarray], "SkillMemory"] | None = None) -> "OutOfFold":
         """Folds dealt by ``groups`` (each demonstration's run: no run on both sides; None: each
@@ -206,6 +207,26 @@ class OutOfFold:
         memories = tuple(make(k, data[fold != k], labels[fold != k]) for k in range(folds))
         steps = np.full(len(data), data.shape[1]) if lengths is None else np.asarray(lengths)
         return cls(data, labels, steps, fold, memories)
+
+
+    @classmethod
+    def crossing(cls, memory: "SkillMemory", cross_fit: CrossFit, progress: bool = False) -> "OutOfFold":
+        """`fit` to what ``cross_fit`` holds (`models.cross_fit.CrossFit`: the demonstrations, their
+        skills, folds, groups and seed), each fold memory a network trained as ``memory``'s was, one
+        progress bar over the folds; a ValueError first unless the demonstrations are those the
+        memory learnt, with their skills (`SkillMemory.check_learnt`)."""
+        if cross_fit.labels is None:
+            raise ValueError(f"the memory learnt the skills {list(memory.skills)}: cross-fitting needs each "
+                             f"demonstration's skill")
+        memory.check_learnt(cross_fit.demonstrations, cross_fit.labels)
+        with tqdm(total=cross_fit.folds, desc="cross-fitting", unit="fold", disable=not progress) as bar:
+            def fold_memory(k: int, x: np.ndarray, y: np.ndarray) -> SkillMemory:
+                fitted = memory.fold(x, y)
+                bar.update()
+                return fitted
+
+            return cls.fit(memory, cross_fit.demonstrations, cross_fit.labels, groups=cross_fit.groups,
+                           folds=cross_fit.folds, seed=cross_fit.seed, fold_memory=fold_memory)
 
 
 class SkillMemory:
@@ -238,7 +259,7 @@ class SkillMemory:
                               labels=labels, context_channels=cues, rate_hz=rate_hz).noted(provenance or {})
         return cls(model, mean_courses(sequences, labels, skills))
 
-    def fold(self, demonstrations: np.ndarray, labels: Sequence[str], network: bool = True) -> "SkillMemory":
+    def fold(self, demonstrations: np.ndarray, labels: Labels, network: bool = True) -> "SkillMemory":
         """A memory that did not learn these raw demonstrations' complement: one trained as this
         one was (its configuration, seed and kept epochs) on ``demonstrations`` (N, T, D) of every
         skill it knows, with their mean courses; without ``network``, this one's network with their

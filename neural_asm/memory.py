@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from neural_asm.models import checkpoint, skill_context
 from neural_asm.models.answer import StepAnswer
@@ -61,26 +60,6 @@ def roles(normal: Sequences | np.ndarray, precision: Sequences | np.ndarray | No
         raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
                          f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
     return spread, spread_skills, held, held_skills
-
-
-def _out_of_fold(told: skill_context.SkillMemory, cross_fit: CrossFit, threshold: np.ndarray,
-                 progress: bool) -> skill_context.OutOfFold:
-    """A skill memory's fold memories (`skill_context.OutOfFold`) for ``cross_fit``'s demonstrations,
-    each a network trained as the memory's was, once the demonstrations are checked to be those it
-    learnt and alike the ``threshold`` episodes (before anything is trained)."""
-    if cross_fit.labels is None:
-        raise ValueError(f"the memory learnt the skills {list(told.skills)}: cross-fitting needs each "
-                         f"demonstration's skill")
-    told.check_learnt(cross_fit.demonstrations, cross_fit.labels)
-    skill_context.check_alike(cross_fit.demonstrations, threshold)
-    with tqdm(total=cross_fit.folds, desc="cross-fitting", unit="fold", disable=not progress) as bar:
-        def fold_memory(k: int, x: np.ndarray, y: np.ndarray) -> skill_context.SkillMemory:
-            fitted = told.fold(x, y)
-            bar.update()
-            return fitted
-
-        return skill_context.OutOfFold.fit(told, cross_fit.demonstrations, cross_fit.labels, groups=cross_fit.groups,
-                                           folds=cross_fit.folds, seed=cross_fit.seed, fold_memory=fold_memory)
 
 
 class Monitor:
@@ -293,7 +272,8 @@ class SkillMemory:
             raise ValueError("the precision episodes of a memory with a skill cue need their skills: give Sequences")
         out_of_fold = None
         if cross_fit is not None and len(held) < conformal_minimum(min(fprs)):
-            out_of_fold = _out_of_fold(told, cross_fit, held, progress)
+            skill_context.check_alike(cross_fit.demonstrations, held)  # before any fold trains
+            out_of_fold = skill_context.OutOfFold.crossing(told, cross_fit, progress)
         cal = told.calibrate(spread, spread_skills, held, held_skills, fprs=fprs, cross_fit=out_of_fold)
         crossed = {} if out_of_fold is None else {"out_of_fold_episodes": cal.out_of_fold_episodes,
                                                   "folds": len(out_of_fold.memories)}
