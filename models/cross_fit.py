@@ -11,6 +11,7 @@ fold left out. Those out-of-fold energies join the held-out episodes' when the t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -22,6 +23,12 @@ from neural_asm.models.calibration import estimate
 from neural_asm.models.config import SCORING
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.plan import check_demonstrations
+
+
+def conformal_minimum(fpr: float = SCORING.default_fpr) -> int:
+    """The fewest normal episodes whose peaks give a split-conformal threshold at ``fpr`` (99 at the
+    served 1 %): below it the threshold is their highest peak, and cross-fitting adds episodes."""
+    return math.ceil(1 / fpr - 1)
 
 
 def group_folds(groups: Sequence[object] | np.ndarray, folds: int, seed: int) -> np.ndarray:

@@ -36,12 +36,14 @@ from types import MappingProxyType
 from typing import Any, Callable, Literal, Mapping, Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from neural_asm.models.asm import NeuralASM, StreamStep
 from neural_asm.models.calibration import conformal_episode_threshold
 from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
-from neural_asm.models.cross_fit import group_folds
+from neural_asm.models.cross_fit import CrossFit, conformal_minimum, group_folds
 from neural_asm.models.fault import FaultDecision, isolate
+from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.scoring import StepScore
 from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, SkillSpreads, infer
 
@@ -128,21 +130,21 @@ class SkillCalibration:
     told: dict[float, np.ndarray] = field(default_factory=dict)  # fpr -> (K,)
     out_of_fold_episodes: int = 0  # demonstrations whose out-of-fold peaks joined the threshold episodes'
 
-    def energies(self, residuals: dict[str, np.ndarray], steps: np.ndarray, rows: np.ndarray | slice = slice(None),
-                 terms: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def scored(self, residuals: dict[str, np.ndarray], steps: np.ndarray, rows: np.ndarray | slice = slice(None)
+               ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
         """The energies (..., R, S) of residuals per term (..., R, S, D) against the skills ``rows``
-        (all K by default) at ``steps``, and those skills' log normalisers (R, S), summed over
-        ``terms`` (None: every term scored)."""
-        terms = self.terms if terms is None else terms
-        energy = sum(self.spreads[t].energy(residuals[t], steps, rows) for t in terms)
-        return energy, sum(self.spreads[t].log_normaliser(steps, rows) for t in terms)
+        (all K by default) at ``steps`` and those skills' log normalisers (R, S), summed over the
+        terms scored; and what updates the posterior where it is not those (the same sums over
+        `recognised_by`; None: the scored ones). Each term is weighed once."""
+        used = dict.fromkeys((*self.terms, *self.recognised_by))
+        parts = {t: (self.spreads[t].energy(residuals[t], steps, rows), self.spreads[t].log_normaliser(steps, rows))
+                 for t in used}
 
-    def evidence(self, residuals: dict[str, np.ndarray], steps: np.ndarray,
-                 rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray] | None:
-        """What updates the posterior, where it is not the scored energies (`recognised_by`)."""
-        if not self.recognised_by or set(self.recognised_by) == set(self.terms):
-            return None
-        return self.energies(residuals, steps, rows, self.recognised_by)
+        def summed(terms: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+            return sum(parts[t][0] for t in terms), sum(parts[t][1] for t in terms)
+
+        own = bool(self.recognised_by) and set(self.recognised_by) != set(self.terms)
+        return (*summed(self.terms), summed(self.recognised_by) if own else None)
 
     def to_parts(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """The calibration as JSON metadata and named arrays, as a checkpoint stores it (no pickle)."""
@@ -168,6 +170,15 @@ class SkillCalibration:
                    {float(f): told[i] for i, f in enumerate(meta["told_fprs"])}, int(meta.get("out_of_fold_episodes", 0)))
 
 
+def check_alike(demonstrations: np.ndarray, threshold: np.ndarray) -> None:
+    """A ValueError unless the demonstrations cross-fitted and the threshold episodes have the same
+    steps and channels: their peaks are pooled as peaks of one kind of episode."""
+    if np.shape(demonstrations)[1:] != np.shape(threshold)[1:]:
+        raise ValueError(f"cross-fitting pools peaks of episodes alike: the demonstrations are "
+                         f"{np.shape(demonstrations)[1:]} (steps, channels), the threshold episodes "
+                         f"{np.shape(threshold)[1:]}")
+
+
 @dataclass(frozen=True)
 class OutOfFold:
     """The raw demonstrations (N, T, D) a memory learnt, their skills and real steps, each one's
@@ -182,7 +193,7 @@ class OutOfFold:
     memories: tuple["SkillMemory", ...]
 
     @classmethod
-    def fit(cls, memory: "SkillMemory", demonstrations: np.ndarray, labels: Sequence[str],
+    def fit(cls, memory: "SkillMemory", demonstrations: np.ndarray, labels: Labels,
             lengths: np.ndarray | None = None, groups: Sequence[object] | np.ndarray | None = None, folds: int = 5,
             seed: int = 0, fold_memory: Callable[[int, np.ndarray, np.ndarray], "SkillMemory"] | None = None) -> "OutOfFold":
         """Folds dealt by ``groups`` (each demonstration's run: no run on both sides; None: each
@@ -196,6 +207,26 @@ class OutOfFold:
         memories = tuple(make(k, data[fold != k], labels[fold != k]) for k in range(folds))
         steps = np.full(len(data), data.shape[1]) if lengths is None else np.asarray(lengths)
         return cls(data, labels, steps, fold, memories)
+
+
+    @classmethod
+    def crossing(cls, memory: "SkillMemory", cross_fit: CrossFit, progress: bool = False) -> "OutOfFold":
+        """`fit` to what ``cross_fit`` holds (`models.cross_fit.CrossFit`: the demonstrations, their
+        skills, folds, groups and seed), each fold memory a network trained as ``memory``'s was, one
+        progress bar over the folds; a ValueError first unless the demonstrations are those the
+        memory learnt, with their skills (`SkillMemory.check_learnt`)."""
+        if cross_fit.labels is None:
+            raise ValueError(f"the memory learnt the skills {list(memory.skills)}: cross-fitting needs each "
+                             f"demonstration's skill")
+        memory.check_learnt(cross_fit.demonstrations, cross_fit.labels)
+        with tqdm(total=cross_fit.folds, desc="cross-fitting", unit="fold", disable=not progress) as bar:
+            def fold_memory(k: int, x: np.ndarray, y: np.ndarray) -> SkillMemory:
+                fitted = memory.fold(x, y)
+                bar.update()
+                return fitted
+
+            return cls.fit(memory, cross_fit.demonstrations, cross_fit.labels, groups=cross_fit.groups,
+                           folds=cross_fit.folds, seed=cross_fit.seed, fold_memory=fold_memory)
 
 
 class SkillMemory:
@@ -228,7 +259,7 @@ class SkillMemory:
                               labels=labels, context_channels=cues, rate_hz=rate_hz).noted(provenance or {})
         return cls(model, mean_courses(sequences, labels, skills))
 
-    def fold(self, demonstrations: np.ndarray, labels: Sequence[str], network: bool = True) -> "SkillMemory":
+    def fold(self, demonstrations: np.ndarray, labels: Labels, network: bool = True) -> "SkillMemory":
         """A memory that did not learn these raw demonstrations' complement: one trained as this
         one was (its configuration, seed and kept epochs) on ``demonstrations`` (N, T, D) of every
         skill it knows, with their mean courses; without ``network``, this one's network with their
@@ -243,6 +274,20 @@ class SkillMemory:
         epochs = int(self.model.provenance.get("kept_epoch", self.model.config.epochs))
         return SkillMemory.fit(demonstrations, self.channel_names, labels, self.model.config.with_(epochs=epochs),
                                provenance={"cross_fit": "fold network"}, rate_hz=self.model.rate_hz)
+
+    def check_learnt(self, demonstrations: np.ndarray, labels: Labels) -> None:
+        """A ValueError unless these raw demonstrations (N, T, D) and skills are those the memory
+        learnt (their count and each skill's mean course): cross-fitting scores each with a memory
+        trained as this one was without it, which other episodes would not test."""
+        data, labels = np.asarray(demonstrations, np.float64), np.asarray(labels).astype(str)
+        trained = self.model.provenance.get("sequences", len(data))
+        learnt = (trained == len(data) == len(labels) and data.shape[1:] == self.means.shape[1:]
+                  and set(labels.tolist()) == set(self.skills)
+                  and np.allclose(mean_courses(data, labels, self.skills), self.means, rtol=1e-6, atol=1e-9))
+        if not learnt:
+            raise ValueError(f"cross-fitting needs the demonstrations the memory learnt ({trained} sequences of the "
+                             f"skills {', '.join(self.skills)}); these {len(data)} are not: their count, skills or "
+                             f"mean courses differ")
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -305,14 +350,12 @@ class SkillMemory:
         scoring.check()
         for skill in {*map(str, precision_skills), *map(str, threshold_skills)}:
             self.index(skill)
-        if cross_fit is not None and cross_fit.demonstrations.shape[1:] != np.asarray(threshold).shape[1:]:
-            raise ValueError(f"cross-fitting pools peaks of episodes alike: the demonstrations are "
-                             f"{cross_fit.demonstrations.shape[1:]} (steps, channels), the threshold episodes "
-                             f"{np.asarray(threshold).shape[1:]}")
+        if cross_fit is not None:
+            check_alike(cross_fit.demonstrations, threshold)
         cal = self._spreads(precision, precision_skills, scoring)
         lengths = np.full(len(threshold), np.asarray(threshold).shape[1]) if threshold_lengths is None else threshold_lengths
         inferred, told, told_skill = self._peaks(cal, threshold, threshold_skills, lengths)
-        if cross_fit is not None and len(threshold) < 1 / min(fprs) - 1:
+        if cross_fit is not None and len(threshold) < conformal_minimum(min(fprs)):
             for k, memory in enumerate(cross_fit.memories):
                 out = cross_fit.fold == k
                 peaks = memory._peaks(memory._spreads(precision, precision_skills, scoring),
@@ -349,9 +392,8 @@ class SkillMemory:
     def _energies(self, cal: SkillCalibration, sequences: np.ndarray, told: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, T) not told and told energies of raw episodes, each told its skill in ``told`` (N,)."""
         steps = np.arange(np.asarray(sequences).shape[1])
-        residuals = self.residuals(sequences, cal.courses, tuple(cal.spreads))
-        energies, norm = cal.energies(residuals, steps)
-        inferred, _ = infer(energies, norm, cal.forgetting, cal.rule, cal.evidence(residuals, steps))
+        energies, norm, evidence = cal.scored(self.residuals(sequences, cal.courses, tuple(cal.spreads)), steps)
+        inferred, _ = infer(energies, norm, cal.forgetting, cal.rule, evidence)
         return inferred, energies[np.arange(len(told)), told]
 
     def score(self, sequences: np.ndarray, told: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -359,10 +401,9 @@ class SkillMemory:
         not told (``told`` None) as a session infers them, or each told its skill."""
         cal = self._calibrated()
         steps = np.arange(np.asarray(sequences).shape[1])
-        residuals = self.residuals(sequences, cal.courses, tuple(cal.spreads))
-        energies, norm = cal.energies(residuals, steps)
+        energies, norm, evidence = cal.scored(self.residuals(sequences, cal.courses, tuple(cal.spreads)), steps)
         if told is None:
-            return infer(energies, norm, cal.forgetting, cal.rule, cal.evidence(residuals, steps))
+            return infer(energies, norm, cal.forgetting, cal.rule, evidence)
         index = np.array([self.index(str(s)) for s in told])
         posterior = np.zeros(energies.shape)
         posterior[np.arange(len(index)), index] = 1.0
@@ -415,6 +456,7 @@ class SkillSession:
         self.memory, self.calibration = memory, cal
         self.told = None if skill is None else memory.index(skill)
         self.rows = np.arange(len(memory.skills)) if self.told is None else np.array([self.told])
+        self.picked = slice(None) if self.told is None else slice(self.told, self.told + 1)  # rows, as tables' slices
         thresholds = cal.inferred if self.told is None else {f: float(t[self.told]) for f, t in cal.told.items()}
         if fpr not in thresholds:
             raise ValueError(f"no threshold at false-positive rate {fpr}; calibrated at {sorted(thresholds)}")
@@ -422,6 +464,11 @@ class SkillSession:
         self.recaller = memory.model.recaller(len(self.rows), "online") if "dynamics" in cal.spreads else None
         self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
         self.t = 0
+        # each row's cue as the network reads it (normalised), the same at every step
+        normaliser, width = memory.model.normaliser, memory.width
+        cues = with_cue(np.zeros((len(self.rows), width)), self.rows, len(memory.skills))[:, width:]
+        self.cues = Normaliser(normaliser.mean[width:], normaliser.std[width:]).normalise(cues)
+        self.observed = Normaliser(normaliser.mean[:width], normaliser.std[:width])
 
     def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
         memory, cal, t = self.memory, self.calibration, np.array([self.t])
@@ -432,14 +479,14 @@ class SkillSession:
         x = memory.normalise(raw)
         residuals = {}
         if "course" in cal.spreads:
-            residuals["course"] = (x - cal.courses[self.rows, min(self.t, cal.courses.shape[1] - 1)])[:, None]
+            residuals["course"] = (x - cal.courses[self.picked, min(self.t, cal.courses.shape[1] - 1)])[:, None]
         if self.recaller is not None:
-            cued = with_cue(np.repeat(raw[None], len(self.rows), axis=0), self.rows, len(memory.skills))
-            expected = self.recaller.step(memory.model.normaliser.normalise(cued))
+            observed = np.repeat(self.observed.normalise(raw)[None], len(self.rows), axis=0)
+            expected = self.recaller.step(np.concatenate([observed, self.cues], axis=1))  # what with_cue gives, normalised
             residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
-        energies, norm = (a[:, 0] for a in cal.energies(residuals, t, self.rows))  # (R,) each
+        energies, norm, evidence = cal.scored(residuals, t, self.picked)
+        energies, norm = energies[:, 0], norm[:, 0]  # (R,) each
         if self.told is None:
-            evidence = cal.evidence(residuals, t, self.rows)
             seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
             energy = float(self.posterior.step(energies[None], norm, cal.rule, self.t == 0, seen)[0])
             p = self.posterior.probabilities[0]

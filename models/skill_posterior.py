@@ -35,6 +35,7 @@ better by the most probable skill's energy (``rule="most_probable"``, its defaul
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal, Sequence
 
 import numpy as np
@@ -96,12 +97,21 @@ class SkillSpreads:
 
     def at(self, steps: np.ndarray, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(R, len(steps), D) the spreads of the skills ``rows`` (all K by default) at ``steps``."""
-        return self.spread[rows][:, np.minimum(steps, self.spread.shape[1] - 1)]
+        return _pick(self.spread, steps, rows)
 
     def scale(self, steps: np.ndarray, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(R, len(steps), D) what residuals are divided by: the spread, or the Student-t's scale."""
-        spread = self.at(steps, rows)
-        return spread if self.nu is None else spread * np.sqrt((self.nu - 2) / self.nu)
+        return _pick(self._scales, steps, rows)
+
+    @cached_property
+    def _scales(self) -> np.ndarray:
+        """(K, T, D) `scale` at every step, computed once: a served step picks its own from it."""
+        return self.spread if self.nu is None else self.spread * np.sqrt((self.nu - 2) / self.nu)
+
+    @cached_property
+    def _log_normalisers(self) -> np.ndarray:
+        """(K, T) `log_normaliser` at every step, computed once."""
+        return 2 * np.log(self._scales).sum(axis=-1)
 
     def energy(self, residuals: np.ndarray, steps: np.ndarray, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(..., R, S) energies of residuals (..., R, S, D) against the skills ``rows`` at ``steps`` (S,):
@@ -113,7 +123,14 @@ class SkillSpreads:
 
     def log_normaliser(self, steps: np.ndarray, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(R, S) the skills' sums of log squared scales at ``steps`` (the variances, Gaussian)."""
-        return 2 * np.log(self.scale(steps, rows)).sum(axis=-1)
+        return _pick(self._log_normalisers, steps, rows)
+
+
+def _pick(table: np.ndarray, steps: np.ndarray, rows: np.ndarray | slice) -> np.ndarray:
+    """(R, S, ...) a per-skill, per-step table's (K, T, ...) rows at ``steps`` (S,), the last step's
+    past its end: the entries asked for alone, not every step of the rows first."""
+    at = np.minimum(steps, table.shape[1] - 1)
+    return table[rows, at] if isinstance(rows, slice) else table[np.asarray(rows)[:, None], at[None, :]]
 
 
 class SkillPosterior:

@@ -21,7 +21,7 @@ from neural_asm.models.answer import StepAnswer
 from neural_asm.models.asm import NeuralASM, SkillStream, StreamStep, step_streams
 from neural_asm.models.calibration import set_energy_thresholds
 from neural_asm.models.config import DEFAULT_RATE_HZ, PRESETS, SCORING, TPCConfig
-from neural_asm.models.cross_fit import CrossFit
+from neural_asm.models.cross_fit import CrossFit, conformal_minimum
 from neural_asm.models.fault import ThresholdKind
 from neural_asm.models.scoring import SequenceScore
 from neural_asm.models.sequences import Sequences
@@ -32,6 +32,34 @@ Observation = Sequence[float] | np.ndarray | Mapping[str, float]
 
 def _data(sequences: Sequences | np.ndarray) -> np.ndarray:
     return sequences.data if isinstance(sequences, Sequences) else np.asarray(sequences, np.float64)
+
+
+def threshold_episodes(normal: int, precision: bool) -> int:
+    """How many of ``normal`` episodes set the thresholds: all of them beside other ``precision``
+    episodes, else every other one (`roles`)."""
+    return normal if precision else normal // 2
+
+
+def roles(normal: Sequences | np.ndarray, precision: Sequences | np.ndarray | None,
+          skills: Sequence[str] | np.ndarray | None = None
+          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray | None]:
+    """The precision episodes and the threshold episodes of a calibration, each with their skills
+    where known (a ``Sequences``' labels, or ``skills`` for an array of ``normal``): ``precision``
+    and ``normal``, or alternate episodes of ``normal``; a ValueError if either role has too few."""
+    labels = normal.labels if isinstance(normal, Sequences) else None if skills is None else np.asarray(skills)
+    if labels is not None and len(labels) != len(_data(normal)):
+        raise ValueError(f"{len(labels)} skills for {len(_data(normal))} normal episodes")
+    labels = None if labels is None else labels.astype(str)
+    if precision is None:
+        spread, held = _data(normal)[0::2], _data(normal)[1::2]
+        spread_skills, held_skills = (None, None) if labels is None else (labels[0::2], labels[1::2])
+    else:
+        spread, held, held_skills = _data(precision), _data(normal), labels
+        spread_skills = precision.labels.astype(str) if isinstance(precision, Sequences) else None
+    if min(len(spread), len(held)) < MIN_CALIBRATION_EPISODES:
+        raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
+                         f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
+    return spread, spread_skills, held, held_skills
 
 
 class Monitor:
@@ -199,24 +227,17 @@ class SkillMemory:
         With fewer than 99 threshold episodes a 1 % threshold is their highest peak and promises
         no rate. ``cross_fit`` (the demonstrations the memory learnt, `CrossFit`) adds their
         out-of-fold energies to the threshold episodes': each scored by a network trained as this
-        one was without its fold (`neural_asm.models.cross_fit`).
+        one was without its fold (`neural_asm.models.cross_fit`), one training per fold.
 
         A memory with a skill cue is calibrated as ``neural_asm.models.skill_context`` calibrates
         it (each skill's spreads and thresholds, and those of a session not told the skill): each
-        episode's skill is its ``Sequences`` label, or for an array of ``normal`` in ``skills``."""
+        episode's skill is its ``Sequences`` label, or for an array of ``normal`` in ``skills``. Its
+        ``cross_fit`` needs each demonstration's skill, and adds peaks only while the threshold
+        episodes are fewer than 99 (`skill_context.OutOfFold`)."""
+        spread, spread_skills, held, held_skills = roles(normal, precision, skills)
         if self.told is not None:
-            return self._calibrate_told(normal, precision, skills, fprs, cross_fit)
-        if precision is None:
-            held = _data(normal)
-            spread, held = held[0::2], held[1::2]
-            skills = normal.labels[0::2] if isinstance(normal, Sequences) else None
-        else:
-            spread, held = _data(precision), _data(normal)
-            skills = precision.labels if isinstance(precision, Sequences) else None
-        if min(len(spread), len(held)) < MIN_CALIBRATION_EPISODES:
-            raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
-                             f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
-        labels = None if skills is None else [str(skill) for skill in skills]  # of the precision episodes
+            return self._calibrate_told(spread, spread_skills, held, held_skills, fprs, cross_fit, progress)
+        labels = None if spread_skills is None else [str(skill) for skill in spread_skills]
         report: dict[str, Any] = {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {}}
         fold = None if cross_fit is None else cross_fit.folds_for(self.model, held.shape[1])  # before any change
         before = dict(self.model.calibrations)
@@ -239,30 +260,24 @@ class SkillMemory:
                                      "step_thresholds": {str(f): t for f, t in sorted(cal.thresholds.items())}}
         return report
 
-    def _calibrate_told(self, normal: Sequences | np.ndarray, precision: Sequences | np.ndarray | None,
-                        skills: Sequence[str] | np.ndarray | None, fprs: tuple[float, ...],
-                        cross_fit: CrossFit | None) -> dict[str, Any]:
-        """`calibrate` of a memory with a skill cue."""
+    def _calibrate_told(self, spread: np.ndarray, spread_skills: np.ndarray | None, held: np.ndarray,
+                        held_skills: np.ndarray | None, fprs: tuple[float, ...], cross_fit: CrossFit | None,
+                        progress: bool) -> dict[str, Any]:
+        """`calibrate` of a memory with a skill cue, from the episodes `roles` gave."""
         told = self._told()
-        if cross_fit is not None:
-            raise ValueError("cross-fitting calibrates a memory without a skill cue; this one has one")
-        labels = normal.labels if isinstance(normal, Sequences) else skills
-        if labels is None or len(labels) != len(_data(normal)):
+        if held_skills is None:
             raise ValueError(f"calibrating a memory with a skill cue needs each episode's skill: Sequences, or "
-                             f"skills= ({len(_data(normal))} episodes, {0 if labels is None else len(labels)} skills)")
-        labels = np.asarray(labels).astype(str)
-        if precision is None:
-            spread, spread_skills = _data(normal)[0::2], labels[0::2]
-            held, held_skills = _data(normal)[1::2], labels[1::2]
-        elif isinstance(precision, Sequences):
-            spread, spread_skills, held, held_skills = precision.data, precision.labels, _data(normal), labels
-        else:
+                             f"skills= ({len(spread) + len(held)} episodes)")
+        if spread_skills is None:
             raise ValueError("the precision episodes of a memory with a skill cue need their skills: give Sequences")
-        if min(len(spread), len(held)) < MIN_CALIBRATION_EPISODES:
-            raise ValueError(f"calibration needs at least {MIN_CALIBRATION_EPISODES} normal episodes for the precisions "
-                             f"and {MIN_CALIBRATION_EPISODES} for the thresholds; got {len(spread)} and {len(held)}")
-        cal = told.calibrate(spread, spread_skills, held, held_skills, fprs=fprs)
-        return {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {},
+        out_of_fold = None
+        if cross_fit is not None and len(held) < conformal_minimum(min(fprs)):
+            skill_context.check_alike(cross_fit.demonstrations, held)  # before any fold trains
+            out_of_fold = skill_context.OutOfFold.crossing(told, cross_fit, progress)
+        cal = told.calibrate(spread, spread_skills, held, held_skills, fprs=fprs, cross_fit=out_of_fold)
+        crossed = {} if out_of_fold is None else {"out_of_fold_episodes": cal.out_of_fold_episodes,
+                                                  "folds": len(out_of_fold.memories)}
+        return {"precision_episodes": len(spread), "threshold_episodes": len(held), "modes": {}, **crossed,
                 "skills": {"inferred": {str(f): t for f, t in sorted(cal.inferred.items())},
                            "told": {str(f): dict(zip(told.skills, map(float, t))) for f, t in sorted(cal.told.items())}}}
 

@@ -174,10 +174,11 @@ def test_calibrate_writes_the_thresholds_evaluate_and_the_service_use(cli_model,
     out, report = tmp_path / "calibrated.safetensors", tmp_path / "calibration.json"
     result = _nasm("evaluate", cli_model, logs["normal"], logs["faults"], "--mapping", logs["mapping"])
     assert result.exit_code == 2 and "calibrate it on held-out normal episodes first (nasm calibrate)" in result.output
-    result = _nasm("calibrate", cli_model, logs["normal"], "--mapping", logs["mapping"], "--out", out)
+    result = _nasm("calibrate", cli_model, logs["normal"], "--mapping", logs["mapping"], "--out", out, "--no-cross-fit")
     assert result.exit_code == 2 and "at least 2 normal episodes for the precisions and 2 for the thresholds; got 1 and 1" \
         in result.output and not out.exists()
-    result = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--out", out, "--json", report)
+    result = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--out", out, "--json", report,
+                   "--no-cross-fit")
     assert result.exit_code == 0, result.output
     model, doc = checkpoint.load(out), json.loads(report.read_text())
     assert doc["precision_episodes"] == 4 and doc["threshold_episodes"] == 4
@@ -185,7 +186,7 @@ def test_calibrate_writes_the_thresholds_evaluate_and_the_service_use(cli_model,
         cal = model.calibration(mode, 1)
         assert cal.episode_thresholds[0.01] == doc["modes"][mode]["episode_thresholds"]["0.01"] > 0
     assert "the thresholds at 0.01, 0.02, 0.03, 0.04, 0.05 are the largest normal peak" in result.output
-    assert "or --cross-fit DEMOS" in result.output
+    assert "or with --cross-fit DEMOS" in result.output
     result = _nasm("evaluate", out, logs["normal"], logs["faults"], "--mapping", logs["mapping"])
     assert result.exit_code == 0 and "episode threshold at 1 % FPR, as the service decides" in result.output
 
@@ -198,13 +199,17 @@ def test_calibrate_cross_fits_on_the_demonstrations_it_was_trained_on(cli_model,
     doc, model = json.loads(report.read_text()), checkpoint.load(out)
     assert doc["out_of_fold_episodes"] == model.provenance["sequences"] and doc["folds"] == 3
     assert "out-of-fold" in model.calibration("offline", 1).source
-    assert f"for the thresholds ({doc['out_of_fold_episodes']} of them out-of-fold, 3 folds)" in result.output
+    assert f"for the thresholds ({doc['out_of_fold_episodes']} of them out-of-fold, 3 folds: cross-fitted)" in result.output
+    default = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--out", tmp_path / "d",
+                    "--json", tmp_path / "d.json", "--folds", 3)  # the demonstrations the checkpoint records: the same
+    assert default.exit_code == 0, default.output
+    assert json.loads((tmp_path / "d.json").read_text())["modes"] == doc["modes"]
     refused = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], "--out", tmp_path / "x",
                     "--cross-fit", logs["normal"])
     assert refused.exit_code == 2 and "these 2 are not" in refused.output and not (tmp_path / "x").exists()
     for args, message in ((("--cross-fit", logs["demos"], "--groups", "["), "'[' is none"),
                           (("--cross-fit", logs["demos"], "--folds", 1), "--folds must be at least 2, got 1"),
-                          (("--folds", 3), "--folds and --groups set how --cross-fit cuts the demonstrations")):
+                          (("--no-cross-fit", "--folds", 3), "--no-cross-fit does not cross-fit")):
         refused = _nasm("calibrate", cli_model, logs["held_out"], "--mapping", logs["mapping"], *args)
         assert refused.exit_code == 2 and message in refused.output and len(refused.output.strip().splitlines()) == 1
 
@@ -212,10 +217,10 @@ def test_calibrate_cross_fits_on_the_demonstrations_it_was_trained_on(cli_model,
 def test_calibrate_an_npz_set(cli_model, logs, tmp_path):
     seqs = read_mapped(logs["held_out"], parse_mapping(bag_mapping("marker"), "m"))
     np.savez(tmp_path / "normal.npz", sequences=seqs.data, channel_names=np.array(seqs.channel_names))
-    result = _nasm("calibrate", cli_model, tmp_path / "normal.npz", "--out", tmp_path / "m.safetensors")
+    result = _nasm("calibrate", cli_model, tmp_path / "normal.npz", "--out", tmp_path / "m.safetensors", "--no-cross-fit")
     assert result.exit_code == 0, result.output
     np.savez(tmp_path / "other.npz", sequences=seqs.data[..., :3], channel_names=np.array(seqs.channel_names[:3]))
-    result = _nasm("calibrate", cli_model, tmp_path / "other.npz", "--out", tmp_path / "n.safetensors")
+    result = _nasm("calibrate", cli_model, tmp_path / "other.npz", "--out", tmp_path / "n.safetensors", "--no-cross-fit")
     assert result.exit_code == 2 and "the model expects" in result.output
     result = _nasm("calibrate", cli_model, tmp_path / "normal.npz", "--cross-fit", tmp_path / "normal.npz", "--groups",
                    "file", "--out", tmp_path / "o.safetensors")

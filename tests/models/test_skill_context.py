@@ -155,6 +155,42 @@ def test_a_student_t_term_weighs_residuals_by_the_ts_log_likelihood():
         SkillSpreads(("a",), np.ones((1, 1, 1)), nu=2.0)
 
 
+@pytest.mark.parametrize("nu", [None, 4.0])
+def test_spreads_picked_at_a_step_are_their_definitions(nu):
+    """The served step reads each skill's scales and log normalisers from tables kept once; they
+    are the definitions' values to the last bit, for rows given as indices or a slice and for
+    steps past the last (which hold the last step's spreads)."""
+    rng = np.random.default_rng(0)
+    spread = rng.uniform(0.1, 2.0, (7, 5, 3))
+    spreads = SkillSpreads(tuple("abcdefg"), spread, nu)
+    residuals = rng.normal(0, 1, (2, 4, 3, 3))  # (N, R, S, D)
+    steps = np.array([0, 4, 9])  # 9: past the last step
+    for rows, picked in ((np.array([6, 1, 1, 3]), spread[[6, 1, 1, 3]]), (slice(2, 6), spread[2:6])):
+        definition = picked[:, np.minimum(steps, 4)]
+        scale = definition if nu is None else definition * np.sqrt((nu - 2) / nu)
+        z2 = (residuals / scale) ** 2
+        energy = z2.sum(axis=-1) if nu is None else (nu + 1) * np.log1p(z2 / nu).sum(axis=-1)
+        np.testing.assert_array_equal(spreads.at(steps, rows), definition)
+        np.testing.assert_array_equal(spreads.scale(steps, rows), scale)
+        np.testing.assert_array_equal(spreads.log_normaliser(steps, rows), 2 * np.log(scale).sum(axis=-1))
+        np.testing.assert_array_equal(spreads.energy(residuals, steps, rows), energy)
+
+
+def test_the_scored_energies_and_the_evidence_are_the_terms_sums(memory):
+    cal = memory.calibration
+    x, _ = episodes(1, SKILLS, 8)
+    steps = np.arange(x.shape[1])
+    residuals = memory.residuals(x, cal.courses, tuple(cal.spreads))
+    energies, norm, evidence = cal.scored(residuals, steps)
+    assert cal.terms == ("course", "dynamics") and cal.recognised_by == ("course",)  # the defaults
+    course, dynamics = cal.spreads["course"], cal.spreads["dynamics"]
+    np.testing.assert_array_equal(energies, course.energy(residuals["course"], steps)
+                                  + dynamics.energy(residuals["dynamics"], steps))
+    np.testing.assert_array_equal(norm, course.log_normaliser(steps) + dynamics.log_normaliser(steps))
+    np.testing.assert_array_equal(evidence[0], course.energy(residuals["course"], steps))
+    np.testing.assert_array_equal(evidence[1], course.log_normaliser(steps))
+
+
 def test_the_dynamics_term_is_held_to_a_student_t_by_default(memory):
     calibrating = (*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
     x, _ = episodes(1, SKILLS, 12)

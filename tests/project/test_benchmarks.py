@@ -38,6 +38,8 @@ RUNS: dict[tuple[str, ...], tuple[str, ...]] = {
         "fleet_steps_per_s_vs_no_record", "rss_growth_mb_per_1000_sessions"),
     ("bench_service.py", "--live"): (  # service_live.py
         "metrics_vs_none", "live_vs_files", "live_cpu_vs_files", "live_lag_p50_ms", "live_lag_p95_ms"),
+    ("bench_skills.py",): ("posterior_vs_single", "posterior_vs_single_online", "told_vs_single", "step_ms_posterior",
+                           "step_ms_single_offline"),
     ("bench_balancer.py",): ("balancer_vs_direct", "lost_steps_surviving", "reconnected_sessions",
                              "killed_recordings_recovered"),
 }
