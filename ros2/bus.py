@@ -206,11 +206,22 @@ class Bus:
 
     def __init__(self, namespace: str = "", env: Mapping[str, str] = os.environ):
         resolve("x", namespace)  # a bad namespace fails here, before joining
-        self.namespace, self.domain_id = namespace, domain_id_from_env(env)
-        _domain(self.domain_id, Discovery.from_env(env), env)
-        self._participant = DomainParticipant(self.domain_id)
-        self._waitset = WaitSet(self._participant)
+        domain_id = domain_id_from_env(env)
+        _domain(domain_id, Discovery.from_env(env), env)
+        self._share(namespace, domain_id, DomainParticipant(domain_id))
+
+    def _share(self, namespace: str, domain_id: int, participant: DomainParticipant) -> None:
+        self.namespace, self.domain_id, self._participant = namespace, domain_id, participant
+        self._waitset = WaitSet(participant)
         self._publications: BuiltinDataReader | None = None
+
+    def under(self, namespace: str) -> Bus:
+        """This participant under another namespace, with a wait of its own: the nodes of many
+        robots in one process share one participant (discovery on loopback admits 32 a host)."""
+        resolve("x", namespace)
+        other = Bus.__new__(Bus)
+        other._share(namespace, self.domain_id, self._participant)
+        return other
 
     def reader(self, name: str, msgtype: str, qos: Qos = SENSOR_DATA) -> Reader:
         """A subscription to ``name`` resolved in the bus's namespace (sensor-data QoS unless told)."""
