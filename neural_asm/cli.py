@@ -56,7 +56,6 @@ COMMANDS = {
 }
 
 
-
 def play_on_ros2(episodes: Sequence[StreamedEpisode], mapping: Path, namespace: str, speed: float) -> int:
     """``nasm replay --ros2``'s player (``ros2.play``), handed to the client's replay command as the
     command line's context object: the client package stands below ros2 and cannot import it."""
@@ -65,9 +64,9 @@ def play_on_ros2(episodes: Sequence[StreamedEpisode], mapping: Path, namespace: 
     return play(episodes, mapping, namespace, speed)
 
 
-app = typer.Typer(cls=lazy_group(COMMANDS), context_settings={"obj": play_on_ros2}, help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
+app = typer.Typer(cls=lazy_group(COMMANDS), help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
                   "models, stream the client and run the experiments.", no_args_is_help=True,
-                  pretty_exceptions_show_locals=False)
+                  pretty_exceptions_show_locals=False, context_settings={"obj": play_on_ros2})
 
 
 def _load_model(path: Path) -> NeuralASM:
