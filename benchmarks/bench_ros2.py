@@ -7,9 +7,10 @@ one 300-step episode each of the benchmark's 40 Hz model (``service_harness.buil
 the controller's pace, from one process of their own: robot r's tick k at k / 40 s plus its phase
 r / 64 of a tick (independent robots' clocks are not aligned), as ``bench_service.py``'s paced
 fleet sends its steps; one more tick completes the last step (a resampler judges a step once it
-has seen past it). One node process (this one) reads them all: a ``MonitorNode`` per namespace,
-each spinning in a thread of its own on one DDS participant (``Bus.under``), judging in-process
-with the memory's monitor, nothing recorded, on loopback (``ROS_LOCALHOST_ONLY=1``). Measured:
+has seen past it). One node process (this one) reads them all: a ``MonitorNode`` per namespace on
+one DDS participant (``Bus.under``), all spun by one thread (``Fleet``: the steps ready in a spin
+judged together, as the service batches its sessions'), judging in-process with the memory's
+monitor, nothing recorded, on loopback (``ROS_LOCALHOST_ONLY=1``). Measured:
 
 - ``ros2_steps_per_s``: each robot's steps judged per second of its episode (its ticks' span,
   or longer if its last verdict came later), summed, as ``fleet_steps_per_s`` is: 2,560 when
@@ -17,7 +18,9 @@ with the memory's monitor, nothing recorded, on loopback (``ROS_LOCALHOST_ONLY=1
 - ``ros2_lag_p50_ms`` / ``ros2_lag_p95_ms``: from the publication of the message that
   completes a step (its source time stamp) to the node's verdict on that step, published on
   ``/diagnostics``, ``nasm/fault`` and ``nasm/energy`` (one host, one clock);
-- ``ros2_lost_messages``: messages published minus messages the nodes read;
+- ``ros2_lost_messages``: messages published minus messages the nodes read (a reader's full
+  history replacing its oldest sample counts here); ``ros2_dds_samples_lost``: those DDS itself
+  reports lost on the way (its sample-lost status, summed over the readers);
   ``ros2_publish_lag_p99_ms``: how late the robots' process itself sent a tick that was due
   (``websocket_send_lag_p99_ms`` is the websocket robots'; on a machine the nodes keep busy, the
   robots' process waits for a core too); ``ros2_warnings``: episodes a node ended on input it
@@ -59,10 +62,12 @@ import bench_service
 from bench_service import paced_fleet
 from neural_asm.logs.mapping import parse_mapping
 from neural_asm.logs.rosbag import topic_groups
+from neural_asm.models.answer import StepAnswer
 from neural_asm.models.config import FAST
 from neural_asm.ros2 import messages as m
 from neural_asm.ros2.bus import Bus, Received
-from neural_asm.ros2.node import MonitorNode, load_judge, topic_type
+from neural_asm.ros2.judge import load_judge
+from neural_asm.ros2.node import Due, Fleet, MonitorNode, topic_type
 from neural_asm.ros2.play import Composer
 from service_harness import CHANNELS, SESSION, build_model, free_port, start_server, warm_fleet
 
@@ -133,32 +138,31 @@ class TimedNode(MonitorNode):
         super().__init__(*args)
         self.read, self.lags_ns, self.verdicts_ns, self.warnings = 0, [], [], []
 
-    def close(self, why: str | None) -> None:
-        if why is not None:  # input it could not read: a WARN
-            self.warnings.append(why)
-        super().close(why)
+    def _warn(self, why: str, ep: Any) -> None:  # input it could not read: a WARN
+        self.warnings.append(why)
+        super()._warn(why, ep)
 
     def _sample(self, g: int, t: int, received: Received) -> None:
         self.read += 1
-        before = len(self.answers)
-        super()._sample(g, t, received)  # judges the steps this message completes and publishes their verdicts
-        now = time.time_ns()
-        for _ in range(len(self.answers) - before):
-            self.lags_ns.append(now - received.sent_ns)
+        super()._sample(g, t, received)
+
+    def deliver(self, due: Due, answer: Any) -> None:
+        super().deliver(due, answer)  # publishes the step's verdict
+        if isinstance(answer, StepAnswer):
+            now = time.time_ns()
+            self.lags_ns.append(now - due.sent_ns)  # from the message that completed the step
             self.verdicts_ns.append(now)
 
 
 def measure_ros2(folder: Path, episodes: np.ndarray, robots: int) -> dict[str, float]:
     steps = episodes.shape[1]
-    assert steps <= 1000, "TimedNode counts steps by the node's answers kept (ANSWERS_KEPT)"
     mapping = parse_mapping(mapping_doc(steps), "the benchmark's mapping")
     judge, _ = load_judge(str(folder / "bench.safetensors"), None, FPR, folder)
     bus = Bus(env=LOOPBACK)
     nodes = [TimedNode(bus.under(f"/robot{r}"), mapping, judge, None) for r in range(robots)]
     stop = threading.Event()
-    threads = [threading.Thread(target=n.spin, args=(stop, 0.1), daemon=True) for n in nodes]
-    for thread in threads:
-        thread.start()
+    thread = threading.Thread(target=Fleet(bus, nodes).spin, args=(stop, 0.1), daemon=True)
+    thread.start()
     np.save(folder / "episodes.npy", episodes)
     child = subprocess.Popen([sys.executable, __file__, "--publish", str(robots), str(folder / "episodes.npy")],
                              env={**os.environ, **LOOPBACK}, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
@@ -180,8 +184,7 @@ def measure_ros2(folder: Path, episodes: np.ndarray, robots: int) -> dict[str, f
         stop.set()
         child.kill()
         child.communicate()
-    for thread in threads:
-        thread.join()
+    thread.join()
     period = 1 / RATE
     served = 0.0
     for r, node in enumerate(nodes):
@@ -194,6 +197,7 @@ def measure_ros2(folder: Path, episodes: np.ndarray, robots: int) -> dict[str, f
             "ros2_lag_p50_ms": float(np.percentile(lags_ms, 50)) if lags_ms else float("nan"),
             "ros2_lag_p95_ms": float(np.percentile(lags_ms, 95)) if lags_ms else float("nan"),
             "ros2_published": said["published"], "ros2_lost_messages": said["published"] - sum(n.read for n in nodes),
+            "ros2_dds_samples_lost": sum(n.lost() for n in nodes),
             "ros2_publish_lag_p99_ms": said["publish_lag_p99_ms"], "ros2_warnings": len(warnings),
             "ros2_first_warning": warnings[0] if warnings else ""}
 

@@ -38,7 +38,8 @@ def ros2(
     the verdict on /diagnostics, nasm/fault and nasm/energy."""
     try:
         from neural_asm.ros2.bus import Bus
-        from neural_asm.ros2.node import MonitorNode, load_judge
+        from neural_asm.ros2.judge import load_judge
+        from neural_asm.ros2.node import MonitorNode
     except ImportError as exc:
         raise fail(f"nasm ros2 needs the ros2 extra (pip install 'neural-asm[ros2]'): {exc}") from None
     try:

@@ -24,7 +24,8 @@ from neural_asm.logs.mapping import parse_mapping  # noqa: E402
 from neural_asm.memory import SkillMemory  # noqa: E402
 from neural_asm.ros2 import messages as m  # noqa: E402
 from neural_asm.ros2.bus import DEFAULT, Bus  # noqa: E402
-from neural_asm.ros2.node import LocalJudge, MonitorNode, RemoteJudge, load_judge  # noqa: E402
+from neural_asm.ros2.judge import LocalJudge, RemoteJudge, load_judge  # noqa: E402
+from neural_asm.ros2.node import MonitorNode  # noqa: E402
 from neural_asm.ros2.verdict import ERROR, OK, WARN  # noqa: E402
 from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_NAMES  # noqa: E402
 
