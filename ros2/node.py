@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from neural_asm.logs.errors import LogError
-from neural_asm.logs.fields import NS, extractor, header_stamp
+from neural_asm.logs.fields import NS, header_stamp
 from neural_asm.logs.mapping import Episodes, Mapping
 from neural_asm.logs.resample import EpisodeResampler
 from neural_asm.logs.rosbag import topic_groups
@@ -40,6 +40,7 @@ from neural_asm.recordings.episode import View
 from neural_asm.recordings.records import StepRecord
 from neural_asm.ros2 import messages as m
 from neural_asm.ros2.bus import MONITOR, Bus, Reader, Received
+from neural_asm.ros2.extract import Extractor
 from neural_asm.ros2.judge import JUDGING, Judge, Judging, Stepper, judge_together
 from neural_asm.ros2.verdict import WARN, VerdictWriter
 
@@ -109,7 +110,7 @@ class MonitorNode:
             topic = group.source.removeprefix("topic ")
             msgtype = topic_type(topic, [c.field or "" for c in group.channels])
             self.readers.append(bus.reader(topic.lstrip("/"), msgtype, MONITOR))
-            self.extract.append(extractor(list(group.channels), topic, msgtype))
+            self.extract.append(Extractor(group.channels, topic, msgtype))
         split = self.split
         self.marker = bus.reader(split.marker_topic.lstrip("/"), m.STRING, MONITOR) if split.marker_topic else None
         self.label = bus.reader(split.label_topic.lstrip("/"), m.STRING, MONITOR) if split.label_topic else None
@@ -137,10 +138,11 @@ class MonitorNode:
 
     # ------------------------------------------------------------------ reading
 
-    def take(self) -> None:
+    def take(self, publications: Sequence[tuple[str, str]]) -> None:
         """Take every message waiting, in one take a reader; read them in time order, across topics;
-        then the silences. What they complete is left in ``due`` for the judge."""
-        for topic, typename in self.bus.publications():
+        then the silences. What they complete is left in ``due`` for the judge. ``publications``:
+        the topics and types of the writers discovered since the last take (``Bus.publications``)."""
+        for topic, typename in publications:
             self._check_type(topic, typename)
         for reader, kind in ((self.label, "label"), (self.marker, "marker")):
             for received in reader.take() if reader is not None else ():
@@ -340,11 +342,11 @@ def judge_due(nodes: Sequence[MonitorNode]) -> None:
 
 
 class Fleet:
-    """The nodes of many robots (each on ``Bus.under`` its namespace) spun by one thread: a spin
-    takes every node's messages, then judges all their steps due together."""
+    """The nodes of many robots, each on its namespace of ``bus`` (``Bus.under``), spun by one
+    thread: a spin takes every node's messages, then judges all their steps due together."""
 
     def __init__(self, bus: Bus, nodes: Sequence[MonitorNode]) -> None:
-        self.nodes = list(nodes)
+        self.bus, self.nodes = bus, list(nodes)
         self.wait: Callable[[float], bool] = bus.wait_for(r for node in nodes for r in node.all_readers)
 
     def spin(self, stop: threading.Event, poll_s: float = 0.1) -> None:
@@ -361,8 +363,9 @@ class Fleet:
         """Handle every message waiting (within ``timeout_s``), judge the steps they complete, then
         each node's heartbeat."""
         self.wait(timeout_s)
+        publications = self.bus.publications()  # of the participant the nodes share
         for node in self.nodes:
-            node.take()
+            node.take(publications)
         judge_due(self.nodes)
         for node in self.nodes:
             node.verdict.heartbeat()
