@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Sequence
 from enum import Enum
 from pathlib import Path
 
@@ -12,10 +13,12 @@ import typer
 
 from neural_asm.client.replay import replay_logs
 from neural_asm.client.run import MODES, SHOWCASE_FAULT, SimulatedRun, falling_object, fault_spec, run_client
+from neural_asm.client.source import StreamedEpisode, logged
 from neural_asm.client.stream import Connection, StreamOptions
 from neural_asm.client.transport import TRANSPORTS, ServiceError, ServiceLost
 from neural_asm.logs.cli import FORMATS, SKIP_BAD_HELP, data_command, mapping_help, read_logs, write_json
 from neural_asm.logs.errors import LogError
+from neural_asm.logs.sources import episode_position
 from neural_asm.models.recall import RECALL_MODES
 from neural_asm.pipelines.default_model import RATE_MODES
 from neural_asm.recordings import DEFAULT_DIR
@@ -137,10 +140,17 @@ def _serve_until_interrupted(viewer: LiveViewer) -> None:
         viewer.close()
 
 
+# ``nasm replay --ros2``'s player: (episodes, the node's mapping, namespace, speed) -> messages sent. It is the
+# ros2 package's (above this one, which cannot import it), handed over by the ``nasm`` command line as its
+# context's object; None outside it.
+BusPlayer = Callable[[Sequence[StreamedEpisode], Path, str, float], int]
+
+
 def replay(
+    ctx: typer.Context,
     source: str = typer.Argument(..., help=f"the logs: {FORMATS}"),
     mapping: Path = typer.Option(..., help=mapping_help("SOURCE")),
-    url: str = typer.Option(..., help="URL of a running service (nasm serve)"),
+    url: str | None = typer.Option(None, help="URL of a running service (nasm serve); or give --ros2"),
     model: str | None = typer.Option(None, help="name of the served model to score with (default: the service's default)"),
     episode: list[int] = typer.Option([], help="episode number in the source (repeatable) (default: every episode)"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
@@ -153,13 +163,34 @@ def replay(
     tell_skill: bool = typer.Option(False, "--tell-skill", help="tell the service each episode's skill, the label "
                                     "the mapping reads (its skill or phase tag): a skill memory then decides with "
                                     "that skill's course and threshold (default: it infers the skill)"),
+    ros2: Path | None = typer.Option(None, help="instead of streaming to a service, play the episodes onto the ROS 2 "
+                                     "bus at their own pace (as ros2 bag play), as the node that reads this mapping "
+                                     "(nasm ros2 --mapping) reads its topics"),
+    namespace: str = typer.Option("", help="with --ros2: the robot's namespace the topics are published under "
+                                  "(the node's --namespace)"),
+    speed: float = typer.Option(1.0, min=0.01, help="with --ros2: times the episodes' own pace"),
 ) -> None:
     """Stream recorded episodes to a running service exactly as the live robot client does,
-    after the same checks as ``nasm score`` against the served model."""
+    after the same checks as ``nasm score`` against the served model; or, with ``--ros2``, play
+    them onto a robot's ROS 2 bus for the monitor node (``nasm ros2``)."""
     if mode not in RECALL_MODES or transport not in TRANSPORTS:
         raise fail(f"--mode must be one of {', '.join(RECALL_MODES)} and --transport ws or http; "
                    f"got {mode!r}, {transport!r}")
+    if (url is None) == (ros2 is None):
+        raise fail("give either --url (a service to stream the episodes to) or --ros2 (a node's mapping: play them onto "
+                   "the ROS 2 bus)")
     seqs = read_logs(source, mapping, skip_bad=skip_bad)
+    if ros2 is not None:
+        player: BusPlayer | None = ctx.obj
+        if player is None:
+            raise fail("--ros2 is played by the nasm command line: run nasm replay --ros2")
+        try:
+            picks = [episode_position(seqs, n) for n in episode] if episode else range(len(seqs.data))
+        except LogError as exc:
+            raise fail(exc) from None
+        sent = player([logged(seqs, i) for i in picks], ros2, namespace, speed)
+        typer.echo(f"played {sent} messages")
+        return
     try:
         summaries = replay_logs(seqs, episode, Connection(url, api_key, transport, reconnect), StreamOptions(mode, out),
                                 model, tell_skill)

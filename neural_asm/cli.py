@@ -7,6 +7,7 @@ import neural_asm.runtime  # noqa: F401  (first: one BLAS thread, no display)
 
 import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,6 +20,7 @@ from neural_asm.runtime.cli import Command, Lazy, fail, lazy_group
 from neural_asm.runtime.home import home, home_path
 
 if TYPE_CHECKING:
+    from neural_asm.client.source import StreamedEpisode
     from neural_asm.models.asm import NeuralASM
 
 
@@ -35,7 +37,8 @@ COMMANDS = {
     "view": Lazy("neural_asm.recordings.cli:view", "Open a run's client and service recordings together in the Rerun "
                  "viewer, or screenshot them."),
     "replay": Lazy("neural_asm.client.cli:replay_command", "Stream recorded episodes to a running service exactly as the live "
-                   "robot client does, after the same checks as ``nasm score`` against the served model."),
+                   "robot client does, after the same checks as ``nasm score`` against the served model; or, with "
+                   "``--ros2``, play them onto a robot's ROS 2 bus for the monitor node (``nasm ros2``)."),
     "evaluate": Lazy("neural_asm.logs.cli:evaluate_command", "Faults-style evaluation on logs: faulty episodes detected, normal "
                      "ones flagged, AUROC."),
     "calibrate": Lazy("neural_asm.calibrate_cli:calibrate_command", "Calibrate a checkpoint's precisions and fault thresholds on "
@@ -52,9 +55,18 @@ COMMANDS = {
                         "one."),
 }
 
+
+def play_on_ros2(episodes: Sequence[StreamedEpisode], mapping: Path, namespace: str, speed: float) -> int:
+    """``nasm replay --ros2``'s player (``ros2.play``), handed to the client's replay command as the
+    command line's context object: the client package stands below ros2 and cannot import it."""
+    from neural_asm.ros2.cli import play
+
+    return play(episodes, mapping, namespace, speed)
+
+
 app = typer.Typer(cls=lazy_group(COMMANDS), help="Neural ASM: train, recall and score skill memories; simulate Panda demonstrations, serve "
                   "models, stream the client and run the experiments.", no_args_is_help=True,
-                  pretty_exceptions_show_locals=False)
+                  pretty_exceptions_show_locals=False, context_settings={"obj": play_on_ros2})
 
 
 def _load_model(path: Path) -> NeuralASM:

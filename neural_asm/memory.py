@@ -10,7 +10,7 @@ whose verdicts are those the service returns for the same observations (both run
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +18,7 @@ import numpy as np
 
 from neural_asm.models import checkpoint, skill_context
 from neural_asm.models.answer import StepAnswer
-from neural_asm.models.asm import NeuralASM, SkillStream, StreamStep, step_streams
+from neural_asm.models.asm import NeuralASM, SkillStream, step_streams
 from neural_asm.models.calibration import set_energy_thresholds
 from neural_asm.models.config import DEFAULT_RATE_HZ, PRESETS, SCORING, TPCConfig
 from neural_asm.models.cross_fit import CrossFit, conformal_minimum
@@ -79,20 +79,43 @@ class Monitor:
         """Observations judged so far."""
         return self._stream.t
 
+    @property
+    def batch_key(self) -> Hashable | None:
+        """Monitors with equal keys step together in ``step_monitors``, as the service batches its
+        sessions; None: a skill memory's session, which steps alone."""
+        return self._stream.batch_key if isinstance(self._stream, SkillStream) else None
+
+    def check(self, observation: Observation) -> np.ndarray:
+        """The observation as the vector this monitor steps on; a ValueError names what is wrong."""
+        stream = self._stream
+        return stream.memory.check(observation) if isinstance(stream, skill_context.SkillSession) \
+            else stream.check(observation)
+
     def step(self, observation: Observation) -> StepAnswer:
         """Judge one raw observation (a vector in channel order, or a channel -> value mapping);
         a ValueError names what is wrong with it."""
-        stream = self._stream
-        probability: float | None = None
-        if isinstance(stream, skill_context.SkillSession):
-            served, probability = skill_context.served_step(stream, stream.memory.check(observation))
-            result: StreamStep | None = served
-            names = stream.memory.channel_names
-        else:
-            result, names = step_streams([stream], stream.check(observation)[None])[0], stream.model.channel_names
-        if result is None or result.decision is None:
-            raise FloatingPointError(f"step {stream.t}: the memory's outputs are not finite")
-        return StepAnswer.judged(result.score, result.decision, names, self._fpr, probability)
+        (answer,) = step_monitors([self], self.check(observation)[None])
+        if answer is None:
+            raise FloatingPointError(f"step {self.steps}: the memory's outputs are not finite")
+        return answer
+
+
+def step_monitors(monitors: Sequence[Monitor], observations: np.ndarray) -> list[StepAnswer | None]:
+    """One step of each of ``monitors`` (sharing a ``batch_key``) on its checked observation, a row
+    of ``observations``, in one relaxation as the service steps its sessions' (``step_streams``);
+    None where the outputs are not finite (that monitor keeps its state)."""
+    if len({m.batch_key for m in monitors}) != 1 or (monitors[0].batch_key is None and len(monitors) > 1):
+        raise ValueError("monitors stepped together share a batch key; a skill memory's session steps alone")
+    first = monitors[0]._stream
+    if isinstance(first, skill_context.SkillSession):
+        served, probability = skill_context.served_step(first, observations[0])
+        assert served.decision is not None  # a session always decides
+        return [StepAnswer.judged(served.score, served.decision, first.memory.channel_names, monitors[0]._fpr,
+                                  probability)]
+    results = step_streams([m._stream for m in monitors if isinstance(m._stream, SkillStream)], observations)
+    names = first.model.channel_names
+    return [None if r is None or r.decision is None else StepAnswer.judged(r.score, r.decision, names, m._fpr)
+            for m, r in zip(monitors, results)]
 
 
 class SkillMemory:

@@ -1,10 +1,13 @@
-"""``nasm ros2``: the monitor node on a robot's ROS 2 bus (``ros2.node``)."""
+"""``nasm ros2``: the monitor node on a robot's ROS 2 bus (``ros2.node``); and the player behind
+``nasm replay --ros2`` (``ros2.play``), which the command line hands to the client's replay command."""
 
 from __future__ import annotations
 
 import signal
 import threading
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -14,6 +17,9 @@ from neural_asm.logs.mapping import load_mapping
 from neural_asm.recordings import DEFAULT_DIR
 from neural_asm.runtime.cli import fail
 from neural_asm.runtime.home import home_path
+
+if TYPE_CHECKING:
+    from neural_asm.client.source import StreamedEpisode
 
 
 def ros2(
@@ -27,25 +33,15 @@ def ros2(
     fpr: float = typer.Option(0.01, min=0.0, max=1.0, help="false-positive rate of the fault threshold"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder: one Rerun and one MCAP file per episode"),
     models_dir: Path = typer.Option(home_path("models"), help="where a model's name is looked up"),
-    play: Path | None = typer.Option(None, help="instead of monitoring, play the ROS 2 bags here onto the bus at "
-                                     "their own pace (as ros2 bag play), for a node started with the same mapping"),
-    speed: float = typer.Option(1.0, min=0.01, help="with --play: times the bags' own pace"),
 ) -> None:
     """Monitor a robot on its ROS 2 bus: read the mapping's topics, judge each step and publish
     the verdict on /diagnostics, nasm/fault and nasm/energy."""
     try:
         from neural_asm.ros2.bus import Bus
-        from neural_asm.ros2.node import MonitorNode, load_judge
-        from neural_asm.ros2.play import Pace, play_bags
+        from neural_asm.ros2.judge import load_judge
+        from neural_asm.ros2.node import MonitorNode
     except ImportError as exc:
         raise fail(f"nasm ros2 needs the ros2 extra (pip install 'neural-asm[ros2]'): {exc}") from None
-    if play is not None:
-        try:
-            sent = play_bags(Bus(namespace), play, load_mapping(mapping), Pace(speed), typer.echo)
-        except (LogError, ValueError) as exc:
-            raise fail(exc) from None
-        typer.echo(f"played {sent} messages")
-        return
     try:
         judge, names = load_judge(model, url, fpr, models_dir, api_key)
         found = load_mapping(mapping)
@@ -61,3 +57,17 @@ def ros2(
         node.spin(stop)
     except KeyboardInterrupt:
         pass
+
+
+def play(episodes: Sequence[StreamedEpisode], mapping: Path, namespace: str, speed: float) -> int:
+    """``nasm replay --ros2``: play logged ``episodes`` onto the bus at ``speed`` times their own pace,
+    as the node reading ``mapping`` under ``namespace`` reads them; the messages sent."""
+    try:
+        from neural_asm.ros2.bus import Bus
+        from neural_asm.ros2.play import Pace, play_episodes
+    except ImportError as exc:
+        raise fail(f"nasm replay --ros2 needs the ros2 extra (pip install 'neural-asm[ros2]'): {exc}") from None
+    try:
+        return play_episodes(Bus(namespace), episodes, load_mapping(mapping), Pace(speed), typer.echo)
+    except (LogError, ValueError) as exc:
+        raise fail(exc) from None

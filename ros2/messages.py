@@ -6,9 +6,10 @@ is typed in twice and the node's bytes on the wire are ROS 2's (``tests/ros2`` c
 with ``rosbags``' CDR serialiser). Types are named as ``rmw_cyclonedds_cpp`` names them
 (``sensor_msgs::msg::dds_::JointState_``), which is how a ROS 2 node matches a topic's type.
 
-Conversions go through those same bytes: a ``rosbags`` message is serialised by ``rosbags``
-and read by the DDS type, and back, so the node can hand the bag reader's code the messages
-it already knows without a second field-by-field copier.
+The types name and describe a topic on the bus (how DDS matches it with a ROS 2 node's); the
+messages themselves are ``rosbags``' messages, written and read as those same bytes by
+``rosbags``' CDR serialiser (``ros2.bus``), so the node hands the bag reader's code the messages
+it already knows, without a second field-by-field copier.
 """
 
 from __future__ import annotations
@@ -84,14 +85,3 @@ def idl_type(msgtype: str) -> type[IdlStruct]:
     _, fields = STORE.fielddefs[msgtype]
     typename = dds_typename(msgtype)
     return make_idl_struct(typename.rsplit("::", 1)[1], typename, {name: _field_type(node) for name, node in fields})
-
-
-def to_idl(message: Any) -> IdlStruct:
-    """A ``rosbags`` message as its DDS type's sample (through its CDR bytes)."""
-    cdr = STORE.serialize_cdr(message, message.__msgtype__)
-    return idl_type(message.__msgtype__).deserialize(bytes(cdr))
-
-
-def from_idl(sample: IdlStruct) -> Any:
-    """A DDS sample as the ``rosbags`` message the bag reader would decode from a bag."""
-    return STORE.deserialize_cdr(sample.serialize(), ros_typename(type(sample).__idl_typename__))

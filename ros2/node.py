@@ -1,8 +1,12 @@
 """The monitor node: a mapping's topics read live from the bus, resampled to the model's clock by
 the bag reader's own resampler (``logs.resample``), cut into episodes as the mapping cuts a bag
 (``gap``, ``marker``; ``label_topic`` names an episode's skill), each step judged by a monitor
-(in-process, or a service session), its verdict published (``ros2.verdict``) and the episode
-recorded to Rerun and MCAP as a client episode is.
+(``ros2.judge``: in-process, or a service session), its verdict published (``ros2.verdict``) and
+the episode recorded to Rerun and MCAP as a client episode is.
+
+A spin takes every message waiting, then judges the steps they complete; many robots' nodes in
+one process share one thread (``Fleet``), so that their steps ready in a spin are judged
+together, as the service judges its sessions' steps (``ros2.judge.judge_together``).
 
 Input the mapping cannot read (a publisher of a mapped topic with another type, a message
 without a mapped joint, a topic silent for longer than ``timing.max_gap_s`` inside an episode,
@@ -18,22 +22,17 @@ import contextlib
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 
-from neural_asm.client.replay import served_model
-from neural_asm.client.session import ServiceClient
-from neural_asm.client.transport import ServiceError, ServiceLost
 from neural_asm.logs.errors import LogError
-from neural_asm.logs.fields import NS, extractor, header_stamp
+from neural_asm.logs.fields import NS, header_stamp
 from neural_asm.logs.mapping import Episodes, Mapping
 from neural_asm.logs.resample import EpisodeResampler
 from neural_asm.logs.rosbag import topic_groups
-from neural_asm.memory import SkillMemory
 from neural_asm.models.answer import StepAnswer
 from neural_asm.models.fault import joint_channels
 from neural_asm.recordings import EpisodeRecorder, new_run_id
@@ -41,14 +40,12 @@ from neural_asm.recordings.episode import View
 from neural_asm.recordings.records import StepRecord
 from neural_asm.ros2 import messages as m
 from neural_asm.ros2.bus import MONITOR, Bus, Reader, Received
+from neural_asm.ros2.extract import Extractor
+from neural_asm.ros2.judge import JUDGING, Judge, Judging, Stepper, judge_together
 from neural_asm.ros2.verdict import WARN, VerdictWriter
 
 # what a mapped topic may carry, told apart by the fields its channels name (``data``: a Bool)
 INPUT_TYPES = (m.JOINT_STATE, m.WRENCH_STAMPED, m.POINT_STAMPED, m.BOOL)
-Step = Callable[[np.ndarray], StepAnswer]
-# what a monitor raises at an input it cannot judge (a skill it does not know, values not finite)
-# and a service session when it refuses or goes away: the episode ends, the node goes on
-JUDGING = (ValueError, FloatingPointError, ServiceError, ServiceLost)
 ANSWERS_KEPT = 1000
 
 
@@ -63,42 +60,9 @@ def topic_type(topic: str, fields: list[str]) -> str:
                    f"{sorted(firsts)}")
 
 
-class Judge(Protocol):
-    """Opens one episode's monitor, told its skill (None: not told)."""
-
-    def open(self, skill: str | None) -> contextlib.AbstractContextManager[Step]: ...
-
-
-@dataclass(frozen=True)
-class LocalJudge:
-    """The in-process ``Monitor`` of a skill memory (told the skill if it has a skill cue)."""
-
-    memory: SkillMemory
-    fpr: float
-
-    @contextlib.contextmanager
-    def open(self, skill: str | None) -> Iterator[Step]:
-        told = skill if self.memory.told is not None else None
-        yield self.memory.monitor(fpr=self.fpr, skill=told).step
-
-
-@dataclass(frozen=True)
-class RemoteJudge:
-    """A session of a running service's ``model`` (None: its default) per episode."""
-
-    client: ServiceClient
-    model: str | None
-    fpr: float
-
-    @contextlib.contextmanager
-    def open(self, skill: str | None) -> Iterator[Step]:
-        with self.client.session(model=self.model, fpr=self.fpr, skill=skill) as session:
-            yield session.step
-
-
 @dataclass
 class _Episode:
-    """The episode being read: its resampler, the steps judged so far, its monitor and recording."""
+    """The episode being read: its resampler, its steps complete and judged, its monitor and recording."""
 
     number: int
     lo: int  # ns: its first sample's stamp, time 0 of its clock
@@ -106,10 +70,24 @@ class _Episode:
     label: str | None
     last_ns: list[int | None]  # each topic's last stamp
     last_rx: float  # monotonic time of its last message
-    judged: int = 0
+    due: int = 0  # steps complete, handed to the judge
+    ended: bool = False  # its monitor and recording closed: its steps still due are not judged
     resources: contextlib.ExitStack = field(default_factory=contextlib.ExitStack)
-    step: Step | None = None
+    monitor: Stepper | None = None
     recorder: EpisodeRecorder | None = None
+
+
+@dataclass(frozen=True)
+class Due:
+    """A step complete and waiting for its verdict (``row``), or the end of an episode (``row`` None,
+    ``why``: the input that ended it, None when it just ended); ``sent_ns``: when the message that
+    completed the step was sent."""
+
+    episode: _Episode | None
+    k: int = 0
+    row: np.ndarray | None = None
+    sent_ns: int = 0
+    why: str | None = None
 
 
 def _vector(values: dict[str, float] | None, names: tuple[str, ...]) -> np.ndarray | None:
@@ -132,7 +110,7 @@ class MonitorNode:
             topic = group.source.removeprefix("topic ")
             msgtype = topic_type(topic, [c.field or "" for c in group.channels])
             self.readers.append(bus.reader(topic.lstrip("/"), msgtype, MONITOR))
-            self.extract.append(extractor(list(group.channels), topic, msgtype))
+            self.extract.append(Extractor(group.channels, topic, msgtype))
         split = self.split
         self.marker = bus.reader(split.marker_topic.lstrip("/"), m.STRING, MONITOR) if split.marker_topic else None
         self.label = bus.reader(split.label_topic.lstrip("/"), m.STRING, MONITOR) if split.label_topic else None
@@ -140,31 +118,54 @@ class MonitorNode:
         self.current: _Episode | None = None
         self.recent_label: tuple[int, str] | None = None
         self.number = 0
+        self.seen_ns: int | None = None  # the newest stamp of a mapped topic's message taken
+        self.before: list[int | None] = [None] * len(self.groups)  # ``seen_ns`` before each reader's last take
+        self.due: deque[Due] = deque()  # what the judge has to do, in order
         self.answers: deque[tuple[int, StepAnswer]] = deque(maxlen=ANSWERS_KEPT)
+
+    @property
+    def all_readers(self) -> list[Reader]:
+        """The mapped topics' readers, and the marker's and the skill label's."""
+        return [*self.readers, *(r for r in (self.marker, self.label) if r is not None)]
 
     def spin(self, stop: threading.Event, poll_s: float = 0.1) -> None:
         """Read, judge and publish until ``stop`` is set; the open episode is closed at the end."""
-        try:
-            while not stop.is_set():
-                self.spin_once(poll_s)
-        finally:
-            self.close("the node stopped in the episode" if self.current is not None else None)
+        Fleet(self.bus, [self]).spin(stop, poll_s)
 
-    def spin_once(self, timeout_s: float) -> None:
-        """Handle every message waiting (within ``timeout_s``), then the silences and the heartbeat."""
-        self.bus.wait(timeout_s)
-        for topic, typename in self.bus.publications():
+    def lost(self) -> int:
+        """Messages of its topics DDS lost on their way (``Reader.lost``)."""
+        return sum(reader.lost() for reader in self.all_readers)
+
+    # ------------------------------------------------------------------ reading
+
+    def take(self, publications: Sequence[tuple[str, str]]) -> None:
+        """Take every message waiting, in one take a reader; read them in time order, across topics;
+        then the silences. What they complete is left in ``due`` for the judge. ``publications``:
+        the topics and types of the writers discovered since the last take (``Bus.publications``)."""
+        for topic, typename in publications:
             self._check_type(topic, typename)
         for reader, kind in ((self.label, "label"), (self.marker, "marker")):
             for received in reader.take() if reader is not None else ():
                 self._control(kind, received)
-        waiting = [(self._stamp(r), g, r) for g, reader in enumerate(self.readers) for r in reader.take()]
+        waiting = []
+        for g, reader in enumerate(self.readers):
+            self.before[g] = self.seen_ns
+            taken = [(self._stamp(r), g, r) for r in reader.take()]
+            if taken:
+                newest = max(t for t, _, _ in taken)
+                self.seen_ns = newest if self.seen_ns is None else max(self.seen_ns, newest)
+            waiting += taken
         for t, g, received in sorted(waiting, key=lambda w: w[0]):  # in time order across topics
             self._sample(g, t, received)
         ep, gap = self.current, self.split.gap_s
+        if ep is not None:
+            try:
+                self._check_silence(ep, None)
+            except LogError as exc:
+                self.close(str(exc))
+        ep = self.current
         if ep is not None and self.split.split == "gap" and gap and time.monotonic() - ep.last_rx > gap:
             self.close(None)  # every topic silent for gap_s: the episode is over
-        self.verdict.heartbeat()
 
     def _check_type(self, topic: str, typename: str) -> None:
         """A publisher of a mapped topic with another type (DDS never matches it: its messages
@@ -186,8 +187,8 @@ class MonitorNode:
             self._open(t)
             return
         self.recent_label = (t, str(received.message.data))
-        if self.current is not None and self.current.step is None:
-            self.current.label = self.recent_label[1]  # not yet judged: the monitor will be told it
+        if self.current is not None and self.current.due == 0:
+            self.current.label = self.recent_label[1]  # no step judged yet: the monitor will be told it
 
     def _open(self, lo: int) -> _Episode:
         label = None
@@ -215,26 +216,30 @@ class MonitorNode:
             values = self.extract[g](received.message)
             ep.resampler.add(g, np.array([(t - ep.lo) / NS]), values=values[None])
             ep.last_ns[g] = t
-            self._check_silence(ep)
+            self._check_silence(ep, t)
         except LogError as exc:
             self.close(str(exc))
             return
-        try:
-            self._judge(ep)
-        except JUDGING as exc:
-            self.close(f"{ep.resampler.what}: the monitor cannot judge it: {exc}")
+        ready = 0 if ep.resampler.grid is None else min(s.k for s in ep.resampler.streams)
+        while ep.due < ready:
+            self.due.append(Due(ep, ep.due, self._row(ep, ep.due), received.sent_ns))
+            ep.due += 1
+        if ep.due >= self.mapping.timing.steps:
+            self.close(None)
 
-    def _check_silence(self, ep: _Episode) -> None:
-        """A topic that has said nothing for longer than ``max_gap_s`` while another spoke."""
-        latest, limit = max(n for n in ep.last_ns if n is not None), self.mapping.timing.gap_limit_s
-        for group, last in zip(self.groups, ep.last_ns):
-            if last is not None and latest - last > limit * NS:
+    def _check_silence(self, ep: _Episode, now: int | None) -> None:
+        """A topic that has said nothing for longer than ``max_gap_s`` by ``now`` (None: by the
+        newest stamp seen), while another spoke. Only messages another topic sent before the
+        topic's reader was last taken count against it: those after may be newer than all it
+        has sent yet, even if the node is behind (its backlog is not silence)."""
+        limit = self.mapping.timing.gap_limit_s
+        for group, last, before in zip(self.groups, ep.last_ns, self.before):
+            if last is None or before is None:
+                continue
+            latest = before if now is None else min(now, before)
+            if latest - last > limit * NS:
                 raise LogError(f"{ep.resampler.what}, {group.source}: silent for {(latest - last) / NS:.3f} s "
                                f"(timing.max_gap_s is {limit:g} s)")
-
-    def _ready(self, ep: _Episode) -> int:
-        """Steps every topic has reached."""
-        return 0 if ep.resampler.grid is None else min(s.k for s in ep.resampler.streams)
 
     def _row(self, ep: _Episode, k: int) -> np.ndarray:
         """Step ``k``'s observation in channel order and units, as ``EpisodeResampler.finish`` lays it out."""
@@ -243,26 +248,51 @@ class MonitorNode:
             row[list(s.group.columns)] = s.out[k] * np.array([c.scale for c in s.group.channels])
         return row
 
-    def _judge(self, ep: _Episode) -> None:
-        """Step the monitor through every step now complete; at ``timing.steps``, close the episode."""
-        ready = self._ready(ep)
-        if ready > ep.judged and ep.step is None:
-            self._start(ep)
-        while ep.judged < ready:
-            k, row = ep.judged, self._row(ep, ep.judged)
-            assert ep.step is not None
-            answer = ep.step(row)
-            self.answers.append((ep.number, answer))
-            self.verdict.step(answer, ep.number)
-            if ep.recorder is not None:
-                self._record(ep.recorder, k, row, answer)
-            ep.judged += 1
-        if ep.judged >= self.mapping.timing.steps:
-            self.close(None)
+    def close(self, why: str | None) -> None:
+        """End the open episode after its steps due; ``why``: the input that ended it, said then as
+        a WARN status."""
+        ep, self.current = self.current, None
+        if ep is not None or why is not None:
+            self.due.append(Due(ep, why=why))
+
+    # ------------------------------------------------------------------ judging
+
+    def next_due(self) -> Due | None:
+        """The first step due of an episode still judged, its monitor opened (the episodes ended
+        before it are closed on the way); None when none is left."""
+        while self.due:
+            due = self.due[0]
+            ep = due.episode
+            if due.row is None:
+                self.due.popleft()
+                self._end(ep, due.why)
+            elif ep is None or ep.ended:
+                self.due.popleft()
+            elif ep.monitor is None:
+                try:
+                    self._start(ep)
+                except JUDGING as exc:
+                    self._end(ep, f"{ep.resampler.what}: the monitor cannot judge it: {exc}")
+            else:
+                return due
+        return None
+
+    def deliver(self, due: Due, answer: StepAnswer | Judging) -> None:
+        """A step's answer published (and recorded), or what its monitor raised: the episode ended."""
+        self.due.popleft()
+        ep = due.episode
+        assert ep is not None and due.row is not None
+        if not isinstance(answer, StepAnswer):
+            self._end(ep, f"{ep.resampler.what}: the monitor cannot judge it: {answer}")
+            return
+        self.answers.append((ep.number, answer))
+        self.verdict.step(answer, ep.number)
+        if ep.recorder is not None:
+            self._record(ep.recorder, due.k, due.row, answer)
 
     def _start(self, ep: _Episode) -> None:
         """The episode's monitor, told its skill, and its recording."""
-        ep.step = ep.resources.enter_context(self.judge.open(ep.label))
+        ep.monitor = ep.resources.enter_context(self.judge.open(ep.label))
         if self.out is not None:
             period = self.mapping.timing.period_s
             metadata = {"source": "ros2", "skill": ep.label, "episode": ep.number, "namespace": self.bus.namespace}
@@ -277,29 +307,65 @@ class MonitorNode:
             energy=answer.energy, threshold=answer.threshold, fault=answer.fault,
             isolated_joint=answer.isolated_joint, time_s=k * self.mapping.timing.period_s))
 
-    def close(self, why: str | None) -> None:
-        """End the open episode; ``why``: the input that ended it, said as a WARN status."""
-        ep, self.current = self.current, None
+    def _end(self, ep: _Episode | None, why: str | None) -> None:
+        """Close an episode's monitor and recording; ``why`` said as a WARN status."""
         if ep is not None:
+            if ep.ended:
+                return
+            ep.ended = True
+            if self.current is ep:
+                self.current = None
             try:
                 ep.resources.close()
             except JUDGING as exc:  # a service session that cannot be ended
                 why = why or f"{ep.resampler.what}: its session did not end: {exc}"
         if why is not None:
-            self.verdict.say(WARN, why, {"episode": str(ep.number) if ep is not None else ""})
+            self._warn(why, ep)
+
+    def _warn(self, why: str, ep: _Episode | None) -> None:
+        self.verdict.say(WARN, why, {"episode": str(ep.number) if ep is not None else ""})
 
 
-def load_judge(model: str | None, url: str | None, fpr: float, models_dir: Path,
-               api_key: str | None = None) -> tuple[Judge, tuple[str, ...]]:
-    """The judge of ``model`` (a checkpoint's path or a name in ``models_dir``; with ``url``, a
-    model the service hosts, None: its default) and the channel names it expects."""
-    if url is not None:
-        served = served_model(url, api_key, model)
-        return RemoteJudge(ServiceClient(url, api_key), served["name"], fpr), tuple(served.get("channel_names", ()))
-    if model is None:
-        raise LogError("give --model: the checkpoint that judges (or --url, a service whose default model does)")
-    path = Path(model)
-    if not path.exists():
-        path = models_dir / f"{model}.safetensors"
-    memory = SkillMemory.load(path)
-    return LocalJudge(memory, fpr), memory.channel_names
+def judge_due(nodes: Sequence[MonitorNode]) -> None:
+    """Judge every step the nodes have due, in rounds: a round takes each node's first (its next
+    waits for it) and judges them together (``judge_together``)."""
+    while True:
+        heads = [(node, due) for node in nodes if (due := node.next_due()) is not None]
+        if not heads:
+            return
+        steps = []
+        for _, due in heads:
+            assert due.episode is not None and due.episode.monitor is not None and due.row is not None
+            steps.append((due.episode.monitor, due.row))
+        for (node, due), answer in zip(heads, judge_together(steps)):
+            node.deliver(due, answer)
+
+
+class Fleet:
+    """The nodes of many robots, each on its namespace of ``bus`` (``Bus.under``), spun by one
+    thread: a spin takes every node's messages, then judges all their steps due together."""
+
+    def __init__(self, bus: Bus, nodes: Sequence[MonitorNode]) -> None:
+        self.bus, self.nodes = bus, list(nodes)
+        self.wait: Callable[[float], bool] = bus.wait_for(r for node in nodes for r in node.all_readers)
+
+    def spin(self, stop: threading.Event, poll_s: float = 0.1) -> None:
+        """Read, judge and publish until ``stop`` is set; the open episodes are closed at the end."""
+        try:
+            while not stop.is_set():
+                self.spin_once(poll_s)
+        finally:
+            for node in self.nodes:
+                node.close("the node stopped in the episode" if node.current is not None else None)
+            judge_due(self.nodes)
+
+    def spin_once(self, timeout_s: float) -> None:
+        """Handle every message waiting (within ``timeout_s``), judge the steps they complete, then
+        each node's heartbeat."""
+        self.wait(timeout_s)
+        publications = self.bus.publications()  # of the participant the nodes share
+        for node in self.nodes:
+            node.take(publications)
+        judge_due(self.nodes)
+        for node in self.nodes:
+            node.verdict.heartbeat()

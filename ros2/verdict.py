@@ -1,6 +1,8 @@
 """The monitor's verdict where ROS tools look for it: ``/diagnostics`` (``DiagnosticArray``, shown
-by ``rqt_robot_monitor``, the diagnostic aggregator and Foxglove without configuration), and
-``nasm/fault`` (``std_msgs/Bool``) and ``nasm/energy`` (``std_msgs/Float64``) every step."""
+by ``rqt_robot_monitor``, the diagnostic aggregator and Foxglove without configuration) when the
+status changes and twice a second otherwise (ROS asks for at least once a second: a diagnostic
+is a component's health, not a data stream), and ``nasm/fault`` (``std_msgs/Bool``) and
+``nasm/energy`` (``std_msgs/Float64``) every step."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ T = m.STORE.types
 STATUS = T[m.DIAGNOSTIC_STATUS]
 OK, WARN, ERROR = int(STATUS.OK), int(STATUS.WARN), int(STATUS.ERROR)
 NAME = "nasm: fault monitor"
-HEARTBEAT_S = 0.5  # the last status again when nothing new was said: ROS tools mark a silent one stale
+HEARTBEAT_S = 0.5  # the status again when it did not change: ROS tools mark a silent one stale
 
 
 def _stamp(ns: int) -> Any:
@@ -30,7 +32,8 @@ def answer_values(answer: StepAnswer, episode: int) -> dict[str, str]:
 
 
 class VerdictWriter:
-    """The node's publishers; ``status`` is the last one said, repeated by ``heartbeat``."""
+    """The node's publishers; ``status`` is the status now, published when its level or message
+    changes or a WARN is said, and again by ``heartbeat`` with the newest step's values."""
 
     def __init__(self, bus: Bus, hardware_id: str) -> None:
         self.hardware_id = hardware_id
@@ -43,24 +46,27 @@ class VerdictWriter:
 
     def say(self, level: int, message: str, values: dict[str, str] | None = None) -> None:
         """Publish a status now (and keep it for the heartbeat)."""
-        kv = [T[m.KEY_VALUE](key=k, value=v) for k, v in (values or {}).items()]
-        self.status = STATUS(level=level, name=NAME, message=message, hardware_id=self.hardware_id, values=kv)
+        self._set(level, message, values)
         self._publish()
 
     def step(self, answer: StepAnswer, episode: int) -> None:
-        """Every step: its fault and energy, and its status (ERROR when flagged)."""
+        """Every step: its fault and energy; its status (ERROR when flagged) if it says something new."""
         self._fault.write(T[m.BOOL](data=bool(answer.fault)))
         self._energy.write(T[m.FLOAT64](data=float(answer.energy)))
-        where = f"episode {episode}, step {answer.step}"
-        if answer.fault:
-            self.say(ERROR, f"fault at {where}: joint {answer.isolated_joint} isolated", answer_values(answer, episode))
-        else:
-            self.say(OK, f"normal at {where}", answer_values(answer, episode))
+        level, message = (ERROR, f"fault: joint {answer.isolated_joint} isolated") if answer.fault else (OK, "normal")
+        changed = (level, message) != (self.status.level, self.status.message)
+        self._set(level, message, answer_values(answer, episode))
+        if changed:
+            self._publish()
 
     def heartbeat(self) -> None:
-        """The last status again if nothing was said for ``HEARTBEAT_S``."""
+        """The status again if none was published for ``HEARTBEAT_S``."""
         if time.monotonic() - self._said >= HEARTBEAT_S:
             self._publish()
+
+    def _set(self, level: int, message: str, values: dict[str, str] | None) -> None:
+        kv = [T[m.KEY_VALUE](key=k, value=v) for k, v in (values or {}).items()]
+        self.status = STATUS(level=level, name=NAME, message=message, hardware_id=self.hardware_id, values=kv)
 
     def _publish(self) -> None:
         self._diagnostics.write(T[m.DIAGNOSTIC_ARRAY](header=_stamp(time.time_ns()), status=[self.status]))

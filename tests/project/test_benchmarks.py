@@ -42,9 +42,12 @@ RUNS: dict[tuple[str, ...], tuple[str, ...]] = {
                            "step_ms_single_offline"),
     ("bench_balancer.py",): ("balancer_vs_direct", "lost_steps_surviving", "reconnected_sessions",
                              "killed_recordings_recovered"),
+    ("bench_ros2.py",): ("ros2_steps_per_s", "ros2_lag_p95_ms", "ros2_lost_messages", "websocket_steps_per_s",
+                         "ros2_vs_websocket"),
 }
 # what a benchmark needs that the package does not bring (.ci/run installs it)
 TOOLS = {"bench_balancer.py": "haproxy"}
+MODULES = {"bench_ros2.py": "cyclonedds"}  # an optional extra's (.ci/run installs the ros2 extra)
 
 
 def run_quick(command: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
@@ -81,6 +84,8 @@ def test_each_benchmark_runs_in_its_quick_mode_and_reports_every_key(run, tmp_pa
     tool = TOOLS.get(script)
     if tool and shutil.which(tool) is None:
         pytest.skip(f"{script} needs {tool}, which is not installed here (.ci/run installs it)")
+    if script in MODULES:
+        pytest.importorskip(MODULES[script], reason=f"{script} needs the ros2 extra (.ci/run installs it)")
     env = {**os.environ, "NASM_HOME": str(tmp_path)}
     done = run_quick([sys.executable, f"benchmarks/{script}", "--quick", *options], env)
     assert done.returncode == 0, done.stderr[-3000:]

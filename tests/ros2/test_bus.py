@@ -95,6 +95,18 @@ def test_a_diagnostic_array_written_with_the_default_qos_is_read_back_whole():
     assert received.message.status == [status] and received.message.header == header
 
 
+def test_namespaces_sharing_one_participant_read_only_their_own_topics_and_wake_their_own_wait():
+    bus = Bus(env=LOOPBACK)
+    robots = [bus.under(f"/robot{r}") for r in range(2)]
+    readers = [robot.reader("fault", m.BOOL, qos=DEFAULT) for robot in robots]
+    writer = bus.writer("/robot1/fault", m.BOOL)
+    assert writer.wait_for_subscribers(1, timeout_s=30) and readers[0].publishers() == 0
+    writer.write(m.STORE.types[m.BOOL](data=True))
+    assert robots[1].wait(timeout_s=30) and not robots[0].wait(timeout_s=0)
+    assert [r.message.data for r in readers[1].take()] == [True] and readers[0].take() == []
+    assert [r.topic for r in readers] == ["/robot0/fault", "/robot1/fault"]
+
+
 def selected_addresses(trace: str) -> set[str]:
     """The addresses of the interfaces a Cyclone DDS trace says the participant selected."""
     addresses = dict(re.findall(r"(\S+) udp/([\d.]+)\(", re.search(r" interfaces: (.*)", trace)[1]))

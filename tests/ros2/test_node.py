@@ -15,14 +15,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 pytest.importorskip("cyclonedds")
 
+from neural_asm.client.session import ServiceClient  # noqa: E402
 from neural_asm.logs.mapping import parse_mapping  # noqa: E402
 from neural_asm.memory import SkillMemory  # noqa: E402
 from neural_asm.ros2 import messages as m  # noqa: E402
 from neural_asm.ros2.bus import DEFAULT, Bus  # noqa: E402
-from neural_asm.ros2.node import LocalJudge, MonitorNode, RemoteJudge, load_judge  # noqa: E402
+from neural_asm.ros2.judge import LocalJudge, RemoteJudge, load_judge  # noqa: E402
+from neural_asm.ros2.node import MonitorNode  # noqa: E402
 from neural_asm.ros2.verdict import ERROR, OK, WARN  # noqa: E402
 from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_NAMES  # noqa: E402
 
@@ -318,32 +321,135 @@ def test_a_monitor_refusing_the_episode_is_a_warn_and_the_node_goes_on():
     assert warned == "episode 0: the monitor cannot judge it: no skill None in this memory"
 
 
+NASM = str(Path(sys.executable).with_name("nasm"))
+
+
+def write_table(observations: np.ndarray, folder: Path) -> tuple[Path, Path]:
+    """One episode as a lab's table (a time column and a column per channel) and its mapping."""
+    folder.mkdir()
+    table = folder / "locked.csv"
+    rows = np.column_stack([np.arange(len(observations)) * 0.5, observations])
+    np.savetxt(table, rows, delimiter=",", header=",".join(["t", *CHANNEL_NAMES]), comments="")
+    doc = {"timing": {"period_s": 0.5, "steps": STEPS}, "source": {"kind": "table", "time_column": "t"},
+           "channels": [{"name": n, "column": n, "units": "1", "joint": n in JOINT_NAMES} for n in CHANNEL_NAMES]}
+    (folder / "table.yaml").write_text(yaml.safe_dump(doc))
+    return table, folder / "table.yaml"
+
+
+def by_step(said: list) -> dict[int, dict[str, str]]:
+    """Each step's first status (the heartbeat repeats it), its level among its values."""
+    found: dict[int, dict[str, str]] = {}
+    for s in said:
+        if s.level in (OK, ERROR) and "step" in values(s):
+            found.setdefault(int(values(s)["step"]), {**values(s), "level": str(s.level)})
+    return found
+
+
 @pytest.mark.slow
-def test_a_bag_played_onto_the_bus_is_judged_as_the_bag_reader_reads_it(memory, tmp_path):
-    """``nasm ros2 --play`` in another process plays a rosbag2 episode at its own pace; the node
-    judges each step as the in-process monitor judges the bag reader's episode."""
-    from neural_asm.experiments.robot_logs.write import bag_mapping, write_bag, write_mapping
+def test_a_table_played_by_nasm_replay_ros2_is_judged_by_nasm_ros2_as_the_service_judges_it(memory, tmp_path):
+    """``nasm replay --ros2`` in one process plays a table's episode (joint 4 locked) onto the bus;
+    ``nasm ros2`` in another judges it; every step's status on /diagnostics is the decision a
+    service session gives for the episode the table reader reads."""
+    from neural_asm.experiments.robot_logs.write import bag_mapping, write_mapping
+    from neural_asm.logs.cli import read_logs
+    from neural_asm.service.embedded import start_embedded
+    from neural_asm.service.settings import Settings
+
+    table, table_mapping = write_table(locked(), tmp_path / "table")
+    node_mapping = write_mapping(bag_mapping(split="gap"), tmp_path / "node.yaml")
+    memory.save(tmp_path / "models" / "panda.safetensors")
+    env = {**os.environ, **LOOPBACK}
+    listener = Bus(env=LOOPBACK)
+    diagnostics = listener.reader("/diagnostics", m.DIAGNOSTIC_ARRAY, qos=DEFAULT)
+    node = subprocess.Popen([NASM, "ros2", "--mapping", str(node_mapping), "--model", "panda", "--models-dir",
+                             str(tmp_path / "models"), "--namespace", NAMESPACE, "--out", str(tmp_path / "recordings")],
+                            env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    player = None
+    said: list = []
+    try:
+        assert diagnostics.wait_for_publishers(1, timeout_s=120), "nasm ros2 never published /diagnostics"
+        player = subprocess.Popen([NASM, "replay", str(table), "--mapping", str(table_mapping), "--ros2",
+                                   str(node_mapping), "--namespace", NAMESPACE], env=env, text=True,
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 120
+        while STEPS - 1 not in by_step(said) and time.monotonic() < deadline and player.poll() in (None, 0):
+            listener.wait(1.0)
+            said += statuses(diagnostics)
+        played, _ = player.communicate(timeout=60)
+    finally:
+        for child in (node, player):
+            if child is not None and child.poll() is None:
+                child.terminate()
+        monitored_by, _ = node.communicate(timeout=60)
+        if player is not None and player.poll() is None:
+            player.kill()
+    assert player.returncode == 0 and "played episode 0 (locked, 15 steps)" in played, played
+    steps = by_step(said)
+    assert sorted(steps) == list(range(STEPS)), (monitored_by, [s.message for s in said])
+    episode = read_logs(str(table), table_mapping).data[0]
+    settings = Settings(models_dir=tmp_path / "models", record=False, build_default_model=False)
+    with start_embedded(settings) as srv:
+        with RemoteJudge(ServiceClient(srv.url), "panda", FPR).open(None) as step:
+            served = [step(x) for x in episode]
+    assert [(k, steps[k]["level"] == str(ERROR), steps[k]["isolated_joint"]) for k in range(STEPS)] == \
+        [(a.step, a.fault, a.isolated_joint or "") for a in served]
+    assert [float(steps[k]["energy"]) for k in range(STEPS)] == pytest.approx([a.energy for a in served], rel=1e-5)
+    assert [float(steps[k]["threshold"]) for k in range(STEPS)] == pytest.approx([a.threshold for a in served],
+                                                                                rel=1e-5)
+    flagged = [a for a in served if a.fault]
+    assert flagged and flagged[0].isolated_joint == "joint4"
+    assert len(list((tmp_path / "recordings").rglob("*.rrd"))) == 1
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["rosbag2", "lerobot"])
+def test_a_bag_or_a_dataset_played_by_nasm_replay_ros2_is_judged_as_its_reader_reads_it(memory, tmp_path, kind):
+    """``nasm replay --ros2`` plays what ``nasm replay`` reads, twice its pace; the node judges each
+    step as the in-process monitor judges the episode the source's reader reads."""
+    from typer.testing import CliRunner
+
+    from neural_asm.cli import app
+    from neural_asm.experiments.robot_logs.write import (bag_mapping, lerobot_mapping, write_bag, write_lerobot,
+                                                         write_mapping)
     from neural_asm.logs.cli import read_logs
     from neural_asm.sim.paper import run_episode
     from neural_asm.sim.skills import SKILLS
 
-    bag = write_bag([run_episode(SKILLS[0], 31)], tmp_path / "bag")
+    episodes = [run_episode(SKILLS[0], 31)]
+    source = write_bag(episodes, tmp_path / "bag") if kind == "rosbag2" else write_lerobot(episodes, tmp_path / "set")
+    read_as = write_mapping(bag_mapping(split="gap") if kind == "rosbag2" else lerobot_mapping(), tmp_path / "read.yaml")
     doc = bag_mapping(split="gap")
-    path = write_mapping(doc, tmp_path / "mapping.yaml")
-    running = Running(parse_mapping(doc, "the bags' mapping"), LocalJudge(memory, FPR), None)
-    player = subprocess.Popen([str(Path(sys.executable).with_name("nasm")), "ros2", "--mapping", str(path), "--play",
-                               str(bag), "--namespace", NAMESPACE], env={**os.environ, **LOOPBACK}, text=True,
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    node_mapping = write_mapping(doc, tmp_path / "node.yaml")
+    running = Running(parse_mapping(doc, "the node's mapping"), LocalJudge(memory, FPR), None)
     try:
+        result = CliRunner().invoke(app, ["replay", str(source), "--mapping", str(read_as), "--ros2", str(node_mapping),
+                                          "--namespace", NAMESPACE, "--speed", "2"], env=LOOPBACK)
         running.until(lambda s: values(s).get("step") == str(STEPS - 1))
     finally:
         running.close()
-        player.kill()
-        said, _ = player.communicate()
-    expected = in_process(memory, read_logs(str(bag), path).data[0])
+    assert result.exit_code == 0, result.output
+    expected = in_process(memory, read_logs(str(source), read_as).data[0])
     answers = [a for _, a in running.node.answers]
-    assert decisions(answers) == decisions(expected), said
+    assert decisions(answers) == decisions(expected)
     assert [a.energy for a in answers] == pytest.approx([a.energy for a in expected], rel=1e-9)
+
+
+def test_nasm_replay_ros2_refuses_a_node_mapping_of_other_channels_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from neural_asm.cli import app
+    from neural_asm.experiments.robot_logs.write import bag_mapping, write_mapping
+
+    table, table_mapping = write_table(np.zeros((STEPS, len(CHANNEL_NAMES))), tmp_path / "table")
+    doc = bag_mapping(split="gap")
+    doc["channels"] = [c for c in doc["channels"] if c["name"] != "ee_x"]
+    node_mapping = write_mapping(doc, tmp_path / "node.yaml")
+    result = CliRunner().invoke(app, ["replay", str(table), "--mapping", str(table_mapping), "--ros2",
+                                      str(node_mapping)], env=LOOPBACK)
+    assert result.exit_code == 2
+    assert "episode 0 has channels the node's mapping does not (missing [], extra ['ee_x'])" in result.output
+    result = CliRunner().invoke(app, ["replay", str(table), "--mapping", str(table_mapping)])
+    assert result.exit_code == 2 and "give either --url" in result.output
 
 
 def test_the_node_says_it_is_waiting_before_any_message():
