@@ -44,6 +44,7 @@ from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
 from neural_asm.models.cross_fit import CrossFit, conformal_minimum, group_folds
 from neural_asm.models.fault import FaultDecision, isolate
 from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.recall import Recaller
 from neural_asm.models.scoring import StepScore
 from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, SkillSpreads, infer
 
@@ -462,6 +463,8 @@ class SkillSession:
             raise ValueError(f"no threshold at false-positive rate {fpr}; calibrated at {sorted(thresholds)}")
         self.threshold = float(thresholds[fpr])
         self.recaller = memory.model.recaller(len(self.rows), "online") if "dynamics" in cal.spreads else None
+        if self.told is None and isinstance(self.recaller, Recaller):  # (online recall always is one)
+            self.recaller.lay_out()  # one row per skill at every step: W_H^T contiguous pays for its copy
         self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
         self.t = 0
         # each row's cue as the network reads it (normalised), the same at every step
