@@ -131,10 +131,10 @@ class SkillCalibration:
     told: dict[float, np.ndarray] = field(default_factory=dict)  # fpr -> (K,)
     out_of_fold_episodes: int = 0  # demonstrations whose out-of-fold peaks joined the threshold episodes'
 
-    def scored(self, residuals: dict[str, np.ndarray], steps: np.ndarray, rows: np.ndarray | slice = slice(None)
+    def scored(self, residuals: dict[str, np.ndarray], steps: np.ndarray | int, rows: np.ndarray | slice = slice(None)
                ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
         """The energies (..., R, S) of residuals per term (..., R, S, D) against the skills ``rows``
-        (all K by default) at ``steps`` and those skills' log normalisers (R, S), summed over the
+        (all K by default) at ``steps`` (S,; an int: one step) and those skills' log normalisers (R, S), summed over the
         terms scored; and what updates the posterior where it is not those (the same sums over
         `recognised_by`; None: the scored ones). Each term is weighed once."""
         used = dict.fromkeys((*self.terms, *self.recognised_by))
@@ -242,6 +242,9 @@ class SkillMemory:
         self.model = model
         self.means = np.asarray(means, np.float64)  # (K, T, D) each skill's mean course of its demonstrations, raw
         self.calibration: SkillCalibration | None = None
+        self.width = self.means.shape[2]  # the observation channels, the cue's left out
+        self.channel_names: tuple[str, ...] = model.channel_names[: self.width]
+        self.observed = Normaliser(model.normaliser.mean[: self.width], model.normaliser.std[: self.width])
 
     @classmethod
     def fit(cls, sequences: np.ndarray, channel_names: Sequence[str], labels: Labels, config: TPCConfig,
@@ -290,14 +293,6 @@ class SkillMemory:
                              f"skills {', '.join(self.skills)}); these {len(data)} are not: their count, skills or "
                              f"mean courses differ")
 
-    @property
-    def channel_names(self) -> tuple[str, ...]:
-        return self.model.channel_names[: self.width]
-
-    @property
-    def width(self) -> int:
-        return self.means.shape[2]
-
     def index(self, skill: str) -> int:
         """The skill's row, or a ValueError naming it and the skills known."""
         if skill not in self.skills:
@@ -306,8 +301,7 @@ class SkillMemory:
 
     def normalise(self, x: np.ndarray) -> np.ndarray:
         """Raw observations (..., D) in the network's normalised units (the cue channels left out)."""
-        return ((np.asarray(x, np.float64) - self.model.normaliser.mean[: self.width])
-                / self.model.normaliser.std[: self.width])
+        return (np.asarray(x, np.float64) - self.observed.mean) / self.observed.std
 
     def courses(self, course: Course, steps: int) -> np.ndarray:
         """(K, steps, D) normalised: each skill's offline recall from its own start (its mean first
@@ -467,14 +461,14 @@ class SkillSession:
             self.recaller.lay_out()  # one row per skill at every step: W_H^T contiguous pays for its copy
         self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
         self.t = 0
+        self.names = tuple(memory.skills[r] for r in self.rows)  # each row's skill
         # each row's cue as the network reads it (normalised), the same at every step
         normaliser, width = memory.model.normaliser, memory.width
         cues = with_cue(np.zeros((len(self.rows), width)), self.rows, len(memory.skills))[:, width:]
         self.cues = Normaliser(normaliser.mean[width:], normaliser.std[width:]).normalise(cues)
-        self.observed = Normaliser(normaliser.mean[:width], normaliser.std[:width])
 
     def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
-        memory, cal, t = self.memory, self.calibration, np.array([self.t])
+        memory, cal, t = self.memory, self.calibration, self.t
         raw = np.asarray(observation, np.float64)
         if raw.shape != (memory.width,) or not np.isfinite(raw).all():
             raise ValueError(f"observation: expected {memory.width} finite values ({', '.join(memory.channel_names)}), "
@@ -482,23 +476,24 @@ class SkillSession:
         x = memory.normalise(raw)
         residuals = {}
         if "course" in cal.spreads:
-            residuals["course"] = (x - cal.courses[self.picked, min(self.t, cal.courses.shape[1] - 1)])[:, None]
+            residuals["course"] = (x - cal.courses[self.picked, min(t, cal.courses.shape[1] - 1)])[:, None]
         if self.recaller is not None:
-            observed = np.repeat(self.observed.normalise(raw)[None], len(self.rows), axis=0)
+            observed = np.broadcast_to(x.astype(np.float32), (len(self.rows), memory.width))  # as the network reads x
             expected = self.recaller.step(np.concatenate([observed, self.cues], axis=1))  # what with_cue gives, normalised
             residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
         energies, norm, evidence = cal.scored(residuals, t, self.picked)
         energies, norm = energies[:, 0], norm[:, 0]  # (R,) each
         if self.told is None:
             seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
-            energy = float(self.posterior.step(energies[None], norm, cal.rule, self.t == 0, seen)[0])
+            energy = float(self.posterior.step(energies[None], norm, cal.rule, t == 0, seen)[0])
             p = self.posterior.probabilities[0]
-            skill, probability = memory.skills[int(p.argmax())], float(p.max())
+            best = int(p.argmax())
+            skill, probability = memory.skills[best], float(p[best])
         else:
             energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0
         self.t += 1
-        return SkillStep(int(t[0]), energy, {memory.skills[r]: float(e) for r, e in zip(self.rows, energies)},
-                         skill, probability, self.threshold, energy > self.threshold)
+        return SkillStep(t, energy, dict(zip(self.names, energies.tolist())), skill, probability, self.threshold,
+                         energy > self.threshold)
 
 
 def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamStep, float]:
@@ -513,8 +508,8 @@ def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamS
     expected, upcoming = cal.courses[k, min(step.t, last)], cal.courses[k, min(step.t + 1, last)]
     errors = memory.normalise(observation) - expected
     course = cal.spreads.get("course")
-    weighted = errors if course is None else errors / course.at(np.array([step.t]), np.array([k]))[0, 0]
-    mean, std = memory.model.normaliser.mean[: memory.width], memory.model.normaliser.std[: memory.width]
+    weighted = errors if course is None else errors / course.at(step.t, slice(k, k + 1))[0, 0]
+    mean, std = memory.observed.mean, memory.observed.std
     score = StepScore(step.t, expected * std + mean, errors, weighted, step.energy, upcoming * std + mean, step.skill)
     joint, ranked, sizes = isolate(weighted, memory.channel_names)
     decision = FaultDecision(step.fault, step.energy, step.threshold, joint, ranked, sizes)
