@@ -107,7 +107,7 @@ def isolate_rows(
     magnitude = np.abs(weighted_errors)
     order = np.argsort(-magnitude, axis=1, kind="stable")
     ranked = _name_array(names)[order].tolist()
-    errors = np.take_along_axis(magnitude, order, 1).tolist()
+    errors = magnitude[np.arange(len(order))[:, None], order].tolist()
     joints = _joint_index(names)
     if not joints:
         return [None] * len(ranked), ranked, errors

@@ -478,8 +478,9 @@ class SkillSession:
         if "course" in cal.spreads:
             residuals["course"] = (x - cal.courses[self.picked, min(t, cal.courses.shape[1] - 1)])[:, None]
         if self.recaller is not None:
-            observed = np.broadcast_to(x.astype(np.float32), (len(self.rows), memory.width))  # as the network reads x
-            expected = self.recaller.step(np.concatenate([observed, self.cues], axis=1))  # what with_cue gives, normalised
+            cued = np.empty((len(self.rows), memory.width + len(memory.skills)), np.float32)  # what with_cue gives, normalised
+            cued[:, : memory.width], cued[:, memory.width:] = x, self.cues  # x as the network reads it, in float32
+            expected = self.recaller.step(cued)
             residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
         energies, norm, evidence = cal.scored(residuals, t, self.picked)
         energies, norm = energies[:, 0], norm[:, 0]  # (R,) each
