@@ -138,11 +138,14 @@ class SkillCalibration:
         terms scored; and what updates the posterior where it is not those (the same sums over
         `recognised_by`; None: the scored ones). Each term is weighed once."""
         used = dict.fromkeys((*self.terms, *self.recognised_by))
-        parts = {t: (self.spreads[t].energy(residuals[t], steps, rows), self.spreads[t].log_normaliser(steps, rows))
-                 for t in used}
+        energy = {t: self.spreads[t].energy(residuals[t], steps, rows) for t in used}
+        norm = {t: self.spreads[t].log_normaliser(steps, rows) for t in used}
 
         def summed(terms: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-            return sum(parts[t][0] for t in terms), sum(parts[t][1] for t in terms)
+            total, normaliser = energy[terms[0]], norm[terms[0]]
+            for t in terms[1:]:
+                total, normaliser = total + energy[t], normaliser + norm[t]
+            return total, normaliser
 
         own = bool(self.recognised_by) and set(self.recognised_by) != set(self.terms)
         return (*summed(self.terms), summed(self.recognised_by) if own else None)
@@ -466,6 +469,7 @@ class SkillSession:
         normaliser, width = memory.model.normaliser, memory.width
         cues = with_cue(np.zeros((len(self.rows), width)), self.rows, len(memory.skills))[:, width:]
         self.cues = Normaliser(normaliser.mean[width:], normaliser.std[width:]).normalise(cues)
+        self.expectations = memory.observed.denormalise(cal.courses)  # (K, T, D) each skill's course, raw: what a served step expected
 
     def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
         memory, cal, t = self.memory, self.calibration, self.t
@@ -506,12 +510,12 @@ def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamS
     step = session.step(observation)
     memory, cal = session.memory, session.calibration
     k, last = memory.index(step.skill), cal.courses.shape[1] - 1
-    expected, upcoming = cal.courses[k, min(step.t, last)], cal.courses[k, min(step.t + 1, last)]
-    errors = memory.normalise(observation) - expected
+    now, upcoming = min(step.t, last), min(step.t + 1, last)
+    errors = memory.normalise(observation) - cal.courses[k, now]
     course = cal.spreads.get("course")
     weighted = errors if course is None else errors / course.at(step.t, slice(k, k + 1))[0, 0]
-    mean, std = memory.observed.mean, memory.observed.std
-    score = StepScore(step.t, expected * std + mean, errors, weighted, step.energy, upcoming * std + mean, step.skill)
+    expected, forecast = session.expectations[k, now].copy(), session.expectations[k, upcoming].copy()
+    score = StepScore(step.t, expected, errors, weighted, step.energy, forecast, step.skill)
     joint, ranked, sizes = isolate(weighted, memory.channel_names)
     decision = FaultDecision(step.fault, step.energy, step.threshold, joint, ranked, sizes)
     return StreamStep(score, decision), step.probability
