@@ -82,7 +82,8 @@ def flag_steps(energies: np.ndarray, calibration: Calibration, fpr: float,
 
 def isolated_joint(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> np.ndarray:
     """Position (0-based, among the joint channels) of the joint with the largest |error|, for
-    errors (..., D) of any leading shape: the served decision and the fault sweep use this."""
+    errors (..., D) of any leading shape: the fault sweep uses this, the served decision (`isolate_rows`) the
+    same argmax of the magnitudes it has."""
     joints = _joint_index(tuple(channel_names))
     if not joints:
         raise ValueError("no joint channels (named joint...) to isolate a fault in")
@@ -111,7 +112,7 @@ def isolate_rows(
     joints = _joint_index(names)
     if not joints:
         return [None] * len(ranked), ranked, errors
-    isolated = [names[joints[j]] for j in isolated_joint(weighted_errors, names).tolist()]
+    isolated = [names[joints[j]] for j in magnitude[:, joints].argmax(axis=1).tolist()]  # `isolated_joint`'s
     return isolated, ranked, errors
 
 

@@ -472,11 +472,16 @@ class SkillSession:
         self.expectations = memory.observed.denormalise(cal.courses)  # (K, T, D) each skill's course, raw: what a served step expected
 
     def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
-        memory, cal, t = self.memory, self.calibration, self.t
+        memory = self.memory
         raw = np.asarray(observation, np.float64)
         if raw.shape != (memory.width,) or not np.isfinite(raw).all():
             raise ValueError(f"observation: expected {memory.width} finite values ({', '.join(memory.channel_names)}), "
                              f"got {raw.tolist()}")
+        return self._advance(raw)
+
+    def _advance(self, raw: np.ndarray) -> SkillStep:
+        """`step` of a raw observation (D,) float64 already checked (`served_step`'s are)."""
+        memory, cal, t = self.memory, self.calibration, self.t
         x = memory.normalise(raw)
         residuals = {}
         if "course" in cal.spreads:
@@ -507,7 +512,7 @@ def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamS
     probability. What it expected is the answered skill's course (told, or the most probable), its
     forecast the course's next step, and each channel's error is divided by that skill's course
     spread (without one: left as is), which isolation ranks."""
-    step = session.step(observation)
+    step = session._advance(observation)
     memory, cal = session.memory, session.calibration
     k, last = memory.index(step.skill), cal.courses.shape[1] - 1
     now, upcoming = min(step.t, last), min(step.t + 1, last)
