@@ -82,7 +82,8 @@ def flag_steps(energies: np.ndarray, calibration: Calibration, fpr: float,
 
 def isolated_joint(weighted_errors: np.ndarray, channel_names: Sequence[str]) -> np.ndarray:
     """Position (0-based, among the joint channels) of the joint with the largest |error|, for
-    errors (..., D) of any leading shape: the served decision and the fault sweep use this."""
+    errors (..., D) of any leading shape: the fault sweep uses this, the served decision (`isolate_rows`) the
+    same argmax of the magnitudes it has."""
     joints = _joint_index(tuple(channel_names))
     if not joints:
         raise ValueError("no joint channels (named joint...) to isolate a fault in")
@@ -107,11 +108,11 @@ def isolate_rows(
     magnitude = np.abs(weighted_errors)
     order = np.argsort(-magnitude, axis=1, kind="stable")
     ranked = _name_array(names)[order].tolist()
-    errors = np.take_along_axis(magnitude, order, 1).tolist()
+    errors = magnitude[np.arange(len(order))[:, None], order].tolist()
     joints = _joint_index(names)
     if not joints:
         return [None] * len(ranked), ranked, errors
-    isolated = [names[joints[j]] for j in isolated_joint(weighted_errors, names).tolist()]
+    isolated = [names[joints[j]] for j in magnitude[:, joints].argmax(axis=1).tolist()]  # `isolated_joint`'s
     return isolated, ranked, errors
 
 

@@ -133,15 +133,16 @@ def gauss_newton(prior: np.ndarray, x: np.ndarray, w_f: np.ndarray, scale: np.nd
     w = w_f * scale.reshape(-1, 1)  # Pi^1/2 W_F
     j = np.empty_like(w)  # J = Pi^1/2 W_F diag(f'(prior))
     factor = np.empty((size, size), np.float32)
-    rows = np.empty((7, hidden), np.float32)  # per-row buffers, reused
-    z, fz, slope, grad, dz, new_z, new_fz = rows[0], rows[1], rows[2], rows[3], rows[4], rows[5], rows[6]
+    rows = np.empty((8, hidden), np.float32)  # per-row buffers, reused
+    z, fz, slope, grad, dz, new_z, new_fz, origin = rows[0], rows[1], rows[2], rows[3], rows[4], rows[5], rows[6], rows[7]
     small = np.empty((4, size), np.float32)
     target, residual, new_residual, solution = small[0], small[1], small[2], small[3]
     out = np.empty_like(prior)
-    for b in range(batch):
-        origin = prior[b]
-        target[:] = x[b] * scale
-        z[:] = origin
+    for b in range(batch):  # copies by explicit loops: an array expression allocates, a slice counts references
+        for d in range(size):
+            target[d] = x[b, d] * scale[d]
+        for k in range(hidden):
+            origin[k] = z[k] = prior[b, k]
         _tanh(z, fz)
         energy = _residual(w, fz, target, residual)
         for k in range(hidden):  # f'(prior): every step's curvature is evaluated here (the chord method)
@@ -169,7 +170,8 @@ def gauss_newton(prior: np.ndarray, x: np.ndarray, w_f: np.ndarray, scale: np.nd
                     acc += j[d, k] * grad[k]
                 solution[d] = acc
             _cholesky_solve(factor, solution)
-            dz[:] = grad
+            for k in range(hidden):
+                dz[k] = grad[k]
             for d in range(size):
                 coef = solution[d]
                 for k in range(hidden):
@@ -183,10 +185,16 @@ def gauss_newton(prior: np.ndarray, x: np.ndarray, w_f: np.ndarray, scale: np.nd
                 _tanh(new_z, new_fz)
                 new_energy = moved + _residual(w, new_fz, target, new_residual)
                 if new_energy <= energy:
-                    z[:], fz[:], residual[:], energy = new_z, new_fz, new_residual, new_energy
+                    for k in range(hidden):
+                        z[k], fz[k] = new_z[k], new_fz[k]
+                    for d in range(size):
+                        residual[d] = new_residual[d]
+                    energy = new_energy
                     break
-                dz *= half
-        out[b] = z
+                for k in range(hidden):
+                    dz[k] *= half
+        for k in range(hidden):
+            out[b, k] = z[k]
     return out
 
 

@@ -44,6 +44,7 @@ from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
 from neural_asm.models.cross_fit import CrossFit, conformal_minimum, group_folds
 from neural_asm.models.fault import FaultDecision, isolate
 from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.recall import Recaller
 from neural_asm.models.scoring import StepScore
 from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, SkillSpreads, infer
 
@@ -130,18 +131,21 @@ class SkillCalibration:
     told: dict[float, np.ndarray] = field(default_factory=dict)  # fpr -> (K,)
     out_of_fold_episodes: int = 0  # demonstrations whose out-of-fold peaks joined the threshold episodes'
 
-    def scored(self, residuals: dict[str, np.ndarray], steps: np.ndarray, rows: np.ndarray | slice = slice(None)
+    def scored(self, residuals: dict[str, np.ndarray], steps: np.ndarray | int, rows: np.ndarray | slice = slice(None)
                ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
         """The energies (..., R, S) of residuals per term (..., R, S, D) against the skills ``rows``
-        (all K by default) at ``steps`` and those skills' log normalisers (R, S), summed over the
+        (all K by default) at ``steps`` (S,; an int: one step) and those skills' log normalisers (R, S), summed over the
         terms scored; and what updates the posterior where it is not those (the same sums over
         `recognised_by`; None: the scored ones). Each term is weighed once."""
         used = dict.fromkeys((*self.terms, *self.recognised_by))
-        parts = {t: (self.spreads[t].energy(residuals[t], steps, rows), self.spreads[t].log_normaliser(steps, rows))
-                 for t in used}
+        energy = {t: self.spreads[t].energy(residuals[t], steps, rows) for t in used}
+        norm = {t: self.spreads[t].log_normaliser(steps, rows) for t in used}
 
         def summed(terms: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-            return sum(parts[t][0] for t in terms), sum(parts[t][1] for t in terms)
+            total, normaliser = energy[terms[0]], norm[terms[0]]
+            for t in terms[1:]:
+                total, normaliser = total + energy[t], normaliser + norm[t]
+            return total, normaliser
 
         own = bool(self.recognised_by) and set(self.recognised_by) != set(self.terms)
         return (*summed(self.terms), summed(self.recognised_by) if own else None)
@@ -241,6 +245,9 @@ class SkillMemory:
         self.model = model
         self.means = np.asarray(means, np.float64)  # (K, T, D) each skill's mean course of its demonstrations, raw
         self.calibration: SkillCalibration | None = None
+        self.width = self.means.shape[2]  # the observation channels, the cue's left out
+        self.channel_names: tuple[str, ...] = model.channel_names[: self.width]
+        self.observed = Normaliser(model.normaliser.mean[: self.width], model.normaliser.std[: self.width])
 
     @classmethod
     def fit(cls, sequences: np.ndarray, channel_names: Sequence[str], labels: Labels, config: TPCConfig,
@@ -289,14 +296,6 @@ class SkillMemory:
                              f"skills {', '.join(self.skills)}); these {len(data)} are not: their count, skills or "
                              f"mean courses differ")
 
-    @property
-    def channel_names(self) -> tuple[str, ...]:
-        return self.model.channel_names[: self.width]
-
-    @property
-    def width(self) -> int:
-        return self.means.shape[2]
-
     def index(self, skill: str) -> int:
         """The skill's row, or a ValueError naming it and the skills known."""
         if skill not in self.skills:
@@ -305,8 +304,7 @@ class SkillMemory:
 
     def normalise(self, x: np.ndarray) -> np.ndarray:
         """Raw observations (..., D) in the network's normalised units (the cue channels left out)."""
-        return ((np.asarray(x, np.float64) - self.model.normaliser.mean[: self.width])
-                / self.model.normaliser.std[: self.width])
+        return (np.asarray(x, np.float64) - self.observed.mean) / self.observed.std
 
     def courses(self, course: Course, steps: int) -> np.ndarray:
         """(K, steps, D) normalised: each skill's offline recall from its own start (its mean first
@@ -462,40 +460,50 @@ class SkillSession:
             raise ValueError(f"no threshold at false-positive rate {fpr}; calibrated at {sorted(thresholds)}")
         self.threshold = float(thresholds[fpr])
         self.recaller = memory.model.recaller(len(self.rows), "online") if "dynamics" in cal.spreads else None
+        if self.told is None and isinstance(self.recaller, Recaller):  # (online recall always is one)
+            self.recaller.lay_out()  # one row per skill at every step: W_H^T contiguous pays for its copy
         self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
         self.t = 0
+        self.names = tuple(memory.skills[r] for r in self.rows)  # each row's skill
         # each row's cue as the network reads it (normalised), the same at every step
         normaliser, width = memory.model.normaliser, memory.width
         cues = with_cue(np.zeros((len(self.rows), width)), self.rows, len(memory.skills))[:, width:]
         self.cues = Normaliser(normaliser.mean[width:], normaliser.std[width:]).normalise(cues)
-        self.observed = Normaliser(normaliser.mean[:width], normaliser.std[:width])
+        self.expectations = memory.observed.denormalise(cal.courses)  # (K, T, D) each skill's course, raw: what a served step expected
 
     def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
-        memory, cal, t = self.memory, self.calibration, np.array([self.t])
+        memory = self.memory
         raw = np.asarray(observation, np.float64)
         if raw.shape != (memory.width,) or not np.isfinite(raw).all():
             raise ValueError(f"observation: expected {memory.width} finite values ({', '.join(memory.channel_names)}), "
                              f"got {raw.tolist()}")
+        return self._advance(raw)
+
+    def _advance(self, raw: np.ndarray) -> SkillStep:
+        """`step` of a raw observation (D,) float64 already checked (`served_step`'s are)."""
+        memory, cal, t = self.memory, self.calibration, self.t
         x = memory.normalise(raw)
         residuals = {}
         if "course" in cal.spreads:
-            residuals["course"] = (x - cal.courses[self.picked, min(self.t, cal.courses.shape[1] - 1)])[:, None]
+            residuals["course"] = (x - cal.courses[self.picked, min(t, cal.courses.shape[1] - 1)])[:, None]
         if self.recaller is not None:
-            observed = np.repeat(self.observed.normalise(raw)[None], len(self.rows), axis=0)
-            expected = self.recaller.step(np.concatenate([observed, self.cues], axis=1))  # what with_cue gives, normalised
+            cued = np.empty((len(self.rows), memory.width + len(memory.skills)), np.float32)  # what with_cue gives, normalised
+            cued[:, : memory.width], cued[:, memory.width:] = x, self.cues  # x as the network reads it, in float32
+            expected = self.recaller.step(cued)
             residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
         energies, norm, evidence = cal.scored(residuals, t, self.picked)
         energies, norm = energies[:, 0], norm[:, 0]  # (R,) each
         if self.told is None:
             seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
-            energy = float(self.posterior.step(energies[None], norm, cal.rule, self.t == 0, seen)[0])
+            energy = float(self.posterior.step(energies[None], norm, cal.rule, t == 0, seen)[0])
             p = self.posterior.probabilities[0]
-            skill, probability = memory.skills[int(p.argmax())], float(p.max())
+            best = int(p.argmax())
+            skill, probability = memory.skills[best], float(p[best])
         else:
             energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0
         self.t += 1
-        return SkillStep(int(t[0]), energy, {memory.skills[r]: float(e) for r, e in zip(self.rows, energies)},
-                         skill, probability, self.threshold, energy > self.threshold)
+        return SkillStep(t, energy, dict(zip(self.names, energies.tolist())), skill, probability, self.threshold,
+                         energy > self.threshold)
 
 
 def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamStep, float]:
@@ -504,15 +512,15 @@ def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamS
     probability. What it expected is the answered skill's course (told, or the most probable), its
     forecast the course's next step, and each channel's error is divided by that skill's course
     spread (without one: left as is), which isolation ranks."""
-    step = session.step(observation)
+    step = session._advance(observation)
     memory, cal = session.memory, session.calibration
     k, last = memory.index(step.skill), cal.courses.shape[1] - 1
-    expected, upcoming = cal.courses[k, min(step.t, last)], cal.courses[k, min(step.t + 1, last)]
-    errors = memory.normalise(observation) - expected
+    now, upcoming = min(step.t, last), min(step.t + 1, last)
+    errors = memory.normalise(observation) - cal.courses[k, now]
     course = cal.spreads.get("course")
-    weighted = errors if course is None else errors / course.at(np.array([step.t]), np.array([k]))[0, 0]
-    mean, std = memory.model.normaliser.mean[: memory.width], memory.model.normaliser.std[: memory.width]
-    score = StepScore(step.t, expected * std + mean, errors, weighted, step.energy, upcoming * std + mean, step.skill)
+    weighted = errors if course is None else errors / course.at(step.t, slice(k, k + 1))[0, 0]
+    expected, forecast = session.expectations[k, now].copy(), session.expectations[k, upcoming].copy()
+    score = StepScore(step.t, expected, errors, weighted, step.energy, forecast, step.skill)
     joint, ranked, sizes = isolate(weighted, memory.channel_names)
     decision = FaultDecision(step.fault, step.energy, step.threshold, joint, ranked, sizes)
     return StreamStep(score, decision), step.probability

@@ -174,6 +174,10 @@ def test_spreads_picked_at_a_step_are_their_definitions(nu):
         np.testing.assert_array_equal(spreads.scale(steps, rows), scale)
         np.testing.assert_array_equal(spreads.log_normaliser(steps, rows), 2 * np.log(scale).sum(axis=-1))
         np.testing.assert_array_equal(spreads.energy(residuals, steps, rows), energy)
+        for i, step in enumerate(steps.tolist()):  # one step given as an int (a served step's): the same entries
+            np.testing.assert_array_equal(spreads.at(step, rows), definition[:, i: i + 1])
+            np.testing.assert_array_equal(spreads.log_normaliser(step, rows), 2 * np.log(scale[:, i: i + 1]).sum(axis=-1))
+            np.testing.assert_array_equal(spreads.energy(residuals[:, :, i: i + 1], step, rows), energy[:, :, i: i + 1])
 
 
 def test_the_scored_energies_and_the_evidence_are_the_terms_sums(memory):
