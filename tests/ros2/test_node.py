@@ -549,3 +549,30 @@ def test_the_node_says_it_is_waiting_before_any_message():
         running.close()
     assert running.said[0].level == OK and running.said[0].message == "waiting for the mapped topics"
     assert running.said[0].hardware_id == "robot1"
+
+
+def test_one_nasm_ros2_process_watches_every_namespace_given(tmp_path, small_panda_model):
+    SkillMemory(small_panda_model).save(tmp_path / "panda.safetensors")
+    doc = {"timing": {"period_s": 0.5, "steps": STEPS, "max_gap_s": 0.3}, "source": {"kind": "rosbag", "split": "gap", "gap_s": 2.0},
+           "channels": [channel(n) for n in CHANNEL_NAMES]}
+    (tmp_path / "node.yaml").write_text(yaml.safe_dump(doc))
+    listener = Bus(env=LOOPBACK)
+    diagnostics = listener.reader("/diagnostics", m.DIAGNOSTIC_ARRAY, qos=DEFAULT)
+    node = subprocess.Popen([NASM, "ros2", "--mapping", str(tmp_path / "node.yaml"), "--model",
+                             str(tmp_path / "panda.safetensors"), "--namespace", "/robot1", "--namespace", "/robot2"],
+                            env={**os.environ, **LOOPBACK}, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    said: set[str] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while len(said) < 2 and node.poll() is None and time.monotonic() < deadline:
+            listener.wait(1.0)
+            said |= {s.hardware_id for s in statuses(diagnostics) if s.message == "waiting for the mapped topics"}
+    finally:
+        node.terminate()
+        output, _ = node.communicate(timeout=60)
+    assert said == {"robot1", "robot2"}, output
+    assert "under /robot1, /robot2" in output
+    refused = subprocess.run([NASM, "ros2", "--mapping", str(tmp_path / "node.yaml"), "--model",
+                              str(tmp_path / "panda.safetensors"), "--namespace", "/robot1", "--namespace", "/robot1"],
+                             env={**os.environ, **LOOPBACK}, text=True, capture_output=True, timeout=120)
+    assert refused.returncode == 2 and "--namespace: each robot once" in refused.stderr + refused.stdout
