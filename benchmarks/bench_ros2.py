@@ -20,7 +20,8 @@ monitor, nothing recorded, on loopback (``ROS_LOCALHOST_ONLY=1``). Measured:
   ``/diagnostics``, ``nasm/fault`` and ``nasm/energy`` (one host, one clock);
 - ``ros2_lost_messages``: messages published minus messages the nodes read (a reader's full
   history replacing its oldest sample counts here); ``ros2_dds_samples_lost``: those DDS itself
-  reports lost on the way (its sample-lost status, summed over the readers);
+  reports lost on the way (its sample-lost status, summed over the readers); ``ros2_reader_peak``:
+  the most messages one reader held when the node took them (its history keeps 1,000);
   ``ros2_publish_lag_p99_ms``: how late the robots' process itself sent a tick that was due
   (``websocket_send_lag_p99_ms`` is the websocket robots'; on a machine the nodes keep busy, the
   robots' process waits for a core too); ``ros2_warnings``: episodes a node ended on input it
@@ -132,18 +133,25 @@ def publish(robots: int, episodes_path: Path) -> None:
 
 class TimedNode(MonitorNode):
     """A node that notes, for every step it judges, the time from the publication of the message
-    that completed it to the verdict, and counts the messages it read."""
+    that completed it to the verdict, counts the messages it read, and the most one reader held
+    at a take (its history keeps ``MONITOR``'s depth: more would be lost)."""
 
     def __init__(self, *args: Any) -> None:
         super().__init__(*args)
-        self.read, self.lags_ns, self.verdicts_ns, self.warnings = 0, [], [], []
+        self.read, self.lags_ns, self.verdicts_ns, self.warnings, self.peak = 0, [], [], [], 0
 
     def _warn(self, why: str, ep: Any) -> None:  # input it could not read: a WARN
         self.warnings.append(why)
         super()._warn(why, ep)
 
+    def take(self, publications: Any) -> None:
+        self.taken = [0] * len(self.readers)
+        super().take(publications)
+        self.peak = max(self.peak, *self.taken)
+
     def _sample(self, g: int, t: int, received: Received) -> None:
         self.read += 1
+        self.taken[g] += 1
         super()._sample(g, t, received)
 
     def deliver(self, due: Due, answer: Any) -> None:
@@ -197,7 +205,7 @@ def measure_ros2(folder: Path, episodes: np.ndarray, robots: int) -> dict[str, f
             "ros2_lag_p50_ms": float(np.percentile(lags_ms, 50)) if lags_ms else float("nan"),
             "ros2_lag_p95_ms": float(np.percentile(lags_ms, 95)) if lags_ms else float("nan"),
             "ros2_published": said["published"], "ros2_lost_messages": said["published"] - sum(n.read for n in nodes),
-            "ros2_dds_samples_lost": sum(n.lost() for n in nodes),
+            "ros2_dds_samples_lost": sum(n.lost() for n in nodes), "ros2_reader_peak": max(n.peak for n in nodes),
             "ros2_publish_lag_p99_ms": said["publish_lag_p99_ms"], "ros2_warnings": len(warnings),
             "ros2_first_warning": warnings[0] if warnings else ""}
 

@@ -26,8 +26,9 @@ def ros2(
     mapping: Path = typer.Option(..., help="channel mapping (.toml/.yaml) naming the topics, fields and episodes"),
     model: str | None = typer.Option(None, help="a checkpoint's path, or a model's name in --models-dir (with "
                                      "--url: a model the service hosts, default its default)"),
-    namespace: str = typer.Option("", help="the robot's namespace, e.g. /robot1: the mapping's topics are read under it "
-                                  "(/joint_states as /robot1/joint_states), and nasm/fault, nasm/energy published"),
+    namespace: list[str] = typer.Option([], help="the robot's namespace, e.g. /robot1: the mapping's topics are read "
+                                        "under it (/joint_states as /robot1/joint_states), and nasm/fault, nasm/energy "
+                                        "published; repeat it to watch many robots from one process"),
     url: str | None = typer.Option(None, help="judge with a running service (nasm serve) instead of in-process"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="the service's API key (X-API-Key header)"),
     fpr: float = typer.Option(0.01, min=0.0, max=1.0, help="false-positive rate of the fault threshold"),
@@ -39,7 +40,7 @@ def ros2(
     try:
         from neural_asm.ros2.bus import Bus
         from neural_asm.ros2.judge import load_judge
-        from neural_asm.ros2.node import MonitorNode
+        from neural_asm.ros2.node import Fleet, MonitorNode
     except ImportError as exc:
         raise fail(f"nasm ros2 needs the ros2 extra (pip install 'neural-asm[ros2]'): {exc}") from None
     try:
@@ -47,14 +48,19 @@ def ros2(
         found = load_mapping(mapping)
         if names != found.channel_names:
             raise LogError(f"the mapping gives channels {list(found.channel_names)} but the model expects {list(names)}")
-        node = MonitorNode(Bus(namespace), found, judge, out)
+        if len(set(namespace)) < len(namespace):
+            raise LogError(f"--namespace: each robot once (given {', '.join(namespace)})")
+        bus = Bus()
+        nodes = [MonitorNode(bus.under(n), found, judge, out) for n in namespace or [""]]
     except (LogError, ValueError, OSError, ServiceError, ServiceLost) as exc:
         raise fail(exc) from None
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    typer.echo(f"nasm ros2: monitoring {', '.join(g.source for g in node.groups)} in ROS domain {node.bus.domain_id}")
+    robots = f" under {', '.join(namespace)}" if namespace else ""
+    typer.echo(f"nasm ros2: monitoring {', '.join(g.source for g in nodes[0].groups)}{robots} in ROS domain "
+               f"{bus.domain_id}")
     try:
-        node.spin(stop)
+        Fleet(bus, nodes).spin(stop)
     except KeyboardInterrupt:
         pass
 

@@ -10,7 +10,7 @@ from collections import defaultdict
 from collections.abc import Hashable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, TypeAlias
 
 import numpy as np
 
@@ -24,7 +24,7 @@ from neural_asm.models.answer import StepAnswer
 # what a monitor raises at an input it cannot judge (a skill it does not know, values not finite)
 # and a service session when it refuses or goes away: the episode ends, the node goes on
 JUDGING = (ValueError, FloatingPointError, ServiceError, ServiceLost)
-Judging = ValueError | FloatingPointError | ServiceError | ServiceLost
+Judging: TypeAlias = ValueError | FloatingPointError | ServiceError | ServiceLost
 
 
 class Stepper(Protocol):

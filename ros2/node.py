@@ -103,6 +103,8 @@ class MonitorNode:
             raise LogError(f"the node reads topics: the mapping's source is {mapping.kind}, not a ROS bag's topics")
         self.mapping, self.split, self.judge, self.out = mapping, mapping.source, judge, out
         self.groups = topic_groups(mapping)
+        # each topic's channels' places in a step's observation and their scales
+        self.layout = [(np.array(g.columns), np.array([c.scale for c in g.channels])) for g in self.groups]
         self.names = mapping.channel_names
         self.readers: list[Reader] = []
         self.extract = []
@@ -244,8 +246,8 @@ class MonitorNode:
     def _row(self, ep: _Episode, k: int) -> np.ndarray:
         """Step ``k``'s observation in channel order and units, as ``EpisodeResampler.finish`` lays it out."""
         row = np.empty(len(self.names))
-        for s in ep.resampler.streams:
-            row[list(s.group.columns)] = s.out[k] * np.array([c.scale for c in s.group.channels])
+        for s, (columns, scales) in zip(ep.resampler.streams, self.layout):
+            row[columns] = s.out[k] * scales
         return row
 
     def close(self, why: str | None) -> None:

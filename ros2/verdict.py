@@ -32,7 +32,7 @@ def answer_values(answer: StepAnswer, episode: int) -> dict[str, str]:
 
 
 class VerdictWriter:
-    """The node's publishers; ``status`` is the status now, published when its level or message
+    """The node's publishers. The status (``status()``) is published when its level or message
     changes or a WARN is said, and again by ``heartbeat`` with the newest step's values."""
 
     def __init__(self, bus: Bus, hardware_id: str) -> None:
@@ -40,13 +40,19 @@ class VerdictWriter:
         self._diagnostics = bus.writer("/diagnostics", m.DIAGNOSTIC_ARRAY)
         self._fault = bus.writer("nasm/fault", m.BOOL)
         self._energy = bus.writer("nasm/energy", m.FLOAT64)
-        self.status: Any = STATUS(level=OK, name=NAME, message="waiting for the mapped topics",
-                                  hardware_id=hardware_id, values=[])
+        self.level, self.message = OK, "waiting for the mapped topics"
+        self._values: dict[str, str] | tuple[StepAnswer, int] = {}  # a step's: turned into text when said
         self._said = 0.0
+
+    def status(self) -> Any:
+        """The status now, as ``/diagnostics`` carries it."""
+        values = answer_values(*self._values) if isinstance(self._values, tuple) else self._values
+        return STATUS(level=self.level, name=NAME, message=self.message, hardware_id=self.hardware_id,
+                      values=[T[m.KEY_VALUE](key=k, value=v) for k, v in values.items()])
 
     def say(self, level: int, message: str, values: dict[str, str] | None = None) -> None:
         """Publish a status now (and keep it for the heartbeat)."""
-        self._set(level, message, values)
+        self.level, self.message, self._values = level, message, values or {}
         self._publish()
 
     def step(self, answer: StepAnswer, episode: int) -> None:
@@ -54,8 +60,8 @@ class VerdictWriter:
         self._fault.write(T[m.BOOL](data=bool(answer.fault)))
         self._energy.write(T[m.FLOAT64](data=float(answer.energy)))
         level, message = (ERROR, f"fault: joint {answer.isolated_joint} isolated") if answer.fault else (OK, "normal")
-        changed = (level, message) != (self.status.level, self.status.message)
-        self._set(level, message, answer_values(answer, episode))
+        changed = (level, message) != (self.level, self.message)
+        self.level, self.message, self._values = level, message, (answer, episode)
         if changed:
             self._publish()
 
@@ -64,10 +70,6 @@ class VerdictWriter:
         if time.monotonic() - self._said >= HEARTBEAT_S:
             self._publish()
 
-    def _set(self, level: int, message: str, values: dict[str, str] | None) -> None:
-        kv = [T[m.KEY_VALUE](key=k, value=v) for k, v in (values or {}).items()]
-        self.status = STATUS(level=level, name=NAME, message=message, hardware_id=self.hardware_id, values=kv)
-
     def _publish(self) -> None:
-        self._diagnostics.write(T[m.DIAGNOSTIC_ARRAY](header=_stamp(time.time_ns()), status=[self.status]))
+        self._diagnostics.write(T[m.DIAGNOSTIC_ARRAY](header=_stamp(time.time_ns()), status=[self.status()]))
         self._said = time.monotonic()

@@ -5,6 +5,7 @@ episode is recorded; input the mapping cannot read is a WARN naming it, and the 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import random
 import subprocess
@@ -23,9 +24,9 @@ from neural_asm.client.session import ServiceClient  # noqa: E402
 from neural_asm.logs.mapping import parse_mapping  # noqa: E402
 from neural_asm.memory import SkillMemory  # noqa: E402
 from neural_asm.ros2 import messages as m  # noqa: E402
-from neural_asm.ros2.bus import DEFAULT, Bus  # noqa: E402
-from neural_asm.ros2.judge import LocalJudge, RemoteJudge, load_judge  # noqa: E402
-from neural_asm.ros2.node import MonitorNode  # noqa: E402
+from neural_asm.ros2.bus import DEFAULT, Bus, Received  # noqa: E402
+from neural_asm.ros2.judge import LocalJudge, RemoteJudge, judge_together, load_judge  # noqa: E402
+from neural_asm.ros2.node import Fleet, MonitorNode  # noqa: E402
 from neural_asm.ros2.verdict import ERROR, OK, WARN  # noqa: E402
 from neural_asm.sim.channels import CHANNEL_NAMES, JOINT_NAMES  # noqa: E402
 
@@ -169,6 +170,32 @@ def test_joint_4_locked_gives_error_with_joint_4_isolated_where_the_monitor_flag
     assert values(first)["step"] == str(flagged[0].step) and values(first)["isolated_joint"] == "joint4"
 
 
+def test_robots_judged_together_answer_as_each_alone_and_one_robots_bad_step_is_its_own(memory):
+    """Three robots' monitors stepped together, as a node process judges its robots' steps, answer
+    as each stepped alone; a NaN in one robot's step is refused for it alone."""
+    from neural_asm.sim.paper import run_episode
+    from neural_asm.sim.skills import SKILLS
+
+    episodes = [run_episode(SKILLS[0], 31).observations, locked(), run_episode(SKILLS[1], 32).observations]
+    bad = episodes[2].copy()
+    bad[4, 0] = np.nan
+    judge = LocalJudge(memory, FPR)
+    with contextlib.ExitStack() as stack:
+        monitors = [stack.enter_context(judge.open(None)) for _ in episodes]
+        together = [judge_together(list(zip(monitors, rows))) for rows in zip(episodes[0], episodes[1], bad)]
+    assert all(len(step) == 3 for step in together)
+    for r, observations in enumerate(episodes[:2]):
+        answers = [step[r] for step in together]
+        assert decisions(answers) == decisions(in_process(memory, observations))
+        # to the service's tolerance: a batch's relaxation differs from one robot's in the last digits
+        assert [a.energy for a in answers] == pytest.approx([a.energy for a in in_process(memory, observations)],
+                                                            rel=1e-5)
+    refused = together[4][2]
+    assert isinstance(refused, ValueError) and "NaN or inf in channel(s) ['joint1']" in str(refused)
+    assert decisions(step[2] for k, step in enumerate(together) if k < 4) == decisions(in_process(memory, bad[:4]))
+    assert any(a.fault for a in (step[1] for step in together))  # the locked joint is flagged among them
+
+
 @pytest.fixture(scope="module")
 def skill_memory() -> SkillMemory:
     """A memory with a skill cue, trained on both simulated skills: it can be told one."""
@@ -266,6 +293,64 @@ def test_a_topic_silent_longer_than_max_gap_s_inside_an_episode_is_a_warn_naming
     assert "/right_pad/wrench" in warned and "silent for 0.350 s" in warned and "max_gap_s is 0.3 s" in warned
 
 
+class Scripted:
+    """A reader whose takes hand over the given batches of (stamp s, message), one a take, as DDS
+    would have received them by then."""
+
+    def __init__(self, reader, batches: list[list[tuple[float, object]]]) -> None:
+        self.topic, self.msgtype, self.batches = reader.topic, reader.msgtype, batches
+
+    def take(self) -> list[Received]:
+        return [Received(message, round(t * 1e9)) for t, message in (self.batches.pop(0) if self.batches else [])]
+
+
+class Noted(MonitorNode):
+    """A node that keeps what it warned of."""
+
+    def __init__(self, *args) -> None:
+        super().__init__(*args)
+        self.warned: list[str] = []
+
+    def _warn(self, why, ep) -> None:
+        self.warned.append(why)
+        super()._warn(why, ep)
+
+
+def ticks(lo: float, hi: float, make) -> list[tuple[float, object]]:
+    """A topic's messages every 0.1 s from ``lo`` to ``hi`` s, stamped so."""
+    return [(t / 10, make(int(t // 10), (t % 10) * 100_000_000)) for t in range(round(lo * 10), round(hi * 10) + 1)]
+
+
+def fed(memory, batches: dict[str, list]) -> Noted:
+    """A node whose readers of /joint_states, /left_pad/wrench and /right_pad/wrench (taken in that
+    order) hand over ``batches``, spun until they are all taken."""
+    node = Noted(Bus(NAMESPACE, env=LOOPBACK), mapping(), LocalJudge(memory, FPR), None)
+    fleet = Fleet(node.bus, [node])
+    node.readers = [Scripted(r, batches[r.topic.removeprefix(NAMESPACE + "/")]) for r in node.readers]
+    for _ in range(max(len(b) for b in batches.values()) + 1):
+        fleet.spin_once(0)
+    return node
+
+
+def test_a_backlog_is_not_silence(memory):
+    """The node, far behind, takes /joint_states' one message, then the wrenches' that came in
+    meanwhile, 1 s newer: /joint_states' backlog, taken next, was not silent."""
+    state = lambda sec, ns: joint_state(STATE, sec, ns)  # noqa: E731
+    node = fed(memory, {"joint_states": [ticks(1.0, 1.0, state), ticks(1.1, 2.0, state)],
+                        "left_pad/wrench": [ticks(1.0, 2.0, wrench), ticks(2.1, 2.1, wrench)],
+                        "right_pad/wrench": [ticks(1.0, 2.0, wrench), ticks(2.1, 2.1, wrench)]})
+    assert node.warned == [] and node.current is not None and node.number == 1  # episode 0 goes on
+    assert [(e, a.step) for e, a in node.answers] == [(0, 0), (0, 1)]  # steps at 1.0 and 1.5 s
+
+
+def test_a_silence_inside_what_is_taken_at_once_is_a_warn_naming_it(memory):
+    state = lambda sec, ns: joint_state(STATE, sec, ns)  # noqa: E731
+    node = fed(memory, {"joint_states": [ticks(1.0, 2.0, state)], "left_pad/wrench": [ticks(1.0, 2.0, wrench)],
+                        "right_pad/wrench": [ticks(1.0, 1.0, wrench) + ticks(1.5, 2.0, wrench)]})
+    assert len(node.warned) == 1
+    assert "/right_pad/wrench" in node.warned[0] and "silent for 0.400 s" in node.warned[0]
+
+
 def test_the_command_refuses_a_mapping_of_another_source_in_one_line(tmp_path, small_panda_model):
     from typer.testing import CliRunner
 
@@ -336,20 +421,17 @@ def write_table(observations: np.ndarray, folder: Path) -> tuple[Path, Path]:
     return table, folder / "table.yaml"
 
 
-def by_step(said: list) -> dict[int, dict[str, str]]:
-    """Each step's first status (the heartbeat repeats it), its level among its values."""
-    found: dict[int, dict[str, str]] = {}
-    for s in said:
-        if s.level in (OK, ERROR) and "step" in values(s):
-            found.setdefault(int(values(s)["step"]), {**values(s), "level": str(s.level)})
-    return found
+def first_status(said: list, level: int) -> dict[str, str] | None:
+    """The values of the first status of ``level`` said about a step, or None."""
+    return next((values(s) for s in said if s.level == level and "step" in values(s)), None)
 
 
 @pytest.mark.slow
 def test_a_table_played_by_nasm_replay_ros2_is_judged_by_nasm_ros2_as_the_service_judges_it(memory, tmp_path):
     """``nasm replay --ros2`` in one process plays a table's episode (joint 4 locked) onto the bus;
-    ``nasm ros2`` in another judges it; every step's status on /diagnostics is the decision a
-    service session gives for the episode the table reader reads."""
+    ``nasm ros2`` in another judges it; every step's fault and energy (nasm/fault, nasm/energy)
+    are those a service session gives for the episode the table reader reads, and /diagnostics
+    turns ERROR, joint 4 isolated, at the step the session first flags."""
     from neural_asm.experiments.robot_logs.write import bag_mapping, write_mapping
     from neural_asm.logs.cli import read_logs
     from neural_asm.service.embedded import start_embedded
@@ -361,20 +443,27 @@ def test_a_table_played_by_nasm_replay_ros2_is_judged_by_nasm_ros2_as_the_servic
     env = {**os.environ, **LOOPBACK}
     listener = Bus(env=LOOPBACK)
     diagnostics = listener.reader("/diagnostics", m.DIAGNOSTIC_ARRAY, qos=DEFAULT)
+    fault = listener.reader(f"{NAMESPACE}/nasm/fault", m.BOOL, qos=DEFAULT)
+    energy = listener.reader(f"{NAMESPACE}/nasm/energy", m.FLOAT64, qos=DEFAULT)
     node = subprocess.Popen([NASM, "ros2", "--mapping", str(node_mapping), "--model", "panda", "--models-dir",
                              str(tmp_path / "models"), "--namespace", NAMESPACE, "--out", str(tmp_path / "recordings")],
                             env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     player = None
     said: list = []
+    faults: list[bool] = []
+    energies: list[float] = []
     try:
-        assert diagnostics.wait_for_publishers(1, timeout_s=120), "nasm ros2 never published /diagnostics"
+        for reader in (diagnostics, fault, energy):
+            assert reader.wait_for_publishers(1, timeout_s=120), f"nasm ros2 never published {reader.topic}"
         player = subprocess.Popen([NASM, "replay", str(table), "--mapping", str(table_mapping), "--ros2",
                                    str(node_mapping), "--namespace", NAMESPACE], env=env, text=True,
                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
         deadline = time.monotonic() + 120
-        while STEPS - 1 not in by_step(said) and time.monotonic() < deadline and player.poll() in (None, 0):
+        while len(energies) < STEPS and time.monotonic() < deadline and player.poll() in (None, 0):
             listener.wait(1.0)
             said += statuses(diagnostics)
+            faults += [r.message.data for r in fault.take()]
+            energies += [r.message.data for r in energy.take()]
         played, _ = player.communicate(timeout=60)
     finally:
         for child in (node, player):
@@ -384,20 +473,20 @@ def test_a_table_played_by_nasm_replay_ros2_is_judged_by_nasm_ros2_as_the_servic
         if player is not None and player.poll() is None:
             player.kill()
     assert player.returncode == 0 and "played episode 0 (locked, 15 steps)" in played, played
-    steps = by_step(said)
-    assert sorted(steps) == list(range(STEPS)), (monitored_by, [s.message for s in said])
+    assert len(faults) == len(energies) == STEPS, (monitored_by, [s.message for s in said])
     episode = read_logs(str(table), table_mapping).data[0]
     settings = Settings(models_dir=tmp_path / "models", record=False, build_default_model=False)
     with start_embedded(settings) as srv:
-        with RemoteJudge(ServiceClient(srv.url), "panda", FPR).open(None) as step:
-            served = [step(x) for x in episode]
-    assert [(k, steps[k]["level"] == str(ERROR), steps[k]["isolated_joint"]) for k in range(STEPS)] == \
-        [(a.step, a.fault, a.isolated_joint or "") for a in served]
-    assert [float(steps[k]["energy"]) for k in range(STEPS)] == pytest.approx([a.energy for a in served], rel=1e-5)
-    assert [float(steps[k]["threshold"]) for k in range(STEPS)] == pytest.approx([a.threshold for a in served],
-                                                                                rel=1e-5)
+        with RemoteJudge(ServiceClient(srv.url), "panda", FPR).open(None) as session:
+            served = [session.step(x) for x in episode]
+    assert faults == [a.fault for a in served]
+    assert energies == pytest.approx([a.energy for a in served], rel=1e-5)
     flagged = [a for a in served if a.fault]
     assert flagged and flagged[0].isolated_joint == "joint4"
+    error = first_status(said, ERROR)
+    assert error is not None and error["step"] == str(flagged[0].step) and error["isolated_joint"] == "joint4"
+    assert float(error["threshold"]) == pytest.approx(flagged[0].threshold, rel=1e-5)
+    assert first_status(said, OK) is not None and all(s.level != WARN for s in said)
     assert len(list((tmp_path / "recordings").rglob("*.rrd"))) == 1
 
 
@@ -460,3 +549,30 @@ def test_the_node_says_it_is_waiting_before_any_message():
         running.close()
     assert running.said[0].level == OK and running.said[0].message == "waiting for the mapped topics"
     assert running.said[0].hardware_id == "robot1"
+
+
+def test_one_nasm_ros2_process_watches_every_namespace_given(tmp_path, small_panda_model):
+    SkillMemory(small_panda_model).save(tmp_path / "panda.safetensors")
+    doc = {"timing": {"period_s": 0.5, "steps": STEPS, "max_gap_s": 0.3}, "source": {"kind": "rosbag", "split": "gap", "gap_s": 2.0},
+           "channels": [channel(n) for n in CHANNEL_NAMES]}
+    (tmp_path / "node.yaml").write_text(yaml.safe_dump(doc))
+    listener = Bus(env=LOOPBACK)
+    diagnostics = listener.reader("/diagnostics", m.DIAGNOSTIC_ARRAY, qos=DEFAULT)
+    node = subprocess.Popen([NASM, "ros2", "--mapping", str(tmp_path / "node.yaml"), "--model",
+                             str(tmp_path / "panda.safetensors"), "--namespace", "/robot1", "--namespace", "/robot2"],
+                            env={**os.environ, **LOOPBACK}, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    said: set[str] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while len(said) < 2 and node.poll() is None and time.monotonic() < deadline:
+            listener.wait(1.0)
+            said |= {s.hardware_id for s in statuses(diagnostics) if s.message == "waiting for the mapped topics"}
+    finally:
+        node.terminate()
+        output, _ = node.communicate(timeout=60)
+    assert said == {"robot1", "robot2"}, output
+    assert "under /robot1, /robot2" in output
+    refused = subprocess.run([NASM, "ros2", "--mapping", str(tmp_path / "node.yaml"), "--model",
+                              str(tmp_path / "panda.safetensors"), "--namespace", "/robot1", "--namespace", "/robot1"],
+                             env={**os.environ, **LOOPBACK}, text=True, capture_output=True, timeout=120)
+    assert refused.returncode == 2 and "--namespace: each robot once" in refused.stderr + refused.stdout
