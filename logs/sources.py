@@ -46,6 +46,16 @@ def read_mapped(source: str | Path, mapping: Mapping, mapping_file: str = "", sk
                      episodes=tuple(_facts(e, mapping.timing) for e in episodes), warnings=tuple(warnings))
 
 
+def read_again(provenance: dict) -> Sequences | None:
+    """The logs a model was trained on, read again as `read_mapped` read them (its provenance's
+    source, through the whole mapping it keeps, not the mapping's file, which may have changed
+    since), or None when its data were not logs."""
+    if "mapping" not in provenance:
+        return None
+    return read_mapped(provenance["source"], parse_mapping(provenance["mapping"], "the checkpoint's mapping"),
+                       provenance.get("mapping_file", ""), skip_bad=bool(provenance.get("warnings")))
+
+
 def _facts(episode: Recorded, timing: Timing) -> EpisodeFacts:
     """A read episode's facts: its own steps are all of them unless it was padded (``timing.shorter = "hold"``)."""
     steps = len(episode.data)

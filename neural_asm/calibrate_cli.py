@@ -28,14 +28,13 @@ import numpy as np
 import typer
 
 from neural_asm.logs.cli import SKIP_BAD_HELP, data_command, mapping_help, write_json
-from neural_asm.logs.mapping import parse_mapping
-from neural_asm.logs.sources import check_model, read_mapped
+from neural_asm.logs.sources import check_model
 from neural_asm.runtime.cli import fail
 from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.cross_fit import CrossFit, conformal_minimum
 from neural_asm.models.sequences import Sequences
-from neural_asm.data import load_sequences, read_data
+from neural_asm.data import read_data, read_training_data
 from neural_asm.memory import SkillMemory, threshold_episodes
 
 
@@ -70,22 +69,6 @@ def episode_groups(seqs: Sequences, by: str | re.Pattern[str]) -> np.ndarray:
         raise ValueError(f"--groups {by.pattern!r} matches nothing in {unmatched[0]!r} "
                          f"({len(unmatched)} of {len(origins)} episodes)")
     return np.array([match.group(0) for match in matches if match is not None])
-
-
-def training_data(provenance: dict[str, Any]) -> Sequences:
-    """The demonstrations a checkpoint was trained on, read again where its provenance says they
-    came from (their source, through the mapping they were read with); a ValueError says why they
-    cannot be."""
-    source = provenance.get("source")
-    if source is None:
-        raise ValueError("the checkpoint does not record where its training data came from")
-    try:
-        if "mapping" in provenance:  # logs: the mapping kept whole in the checkpoint, not its file
-            return read_mapped(source, parse_mapping(provenance["mapping"], "the checkpoint's mapping"),
-                               provenance.get("mapping_file", ""), skip_bad=bool(provenance.get("warnings")))
-        return load_sequences(source)
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"its training data ({source}) cannot be read again: {exc}") from None
 
 
 def _checked(read: Sequences, memory: SkillMemory) -> None:
@@ -196,7 +179,7 @@ def calibrate(
 def _training(model: NeuralASM, held: int) -> Sequences:
     """The training data cross-fitting by default needs, or the command's end naming both ways on."""
     try:
-        return training_data(model.provenance)
+        return read_training_data(model.provenance)
     except ValueError as exc:
         raise fail(f"{held} threshold episodes are fewer than the {conformal_minimum()} a 1 % threshold needs, so "
                    f"they are cross-fitted with the training demonstrations, but {exc}; give them with --cross-fit "

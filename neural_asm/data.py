@@ -22,6 +22,22 @@ SYNTHETIC = "synthetic"
 DATA_HELP = f"'{SYNTHETIC}', an .npz of sequences, an .mcap episode set, or (with --mapping) {FORMATS}"
 
 
+def read_training_data(provenance: dict) -> Sequences:
+    """The demonstrations a checkpoint was trained on, read again where its provenance says they
+    came from (logs through the mapping they were read with: `logs.sources.read_again`; else the
+    source `load_sequences` recorded); a ValueError says why they cannot be."""
+    from neural_asm.logs.sources import read_again
+
+    source = provenance.get("source")
+    if source is None:
+        raise ValueError("the checkpoint does not record where its training data came from")
+    try:
+        logs = read_again(provenance)
+        return load_sequences(source) if logs is None else logs
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"its training data ({source}) cannot be read again: {exc}") from None
+
+
 def load_sequences(source: str) -> Sequences:
     """``synthetic``, ``file.npz`` (arrays ``sequences``, ``channel_names``, optional
     ``skills``) or an episode set ``file.mcap`` from the simulator; a ValueError (or
