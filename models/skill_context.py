@@ -78,6 +78,18 @@ def with_cue(x: np.ndarray, skill: np.ndarray, skills: int) -> np.ndarray:
     return np.concatenate([x, cue], axis=-1)
 
 
+def cued_network(sequences: np.ndarray, channel_names: Sequence[str], labels: np.ndarray, skills: Sequence[str],
+                 config: TPCConfig, progress: bool = False, provenance: dict | None = None,
+                 rate_hz: float = DEFAULT_RATE_HZ) -> NeuralASM:
+    """The one network trained on raw demonstrations (N, T, D), each with its skill's one-hot cue
+    among ``skills`` (the cue's channels: a skill without demonstrations keeps an unseen cue)."""
+    index = np.array([list(skills).index(s) for s in labels])
+    cues = cue_names(tuple(skills))
+    return NeuralASM.fit(with_cue(np.asarray(sequences, np.float64), index, len(skills)),
+                         (*channel_names, *cues), config.with_(context_input=True), progress=progress,
+                         labels=labels, context_channels=cues, rate_hz=rate_hz).noted(provenance or {})
+
+
 def mean_courses(sequences: np.ndarray, labels: Sequence[str], skills: Sequence[str]) -> np.ndarray:
     """(K, T, D) each skill's mean course of its raw demonstrations (N, T, D)."""
     labels = np.asarray(labels).astype(str)
@@ -259,28 +271,27 @@ class SkillMemory:
         skills = tuple(sorted(set(labels.tolist())))
         if len(skills) < 2:
             raise ValueError(f"a skill memory needs demonstrations of at least 2 skills, got {list(skills)}")
-        index = np.array([skills.index(s) for s in labels])
-        cues = cue_names(skills)
-        model = NeuralASM.fit(with_cue(np.asarray(sequences, np.float64), index, len(skills)),
-                              (*channel_names, *cues), config.with_(context_input=True), progress=progress,
-                              labels=labels, context_channels=cues, rate_hz=rate_hz).noted(provenance or {})
+        model = cued_network(sequences, channel_names, labels, skills, config, progress, provenance, rate_hz)
         return cls(model, mean_courses(sequences, labels, skills))
 
     def fold(self, demonstrations: np.ndarray, labels: Labels, network: bool = True) -> "SkillMemory":
         """A memory that did not learn these raw demonstrations' complement: one trained as this
         one was (its configuration, seed and kept epochs) on ``demonstrations`` (N, T, D) of every
         skill it knows, with their mean courses; without ``network``, this one's network with their
-        mean courses (all a memory scored by its course alone needs)."""
+        mean courses (all a memory scored by its course alone needs). A skill with no demonstration
+        among them (every run of it left out) keeps this memory's course and a cue its network never
+        saw: the fold memory is not asked to score it (`calibrate` leaves its episodes out)."""
         labels = np.asarray(labels).astype(str)
-        missing = sorted(set(self.skills) - set(labels.tolist()))
-        if missing:
-            raise ValueError(f"no demonstration of skill(s) {missing} in the fold's training part: use fewer folds")
-        means = mean_courses(demonstrations, labels, self.skills)
+        learnt = set(labels.tolist())
+        means = np.stack([mean_courses(demonstrations, labels, [s])[0] if s in learnt else self.means[k]
+                          for k, s in enumerate(self.skills)])
         if not network:
             return SkillMemory(self.model, means)
         epochs = int(self.model.provenance.get("kept_epoch", self.model.config.epochs))
-        return SkillMemory.fit(demonstrations, self.channel_names, labels, self.model.config.with_(epochs=epochs),
-                               provenance={"cross_fit": "fold network"}, rate_hz=self.model.rate_hz)
+        model = cued_network(demonstrations, self.channel_names, labels, self.skills,
+                             self.model.config.with_(epochs=epochs), provenance={"cross_fit": "fold network"},
+                             rate_hz=self.model.rate_hz)
+        return SkillMemory(model, means)
 
     def check_learnt(self, demonstrations: np.ndarray, labels: Labels) -> None:
         """A ValueError unless these raw demonstrations (N, T, D) and skills are those the memory
@@ -355,11 +366,14 @@ class SkillMemory:
         inferred, told, told_skill = self._peaks(cal, threshold, threshold_skills, lengths)
         if cross_fit is not None and len(threshold) < conformal_minimum(min(fprs)):
             for k, memory in enumerate(cross_fit.memories):
-                out = cross_fit.fold == k
+                # the fold's episodes of a skill the fold memory learnt: of one it never saw, none
+                out = (cross_fit.fold == k) & np.isin(cross_fit.labels, cross_fit.labels[cross_fit.fold != k])
+                if not out.any():
+                    continue
                 peaks = memory._peaks(memory._spreads(precision, precision_skills, scoring),
                                       cross_fit.demonstrations[out], cross_fit.labels[out], cross_fit.lengths[out])
                 inferred, told, told_skill = (np.concatenate(pair) for pair in zip((inferred, told, told_skill), peaks))
-            cal.out_of_fold_episodes = len(cross_fit.fold)
+                cal.out_of_fold_episodes += int(out.sum())
         for fpr in fprs:
             cal.inferred[fpr] = conformal_episode_threshold(inferred, fpr)
             pooled = conformal_episode_threshold(told, fpr)

@@ -246,13 +246,25 @@ def test_cross_fitted_thresholds_pool_the_demonstrations_out_of_fold_peaks(memor
         memory.calibrate(*precision, *episodes(5, SKILLS, 2))
 
 
-def test_a_fold_without_a_skill_is_refused(memory):
+def test_a_fold_without_a_skill_scores_none_of_its_episodes(memory):
     from neural_asm.models.skill_context import OutOfFold
 
     demos, labels = episodes(4, SKILLS, 0)
-    runs = np.where(labels == "5", "run-a", "run-b")  # every skill-5 demonstration in one run
-    with pytest.raises(ValueError, match=r"skill\(s\) \['5'\].*use fewer folds"):
-        OutOfFold.fit(memory, demos, labels, groups=runs, folds=2, fold_memory=lambda k, x, y: memory.fold(x, y, False))
+    # every skill-5 demonstration in one run; skills 3 and 4 in three runs that each hold both
+    runs = np.where(labels == "5", "run-a", np.array(["run-b", "run-c", "run-d"])[np.arange(len(labels)) % 3])
+    out_of_fold = OutOfFold.fit(memory, demos, labels, groups=runs, folds=2,
+                                fold_memory=lambda k, x, y: memory.fold(x, y, False))
+    alone = out_of_fold.fold[labels == "5"][0]  # the fold of the run that holds every skill-5 demonstration
+    fold_memory = out_of_fold.memories[alone]
+    five = memory.index("5")
+    np.testing.assert_array_equal(fold_memory.means[five], memory.means[five])  # the skill it never saw keeps its course
+    precision, few = episodes(5, SKILLS, 2), episodes(1, SKILLS, 3)
+    try:
+        cal = memory.calibrate(*precision, *few, scoring=SkillScoring(("course",), "mean", (), 0.0),
+                               fprs=(0.1,), cross_fit=out_of_fold)
+        assert cal.out_of_fold_episodes == len(labels) - (labels == "5").sum()
+    finally:
+        memory.calibrate(*precision, *episodes(5, SKILLS, 2))
 
 
 def test_not_told_a_step_is_scored_by_the_skill_most_probable_before_it_by_default(memory):
