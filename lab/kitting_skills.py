@@ -144,7 +144,7 @@ def out_of_fold(memory: SkillMemory, sets: Sets, config: KittingConfig, seed: in
         if not network:
             return memory.fold(x, y, network=False)
         model = cached(cache / f"seed{seed}_fold{k}of{FOLDS}_skill.safetensors", lambda: memory.fold(x, y).model)
-        return SkillMemory(model, mean_courses(x, y, memory.skills))
+        return SkillMemory(model, memory.fold(x, y, network=False).means)  # a skill the fold lacks keeps its course
 
     train = sets.train
     return OutOfFold.fit(memory, train.data, train.skills, train.lengths, train.runs, FOLDS, config.split_seed,

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from neural_asm.models import checkpoint, skill_context
+from neural_asm.models import checkpoint, skill_context, skill_session
 from neural_asm.models.answer import StepAnswer
 from neural_asm.models.asm import NeuralASM, SkillStream, step_streams
 from neural_asm.models.calibration import set_energy_thresholds
@@ -66,7 +66,7 @@ class Monitor:
     """One episode monitored as the service monitors a session: ``step(x) -> StepAnswer``, the
     service's answer to the same observation less what only a service knows (session, timing)."""
 
-    def __init__(self, stream: SkillStream | skill_context.SkillSession, fpr: float | None = None) -> None:
+    def __init__(self, stream: SkillStream | skill_session.SkillSession, fpr: float | None = None) -> None:
         """``stream``: a recall mode's stream (its own false-positive rate), or a skill memory's
         session (calibrated at ``fpr``)."""
         fpr = stream.fpr if isinstance(stream, SkillStream) else fpr
@@ -88,7 +88,7 @@ class Monitor:
     def check(self, observation: Observation) -> np.ndarray:
         """The observation as the vector this monitor steps on; a ValueError names what is wrong."""
         stream = self._stream
-        return stream.memory.check(observation) if isinstance(stream, skill_context.SkillSession) \
+        return stream.memory.check(observation) if isinstance(stream, skill_session.SkillSession) \
             else stream.check(observation)
 
     def step(self, observation: Observation) -> StepAnswer:
@@ -107,8 +107,8 @@ def step_monitors(monitors: Sequence[Monitor], observations: np.ndarray) -> list
     if len({m.batch_key for m in monitors}) != 1 or (monitors[0].batch_key is None and len(monitors) > 1):
         raise ValueError("monitors stepped together share a batch key; a skill memory's session steps alone")
     first = monitors[0]._stream
-    if isinstance(first, skill_context.SkillSession):
-        served, probability = skill_context.served_step(first, observations[0])
+    if isinstance(first, skill_session.SkillSession):
+        served, probability = skill_session.served_step(first, observations[0])
         assert served.decision is not None  # a session always decides
         return [StepAnswer.judged(served.score, served.decision, first.memory.channel_names, monitors[0]._fpr,
                                   probability)]

@@ -38,7 +38,7 @@ import numpy as np
 from neural_asm.models.asm import StreamStep, step_streams
 from neural_asm.models.fault import FaultDecision
 from neural_asm.models.scoring import StepScore
-from neural_asm.models.skill_context import served_step
+from neural_asm.models.skill_session import served_step
 from neural_asm.recordings.recorder import RecorderProcess
 from neural_asm.recordings.records import StepBatch
 from neural_asm.service.errors import BadObservation, ShuttingDown

@@ -19,7 +19,7 @@ import numpy as np
 
 from neural_asm.models.asm import SkillStream
 from neural_asm.models.fault import ThresholdKind, joint_channels
-from neural_asm.models.skill_context import SkillSession
+from neural_asm.models.skill_session import SkillSession
 from neural_asm.recordings.recorder import RecorderProcess, SessionRecording
 from neural_asm.service.errors import BadObservation, NotCalibrated, SkillRefused, TooManySessions, UnknownSession
 from neural_asm.service.registry import Hosted, ModelRegistry

@@ -1,0 +1,117 @@
+"""A skill memory's served step: one episode scored step by step, told its skill or inferring it
+(`models.skill_context` holds the memory, its courses, spreads and thresholds). What a session
+answers is what `SkillMemory.score` gives for the whole episode (tests/models/test_skill_served_step.py)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+from neural_asm.models.asm import StreamStep
+from neural_asm.models.config import SCORING
+from neural_asm.models.fault import FaultDecision, isolate
+from neural_asm.models.normaliser import Normaliser
+from neural_asm.models.recall import Recaller
+from neural_asm.models.scoring import StepScore
+from neural_asm.models.skill_context import with_cue
+from neural_asm.models.skill_posterior import SkillPosterior
+
+if TYPE_CHECKING:
+    from neural_asm.models.skill_context import SkillMemory
+
+
+@dataclass(frozen=True)
+class SkillStep:
+    """What a session answers at each step."""
+
+    t: int
+    energy: float  # the fault energy: against the told skill, or the surprise under the skills still plausible
+    energies: dict[str, float]  # each scored skill's own energy (the told one's only, when told)
+    skill: str  # the told skill, or the most probable one after this step
+    probability: float  # its posterior probability (1 when told)
+    threshold: float
+    fault: bool  # energy strictly above the threshold, as the served rule decides
+
+
+class SkillSession:
+    """One episode scored step by step: ``step(x) -> SkillStep``. Told a skill, it expects that
+    skill only; not told, it scores every skill it knows (one batch of online recall, one row per
+    skill) and keeps the posterior over them."""
+
+    def __init__(self, memory: SkillMemory, skill: str | None = None, fpr: float = SCORING.default_fpr) -> None:
+        cal = memory._calibrated()
+        self.memory, self.calibration = memory, cal
+        self.told = None if skill is None else memory.index(skill)
+        self.rows = np.arange(len(memory.skills)) if self.told is None else np.array([self.told])
+        self.picked = slice(None) if self.told is None else slice(self.told, self.told + 1)  # rows, as tables' slices
+        thresholds = cal.inferred if self.told is None else {f: float(t[self.told]) for f, t in cal.told.items()}
+        if fpr not in thresholds:
+            raise ValueError(f"no threshold at false-positive rate {fpr}; calibrated at {sorted(thresholds)}")
+        self.threshold = float(thresholds[fpr])
+        self.recaller = memory.model.recaller(len(self.rows), "online") if "dynamics" in cal.spreads else None
+        if self.told is None and isinstance(self.recaller, Recaller):  # (online recall always is one)
+            self.recaller.lay_out()  # one row per skill at every step: W_H^T contiguous pays for its copy
+        self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
+        self.t = 0
+        self.names = tuple(memory.skills[r] for r in self.rows)  # each row's skill
+        # each row's cue as the network reads it (normalised), the same at every step
+        normaliser, width = memory.model.normaliser, memory.width
+        cues = with_cue(np.zeros((len(self.rows), width)), self.rows, len(memory.skills))[:, width:]
+        self.cues = Normaliser(normaliser.mean[width:], normaliser.std[width:]).normalise(cues)
+        self.expectations = memory.observed.denormalise(cal.courses)  # (K, T, D) each skill's course, raw: what a served step expected
+
+    def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
+        memory = self.memory
+        raw = np.asarray(observation, np.float64)
+        if raw.shape != (memory.width,) or not np.isfinite(raw).all():
+            raise ValueError(f"observation: expected {memory.width} finite values ({', '.join(memory.channel_names)}), "
+                             f"got {raw.tolist()}")
+        return self._advance(raw)
+
+    def _advance(self, raw: np.ndarray) -> SkillStep:
+        """`step` of a raw observation (D,) float64 already checked (`served_step`'s are)."""
+        memory, cal, t = self.memory, self.calibration, self.t
+        x = memory.normalise(raw)
+        residuals = {}
+        if "course" in cal.spreads:
+            residuals["course"] = (x - cal.courses[self.picked, min(t, cal.courses.shape[1] - 1)])[:, None]
+        if self.recaller is not None:
+            cued = np.empty((len(self.rows), memory.width + len(memory.skills)), np.float32)  # what with_cue gives, normalised
+            cued[:, : memory.width], cued[:, memory.width:] = x, self.cues  # x as the network reads it, in float32
+            expected = self.recaller.step(cued)
+            residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
+        energies, norm, evidence = cal.scored(residuals, t, self.picked)
+        energies, norm = energies[:, 0], norm[:, 0]  # (R,) each
+        if self.told is None:
+            seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
+            energy = float(self.posterior.step(energies[None], norm, cal.rule, t == 0, seen)[0])
+            p = self.posterior.probabilities[0]
+            best = int(p.argmax())
+            skill, probability = memory.skills[best], float(p[best])
+        else:
+            energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0
+        self.t += 1
+        return SkillStep(t, energy, dict(zip(self.names, energies.tolist())), skill, probability, self.threshold,
+                         energy > self.threshold)
+
+
+def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamStep, float]:
+    """A session's step (a raw observation, `SkillMemory.check`ed) as the service and the public
+    ``Monitor`` answer it, in the types every recall mode answers with, and the answered skill's
+    probability. What it expected is the answered skill's course (told, or the most probable), its
+    forecast the course's next step, and each channel's error is divided by that skill's course
+    spread (without one: left as is), which isolation ranks."""
+    step = session._advance(observation)
+    memory, cal = session.memory, session.calibration
+    k, last = memory.index(step.skill), cal.courses.shape[1] - 1
+    now, upcoming = min(step.t, last), min(step.t + 1, last)
+    errors = memory.normalise(observation) - cal.courses[k, now]
+    course = cal.spreads.get("course")
+    weighted = errors if course is None else errors / course.at(step.t, slice(k, k + 1))[0, 0]
+    expected, forecast = session.expectations[k, now].copy(), session.expectations[k, upcoming].copy()
+    score = StepScore(step.t, expected, errors, weighted, step.energy, forecast, step.skill)
+    joint, ranked, sizes = isolate(weighted, memory.channel_names)
+    decision = FaultDecision(step.fault, step.energy, step.threshold, joint, ranked, sizes)
+    return StreamStep(score, decision), step.probability
