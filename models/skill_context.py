@@ -33,20 +33,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import Any, Callable, Literal, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Literal, Mapping, Sequence
 
 import numpy as np
 from tqdm.auto import tqdm
 
-from neural_asm.models.asm import NeuralASM, StreamStep
+from neural_asm.models.asm import NeuralASM
 from neural_asm.models.calibration import conformal_episode_threshold
 from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
 from neural_asm.models.cross_fit import CrossFit, conformal_minimum, group_folds
-from neural_asm.models.fault import FaultDecision, isolate
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.recall import Recaller
-from neural_asm.models.scoring import StepScore
-from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillPosterior, SkillSpreads, infer
+from neural_asm.models.skill_posterior import FORGETTING, Rule, SkillSpreads, infer
+
+if TYPE_CHECKING:
+    from neural_asm.models.skill_session import SkillSession
 
 CUE_PREFIX = "skill:"
 TERMS = ("course", "dynamics")
@@ -136,9 +136,9 @@ class SkillCalibration:
     terms: tuple[str, ...]
     courses: np.ndarray
     spreads: dict[str, SkillSpreads]
-    forgetting: float = FORGETTING
-    rule: Rule = "surprise"
-    recognised_by: tuple[str, ...] = ()  # the terms whose likelihood updates the posterior (none: every term)
+    forgetting: float  # these three as `SkillScoring` set them (it holds their defaults)
+    rule: Rule
+    recognised_by: tuple[str, ...]  # the terms whose likelihood updates the posterior (none: every term)
     inferred: dict[float, float] = field(default_factory=dict)
     told: dict[float, np.ndarray] = field(default_factory=dict)  # fpr -> (K,)
     out_of_fold_episodes: int = 0  # demonstrations whose out-of-fold peaks joined the threshold episodes'
