@@ -14,6 +14,7 @@ from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import FAST
 from neural_asm.models.synthetic import make_skills, split
 from neural_asm.sim.channels import CHANNEL_NAMES
+from small_config import SMALL
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -26,7 +27,6 @@ def pytest_unconfigure(config: pytest.Config) -> None:
 
 
 # Small but real: three skills, distinct starts, noisy repetitions.
-SMALL = FAST.with_(hidden_size=96, epochs=250)
 
 
 @pytest.fixture(scope="session")

@@ -4,7 +4,7 @@ added to the expected observation (W_F f(z) + W_D p) or to the hidden state's pr
 import numpy as np
 import pytest
 import torch
-from conftest import SMALL
+from small_config import SMALL
 
 from neural_asm.models import checkpoint, recall
 from neural_asm.models.asm import NeuralASM

@@ -11,7 +11,7 @@ from neural_asm.models.kernels import spectral_norm
 from neural_asm.models.tpc import TemporalPC, relative_precision, stable_wf_norm
 from neural_asm.models.train import WeightUpdate, learning_rate, recall_error, train
 
-from conftest import SMALL
+from small_config import SMALL
 
 
 def test_training_lowers_energy_tenfold(trained):
