@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from neural_asm.models.asm import StreamStep
+from neural_asm.models.asm import SkillStream, StreamStep, step_streams
 from neural_asm.models.config import SCORING
 from neural_asm.models.fault import FaultDecision, isolate
 from neural_asm.models.normaliser import Normaliser
@@ -115,3 +115,21 @@ def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamS
     joint, ranked, sizes = isolate(weighted, memory.channel_names)
     decision = FaultDecision(step.fault, step.energy, step.threshold, joint, ranked, sizes)
     return StreamStep(score, decision), step.probability
+
+
+def step_sessions(streams: Sequence[SkillStream | SkillSession], observations: np.ndarray
+                  ) -> tuple[list[StreamStep | None], list[float | None]]:
+    """One step of sessions sharing a batch key, each on its row of checked raw ``observations``,
+    and each answered skill's probability (None but for a skill memory's session): a skill
+    memory's session steps alone (its skills are the rows of its own batch), a model's streams in
+    one relaxation (`step_streams`). None where the outputs are not finite. The service's runner
+    and `neural_asm.memory.step_monitors` both step this way."""
+    first = streams[0]
+    if isinstance(first, SkillSession):
+        result, probability = served_step(first, observations[0])
+        finite = np.isfinite(result.score.energy) and np.isfinite(result.score.prediction).all()
+        return [result if finite else None], [probability]
+    plain = [s for s in streams if isinstance(s, SkillStream)]
+    if len(plain) != len(streams):
+        raise ValueError("a skill memory's session steps alone, not batched with other sessions")
+    return step_streams(plain, observations), [None] * len(plain)

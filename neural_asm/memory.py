@@ -4,7 +4,7 @@ Fit it on demonstrations (arrays or ``Sequences``: simulated episodes, a lab's l
 calibrate its fault thresholds on normal episodes it was not trained on, recall a skill from
 a cue, score whole sequences, and monitor a live stream step by step with ``monitor()``,
 whose verdicts are those the service returns for the same observations (both run
-``neural_asm.models.asm.step_streams``). ``save`` writes the checkpoint ``nasm serve`` hosts.
+``neural_asm.models.skill_session.step_sessions``). ``save`` writes the checkpoint ``nasm serve`` hosts.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 
 from neural_asm.models import checkpoint, skill_context, skill_session
 from neural_asm.models.answer import StepAnswer
-from neural_asm.models.asm import NeuralASM, SkillStream, step_streams
+from neural_asm.models.asm import NeuralASM, SkillStream
 from neural_asm.models.calibration import set_energy_thresholds
 from neural_asm.models.config import DEFAULT_RATE_HZ, PRESETS, SCORING, TPCConfig
 from neural_asm.models.cross_fit import CrossFit, conformal_minimum
@@ -80,6 +80,13 @@ class Monitor:
         return self._stream.t
 
     @property
+    def channel_names(self) -> tuple[str, ...]:
+        """The channels it judges, in the order a vector observation gives them."""
+        stream = self._stream
+        return tuple(stream.memory.channel_names if isinstance(stream, skill_session.SkillSession)
+                     else stream.model.channel_names)
+
+    @property
     def batch_key(self) -> Hashable | None:
         """Monitors with equal keys step together in ``step_monitors``, as the service batches its
         sessions; None: a skill memory's session, which steps alone."""
@@ -106,16 +113,9 @@ def step_monitors(monitors: Sequence[Monitor], observations: np.ndarray) -> list
     None where the outputs are not finite (that monitor keeps its state)."""
     if len({m.batch_key for m in monitors}) != 1 or (monitors[0].batch_key is None and len(monitors) > 1):
         raise ValueError("monitors stepped together share a batch key; a skill memory's session steps alone")
-    first = monitors[0]._stream
-    if isinstance(first, skill_session.SkillSession):
-        served, probability = skill_session.served_step(first, observations[0])
-        assert served.decision is not None  # a session always decides
-        return [StepAnswer.judged(served.score, served.decision, first.memory.channel_names, monitors[0]._fpr,
-                                  probability)]
-    results = step_streams([m._stream for m in monitors if isinstance(m._stream, SkillStream)], observations)
-    names = first.model.channel_names
-    return [None if r is None or r.decision is None else StepAnswer.judged(r.score, r.decision, names, m._fpr)
-            for m, r in zip(monitors, results)]
+    results, probabilities = skill_session.step_sessions([m._stream for m in monitors], observations)
+    return [None if r is None or r.decision is None else StepAnswer.judged(r.score, r.decision, m.channel_names, m._fpr, p)
+            for m, r, p in zip(monitors, results, probabilities)]
 
 
 class SkillMemory:

@@ -4,7 +4,7 @@ Handlers never touch a model: they queue a step and await its future. The steps 
 while the loop reads its ready messages are computed together in one loop callback: all
 steps of distinct sessions at once, one forward relaxation per model, recall setting and
 phase (``models.asm.step_streams``, which also decides each step); a skill memory's session steps
-alone, its own batch being one row per skill it knows (``models.skill_context``). On the loop rather than
+alone, its own batch being one row per skill it knows (``models.skill_session.step_sessions``). On the loop rather than
 in a thread: a batch's Python holds the GIL either way, and a second thread would contend
 for it (measured in docs/performance.md).
 
@@ -35,10 +35,10 @@ from typing import Any, Callable, TypeVar
 
 import numpy as np
 
-from neural_asm.models.asm import StreamStep, step_streams
+from neural_asm.models.asm import StreamStep
 from neural_asm.models.fault import FaultDecision
 from neural_asm.models.scoring import StepScore
-from neural_asm.models.skill_session import served_step
+from neural_asm.models.skill_session import step_sessions
 from neural_asm.recordings.recorder import RecorderProcess
 from neural_asm.recordings.records import StepBatch
 from neural_asm.service.errors import BadObservation, ShuttingDown
@@ -259,14 +259,8 @@ class Runner:
 
 
 def _step(jobs: list[_Step]) -> tuple[list[StreamStep | None], list[float | None]]:
-    """The steps of sessions sharing a batch key, and each answered skill's probability: a skill
-    memory's session steps alone (its skills are the rows of its own batch)."""
-    skilled = jobs[0].session.skilled
-    if skilled is not None:
-        result, probability = served_step(skilled, jobs[0].x)
-        finite = np.isfinite(result.score.energy) and np.isfinite(result.score.prediction).all()
-        return [result if finite else None], [probability]
-    return step_streams([j.session.stream for j in jobs], np.stack([j.x for j in jobs])), [None] * len(jobs)
+    """The steps of sessions sharing a batch key, and each answered skill's probability."""
+    return step_sessions([j.session.stream for j in jobs], np.stack([j.x for j in jobs]))
 
 
 def step_batch(records: list[_Record]) -> StepBatch:
