@@ -32,6 +32,10 @@ probable skill's energy, and the paired McNemar table; splits 3-5 were first run
 
     python -m lab.kitting_skills "$SCHEME" --splits 0 --splits 1 --splits 2 --seeds 3 --cache DIR --only "r2:"
     python -m lab.kitting_skills "$SCHEME" --splits 3 --splits 4 --splits 5 --seeds 3 --cache DIR --only "r2:" --no-benchmark
+
+Round 4's H6 (docs/kitting.md): the rows named "r4: ...", on splits never run before.
+
+    python -m lab.kitting_skills "$SCHEME" --splits 9 --splits 10 --splits 11 --seeds 3 --cache DIR --only "r4:" --no-benchmark
 """
 
 from __future__ import annotations
@@ -70,6 +74,7 @@ class Variant(NamedTuple):
     forgetting: float = 0.01
     tails: tuple[tuple[str, float], ...] = ()
     cross_fitted: bool = False
+    correlated: tuple[str, ...] = ()
 
 
 DEFAULTS = Variant(("course", "dynamics"), "mean", ("course",), "surprise", 0.0)
@@ -107,6 +112,11 @@ VARIANTS = {
                                                                                               tails=STUDENT),
     "r2: defaults, most probable skill's energy, Student-t dynamics (ν 4), cross-fitted": DEFAULTS._replace(
         rule="most_probable", tails=STUDENT, cross_fitted=True),
+    # round 4's H6 (docs/kitting.md, "Round 4, H6"), written before its run on splits 9-11: the served
+    # defaults, and the same with the course term weighed by per-step precision matrices
+    "r4: served defaults, cross-fitted": DEFAULTS._replace(rule="most_probable", tails=STUDENT, cross_fitted=True),
+    "r4: served defaults, the course correlated, cross-fitted": DEFAULTS._replace(
+        rule="most_probable", tails=STUDENT, cross_fitted=True, correlated=("course",)),
 }
 # The report's likelihood template: each skill's mean course and own spreads, the most probable skill.
 TEMPLATE_LIKELIHOOD = Variant(("course",), "mean", (), "most_probable", 0.0)
@@ -170,7 +180,8 @@ def memory_rows(memory: SkillMemory, sets: Sets, w: Windows, config: KittingConf
     for name, variant in variants.items():
         v = Variant(*variant)
         cross_fit = folds[any(t == "dynamics" for t in (*v.terms, *v.recognised_by))] if v.cross_fitted else None
-        scoring = SkillScoring(tuple(v.terms), v.course, tuple(v.recognised_by), v.forgetting, v.rule, tuple(v.tails))
+        scoring = SkillScoring(tuple(v.terms), v.course, tuple(v.recognised_by), v.forgetting, v.rule, tuple(v.tails),
+                               tuple(v.correlated))
         cal = memory.calibrate(sets.precision.data, sets.precision.skills, sets.threshold.data, sets.threshold.skills,
                                sets.threshold.lengths, scoring, config.fprs, cross_fit=cross_fit)
         inferred, posterior = memory.score(sets.test.data)
@@ -250,7 +261,7 @@ def paired_table(by_split: dict[int, dict[str, list[dict]]]) -> str:
     lines = ["| split | memory | rival | memory only right (sum of trainings) | rival only right | p (summed) | "
              "per training: memory only / rival only, p |", "|---|---|---|---|---|---|---|"]
     for split, rows in by_split.items():
-        for name in (r for r in rows if r.startswith("r2: ")):
+        for name in (r for r in rows if r.startswith(("r2: ", "r4: "))):
             rivals = (("template_likelihood (rival), not told", "template_likelihood (rival), cross-fitted, not told")
                       if name.endswith("not told") else
                       ("template_told (rival), told", "template (the mean course) (rival), cross-fitted, told"))

@@ -258,7 +258,9 @@ def _skill_memory(model: NeuralASM, meta: dict[str, Any], tensors: dict[str, tor
         cal = SkillCalibration.from_parts(meta["calibration"], arrays, memory.skills)
         k, width = len(memory.skills), memory.width
         shapes = [cal.courses.shape, *(s.spread.shape for s in cal.spreads.values())]
+        precisions = [s.precision.shape for s in cal.spreads.values() if s.precision is not None]
         if any(len(shape) != 3 or shape[::2] != (k, width) for shape in shapes) or \
+                any(len(shape) != 3 or shape[1:] != (width, width) for shape in precisions) or \
                 any(t.shape != (k,) for t in cal.told.values()):
             raise ValueError(f"its skill calibration does not fit {k} skills of {width} channels")
         memory.calibration = cal

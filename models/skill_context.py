@@ -39,7 +39,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from neural_asm.models.asm import NeuralASM
-from neural_asm.models.calibration import conformal_episode_threshold
+from neural_asm.models.calibration import conformal_episode_threshold, error_precision
 from neural_asm.models.config import DEFAULT_RATE_HZ, SCORING, TPCConfig
 from neural_asm.models.cross_fit import CrossFit, conformal_minimum, group_folds
 from neural_asm.models.normaliser import Normaliser
@@ -109,7 +109,9 @@ class SkillScoring:
     dynamics scored, the skill recognised by the course, no forgetting (chosen after the first
     three splits were seen); the dynamics residual held to a Student-t of 4 degrees of freedom
     and, not told, the most probable skill's energy scored (adopted by a rule written before
-    three fresh splits were run: +0.014 mean AUROC not told, told unchanged)."""
+    three fresh splits were run: +0.014 mean AUROC not told, told unchanged). The terms in
+    ``correlated`` are weighed with their channels' correlations (per-step precision matrices,
+    `SkillSpreads`), the others channel by channel."""
 
     terms: tuple[str, ...] = TERMS
     course: Course = "mean"
@@ -117,13 +119,17 @@ class SkillScoring:
     forgetting: float = FORGETTING
     rule: Rule = "most_probable"
     tails: tuple[tuple[str, float], ...] = tuple(TAILS.items())
+    correlated: tuple[str, ...] = ()
 
     def check(self) -> None:
-        """A ValueError naming a term that is not one."""
-        unknown = [t for t in (*self.terms, *self.recognised_by, *dict(self.tails)) if t not in TERMS]
+        """A ValueError naming a term that is not one, or one both held to a Student-t and correlated."""
+        unknown = [t for t in (*self.terms, *self.recognised_by, *dict(self.tails), *self.correlated) if t not in TERMS]
         if unknown or not self.terms:
-            raise ValueError(f"terms must be among {TERMS}, got {list(self.terms)}, {list(self.recognised_by)} and "
-                             f"{list(dict(self.tails))}")
+            raise ValueError(f"terms must be among {TERMS}, got {list(self.terms)}, {list(self.recognised_by)}, "
+                             f"{list(dict(self.tails))} and {list(self.correlated)}")
+        both = sorted(set(dict(self.tails)) & set(self.correlated))
+        if both:
+            raise ValueError(f"term(s) {both} held to a Student-t channel by channel cannot also be correlated")
 
 
 @dataclass
@@ -170,7 +176,8 @@ class SkillCalibration:
                 "inferred": [[f, t] for f, t in sorted(self.inferred.items())], "told_fprs": fprs,
                 "tails": {t: s.nu for t, s in self.spreads.items() if s.nu is not None},
                 "out_of_fold_episodes": self.out_of_fold_episodes}
-        arrays = {"courses": self.courses, **{f"spreads.{t}": s.spread for t, s in self.spreads.items()}}
+        arrays = {"courses": self.courses, **{f"spreads.{t}": s.spread for t, s in self.spreads.items()},
+                  **{f"precision.{t}": s.precision for t, s in self.spreads.items() if s.precision is not None}}
         if fprs:
             arrays["told"] = np.stack([self.told[f] for f in fprs])
         return meta, arrays
@@ -180,7 +187,8 @@ class SkillCalibration:
         """The calibration `to_parts` wrote, of a memory knowing ``skills``."""
         told, tails = arrays.get("told"), meta.get("tails", {})
         return cls(tuple(meta["terms"]), arrays["courses"],
-                   {t: SkillSpreads(tuple(skills), arrays[f"spreads.{t}"], tails.get(t)) for t in meta["spreads"]},
+                   {t: SkillSpreads(tuple(skills), arrays[f"spreads.{t}"], tails.get(t), arrays.get(f"precision.{t}"))
+                    for t in meta["spreads"]},
                    float(meta["forgetting"]), meta["rule"], tuple(meta["recognised_by"]),
                    {float(f): float(t) for f, t in meta["inferred"]},
                    {float(f): told[i] for i, f in enumerate(meta["told_fprs"])}, int(meta.get("out_of_fold_episodes", 0)))
@@ -390,8 +398,14 @@ class SkillMemory:
         floor = SCORING.spread_floor(self.model.rate_hz)
         residuals = self.residuals(precision, courses, needed)
         tails = dict(scoring.tails)
-        spreads = {t: replace(SkillSpreads.estimate(residuals[t], precision_skills, self.skills, floor), nu=tails.get(t))
-                   for t in needed}
+        own = np.array([self.index(str(s)) for s in precision_skills])
+        spreads = {}
+        for t in needed:
+            spread = replace(SkillSpreads.estimate(residuals[t], precision_skills, self.skills, floor), nu=tails.get(t))
+            if t in scoring.correlated:  # each episode's residual against its own skill, over that skill's spread
+                whitened = residuals[t][np.arange(len(own)), own] / spread.spread[own]
+                spread = replace(spread, precision=error_precision(whitened, np.ones(whitened.shape[1:])))
+            spreads[t] = spread
         return SkillCalibration(scoring.terms, courses, spreads, scoring.forgetting, scoring.rule, scoring.recognised_by)
 
     def _peaks(self, cal: SkillCalibration, sequences: np.ndarray, skills: Sequence[str],

@@ -67,15 +67,23 @@ class SkillSpreads:
     With ``nu`` the residual is held to a Student-t of ``nu`` (> 2) degrees of freedom instead of
     a Gaussian, of the same variance (scale ``spread * sqrt((nu - 2) / nu)``): a step far off adds
     about the log of its size to the energy, not its square, so that a normal episode's isolated
-    spike does not outweigh a course that is off for many steps."""
+    spike does not outweigh a course that is off for many steps.
+
+    With ``precision`` (Gaussian only) the channels are weighed together, as the product's other
+    calibrations weigh a step's errors: the residual over the spread, ``z``, scores ``z^T P_t z``
+    with ``P_t`` the step's precision matrix of normal ``z`` (every skill's), so that channels
+    that move together in normal episodes (speeds, force and torque) are not counted twice."""
 
     skills: tuple[str, ...]
     spread: np.ndarray  # (K, T, D) the residual's RMS
     nu: float | None = None  # None: Gaussian
+    precision: np.ndarray | None = None  # (T, D, D) of the residual over the spread; None: channel by channel
 
     def __post_init__(self) -> None:
         if self.nu is not None and not self.nu > 2:
             raise ValueError(f"a Student-t's degrees of freedom must be > 2 (a finite variance), got {self.nu}")
+        if self.nu is not None and self.precision is not None:
+            raise ValueError("a term is held to a Student-t channel by channel, or weighed by precision matrices: not both")
 
     @classmethod
     def estimate(cls, residuals: np.ndarray, labels: Sequence[str], skills: Sequence[str], floor: float,
@@ -111,18 +119,28 @@ class SkillSpreads:
     @cached_property
     def _log_normalisers(self) -> np.ndarray:
         """(K, T) `log_normaliser` at every step, computed once."""
-        return 2 * np.log(self._scales).sum(axis=-1)
+        log_variances = 2 * np.log(self._scales).sum(axis=-1)
+        if self.precision is None:
+            return log_variances
+        steps = np.minimum(np.arange(self.spread.shape[1]), len(self.precision) - 1)
+        return log_variances - np.linalg.slogdet(self.precision)[1][steps][None]
 
     def energy(self, residuals: np.ndarray, steps: np.ndarray | int, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(..., R, S) energies of residuals (..., R, S, D) against the skills ``rows`` at ``steps`` (S,, or one):
-        -2 log-likelihood less the normaliser, `Σ z²` (Gaussian) or `(ν + 1) Σ log(1 + z² / ν)`."""
+        -2 log-likelihood less the normaliser, `Σ z²` (Gaussian), `z^T P_t z` (with precision matrices)
+        or `(ν + 1) Σ log(1 + z² / ν)`."""
+        if self.precision is not None:
+            z = residuals / self.scale(steps, rows)
+            at = np.minimum(steps, len(self.precision) - 1)
+            return np.einsum("...rsd,sde,...rse->...rs", z, self.precision[np.atleast_1d(at)], z)
         z2 = (residuals / self.scale(steps, rows)) ** 2
         if self.nu is None:
             return np.add.reduce(z2, axis=-1)  # .sum without its Python wrapper: a served step's every microsecond counts
         return (self.nu + 1) * np.add.reduce(np.log1p(z2 / self.nu), axis=-1)
 
     def log_normaliser(self, steps: np.ndarray | int, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """(R, S) the skills' sums of log squared scales at ``steps`` (the variances, Gaussian)."""
+        """(R, S) the skills' sums of log squared scales at ``steps`` (the variances, Gaussian), less
+        the log-determinant of the step's precision matrix where the channels are weighed together."""
         return _pick(self._log_normalisers, steps, rows)
 
 

@@ -274,3 +274,40 @@ def test_not_told_a_step_is_scored_by_the_skill_most_probable_before_it_by_defau
     before = posterior[:, :, :-1].argmax(axis=1)  # the most probable skill after step t - 1
     expected = np.take_along_axis(each[:, :, 1:], before[:, None], axis=1)[:, 0]
     np.testing.assert_allclose(energies[:, 1:], expected, rtol=1e-6)
+
+
+def test_correlated_channels_are_weighed_together():
+    rng = np.random.default_rng(0)
+    common = rng.standard_normal((400, 1, 1))
+    z = np.concatenate([common, common + 0.1 * rng.standard_normal((400, 1, 1)), rng.standard_normal((400, 1, 1))],
+                       axis=2)  # channels 0 and 1 move together, channel 2 alone
+    from neural_asm.models.calibration import error_precision
+
+    spreads = SkillSpreads(("a",), np.ones((1, 1, 3)), precision=error_precision(z, np.ones((1, 3))))
+    plain = SkillSpreads(("a",), np.ones((1, 1, 3)))
+    together, apart = np.array([[[1.0, 1.0, 0.0]]]), np.array([[[1.0, -1.0, 0.0]]])
+    assert spreads.energy(together, np.arange(1))[0, 0] < 0.7 * plain.energy(together, np.arange(1))[0, 0]
+    assert spreads.energy(apart, np.arange(1))[0, 0] > 10 * plain.energy(apart, np.arange(1))[0, 0]
+    with pytest.raises(ValueError, match="not both"):
+        SkillSpreads(("a",), np.ones((1, 1, 3)), nu=4.0, precision=np.eye(3)[None])
+
+
+def test_a_correlated_course_is_kept_by_the_checkpoint_and_a_student_t_term_cannot_be_correlated(memory, tmp_path):
+    from neural_asm.models import checkpoint
+
+    precision, threshold = episodes(5, SKILLS, 1), episodes(5, SKILLS, 2)
+    try:
+        with pytest.raises(ValueError, match=r"\['dynamics'\] held to a Student-t"):
+            memory.calibrate(*precision, *threshold, scoring=SkillScoring(correlated=("dynamics",)))
+        cal = memory.calibrate(*precision, *threshold, scoring=SkillScoring(correlated=("course",)))
+        matrices = cal.spreads["course"].precision
+        assert matrices.shape == (STEPS, len(NAMES), len(NAMES)) and cal.spreads["dynamics"].precision is None
+        _, loaded = checkpoint.load_memory(checkpoint.save(memory, tmp_path / "m.safetensors"))
+        np.testing.assert_array_equal(loaded.calibration.spreads["course"].precision, matrices)
+        x, _ = episodes(1, SKILLS, 3)
+        np.testing.assert_array_equal(loaded.score(x)[0], memory.score(x)[0])
+        plain = memory.calibrate(*precision, *threshold)
+        assert not np.allclose(memory.score(x)[0], loaded.score(x)[0])  # the weighing changes the energies
+        assert plain.spreads["course"].precision is None
+    finally:
+        memory.calibrate(*precision, *episodes(5, SKILLS, 2))

@@ -41,6 +41,9 @@ def term(spreads, residual: np.ndarray, t: int) -> tuple[np.ndarray, np.ndarray]
     """Each skill's energy (K,) and log normaliser (K,) of one term's residuals (K, D) at step t."""
     spread = spreads.spread[:, min(t, spreads.spread.shape[1] - 1)]
     scale = spread if spreads.nu is None else spread * np.sqrt((spreads.nu - 2) / spreads.nu)
+    if spreads.precision is not None:  # the channels weighed together: z^T P_t z, less log det P_t
+        z, precision = residual / scale, spreads.precision[min(t, len(spreads.precision) - 1)]
+        return np.array([zk @ precision @ zk for zk in z]), 2 * np.log(scale).sum(axis=1) - np.linalg.slogdet(precision)[1]
     z2 = (residual / scale) ** 2
     energy = z2.sum(axis=1) if spreads.nu is None else (spreads.nu + 1) * np.log1p(z2 / spreads.nu).sum(axis=1)
     return energy, 2 * np.log(scale).sum(axis=1)
@@ -119,7 +122,8 @@ def check_session(memory: SkillMemory, episode: np.ndarray, told: str | None) ->
 
 
 @pytest.mark.parametrize("scoring", [SkillScoring(), SkillScoring(rule="surprise", tails=()),
-                                     SkillScoring(recognised_by=())], ids=["default", "surprise", "both_terms"])
+                                     SkillScoring(recognised_by=()), SkillScoring(rule="surprise", correlated=("course",))],
+                         ids=["default", "surprise", "both_terms", "correlated"])
 def test_served_steps_are_the_definitions(memory, scoring):
     normal, labels = episodes(4, 1)
     memory.calibrate(normal[0::2], labels[0::2], normal[1::2], labels[1::2], scoring=scoring)
