@@ -132,7 +132,8 @@ class SkillSpreads:
         if self.precision is not None:
             z = residuals / self.scale(steps, rows)
             at = np.minimum(steps, len(self.precision) - 1)
-            return np.einsum("...rsd,sde,...rse->...rs", z, self.precision[np.atleast_1d(at)], z)
+            weighed = np.matmul(z[..., None, :], self.precision[np.atleast_1d(at)])[..., 0, :]  # z^T P_t (einsum's 2x)
+            return np.add.reduce(weighed * z, axis=-1)
         z2 = (residuals / self.scale(steps, rows)) ** 2
         if self.nu is None:
             return np.add.reduce(z2, axis=-1)  # .sum without its Python wrapper: a served step's every microsecond counts
