@@ -111,7 +111,8 @@ class SkillScoring:
     and, not told, the most probable skill's energy scored (adopted by a rule written before
     three fresh splits were run: +0.014 mean AUROC not told, told unchanged). The terms in
     ``correlated`` are weighed with their channels' correlations (per-step precision matrices,
-    `SkillSpreads`), the others channel by channel."""
+    `SkillSpreads`), the others channel by channel: none by default (the course correlated did not
+    rank better told on three fresh splits: docs/kitting.md, "Round 4, H6")."""
 
     terms: tuple[str, ...] = TERMS
     course: Course = "mean"
