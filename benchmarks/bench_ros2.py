@@ -236,7 +236,7 @@ def main() -> None:
         return
     robots = 4 if args.quick else args.robots
     bench_service.FLEET = robots  # the websocket fleet as large as the nodes' (paced_fleet reads it)
-    SESSION.update(mode="offline", rate_hz=RATE)  # the node's monitor recalls offline
+    SESSION.update(mode="offline", rate_hz=RATE)  # as the node's monitor: the model is calibrated offline only
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         episodes = build_model(folder, RATE)

@@ -20,7 +20,6 @@ from neural_asm.logs.cli import FORMATS, SKIP_BAD_HELP, data_command, mapping_he
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.sources import episode_position
 from neural_asm.models.recall import RECALL_MODES
-from neural_asm.pipelines.default_model import RATE_MODES
 from neural_asm.recordings import DEFAULT_DIR
 from neural_asm.recordings.foxglove_live import FoxgloveLive
 from neural_asm.recordings.live import LiveViewer, open_viewer
@@ -70,8 +69,8 @@ def client(
                              "(panda, panda-40hz) is built on first use."),
     realtime: bool = typer.Option(False, "--realtime", help="send each observation at its time in the episode "
                                   "(every 25 ms at 40 Hz), not as fast as the service answers"),
-    mode: Mode | None = typer.Option(None, help="recall mode: offline (the paper's setting) or online; default "
-                                     + ", ".join(f"{m} at {r:g} Hz" for r, m in RATE_MODES.items())),
+    mode: Mode | None = typer.Option(None, help="recall mode: offline (the paper's setting) or online; default: the "
+                                     "model's served mode, offline at 2 Hz and online at 40"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
     reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
     transport: TransportName = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
@@ -154,7 +153,8 @@ def replay(
     model: str | None = typer.Option(None, help="name of the served model to score with (default: the service's default)"),
     episode: list[int] = typer.Option([], help="episode number in the source (repeatable) (default: every episode)"),
     api_key: str | None = typer.Option(None, envvar="NASM_API_KEY", help="API key (X-API-Key header)"),
-    mode: str = typer.Option("offline", help="recall mode: offline, online or plan (a model with a plan memory)"),
+    mode: str | None = typer.Option(None, help="recall mode: offline, online or plan (a model with a plan memory); "
+                                    "default: the model's served mode, offline at 2 Hz and online faster"),
     out: Path = typer.Option(DEFAULT_DIR, help="recordings folder"),
     transport: str = typer.Option("ws", help="ws (websocket /stream) or http (/sessions + /fault)"),
     reconnect: bool = typer.Option(False, "--reconnect", help="if the service goes away, reconnect and replay"),
@@ -173,7 +173,7 @@ def replay(
     """Stream recorded episodes to a running service exactly as the live robot client does,
     after the same checks as ``nasm score`` against the served model; or, with ``--ros2``, play
     them onto a robot's ROS 2 bus for the monitor node (``nasm ros2``)."""
-    if mode not in RECALL_MODES or transport not in TRANSPORTS:
+    if (mode is not None and mode not in RECALL_MODES) or transport not in TRANSPORTS:
         raise fail(f"--mode must be one of {', '.join(RECALL_MODES)} and --transport ws or http; "
                    f"got {mode!r}, {transport!r}")
     if (url is None) == (ros2 is None):

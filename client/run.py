@@ -24,7 +24,7 @@ from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.config import SCORING
 from neural_asm.pipelines.compliant import Gate, compliant_episode, digest_of, ensure_compliant_model
-from neural_asm.pipelines.default_model import RATE_MODES, ensure_default_model, model_name
+from neural_asm.pipelines.default_model import ensure_default_model, model_name
 from neural_asm.runtime.home import home_path
 from neural_asm.sim.config import CONTROLLERS, RATES, SIM
 from neural_asm.sim.disturbances import FallingObject, elbow_hit
@@ -158,11 +158,11 @@ def run_client(run: SimulatedRun = SimulatedRun(), connection: Connection = Conn
     """Simulate the ``run``'s episodes and stream each to the service at ``connection`` (its URL,
     or one started here, on ``models_dir``, hosting the default model at the run's rate,
     ``panda`` or ``panda-40hz``, built on first use); ``options.mode`` defaults to the rate's
-    ``RATE_MODES``. ``after_step(episode, step)`` is called after each scored step (tests use it
+    served mode (`ScoringConfig.served_mode`). ``after_step(episode, step)`` is called after each scored step (tests use it
     to stop the service mid-episode). Stops after an episode the service was lost in.
     """
     rate, quiet = run.rate, options.quiet
-    options = replace(options, mode=RATE_MODES[rate] if options.mode is None else options.mode)
+    options = replace(options, mode=SCORING.served_mode(rate) if options.mode is None else options.mode)
     for name, value, known in (("mode", options.mode, MODES), ("transport", connection.transport, TRANSPORTS)):
         if value not in known:
             raise ValueError(f"--{name} must be one of {', '.join(known)}, got {value!r}")

@@ -49,9 +49,10 @@ class ServiceClient:
         return served_models(self.url, self.api_key)
 
     @contextmanager
-    def session(self, model: str | None = None, mode: str = "offline", fpr: float | None = None,
+    def session(self, model: str | None = None, mode: str | None = None, fpr: float | None = None,
                 skill: str | None = None, **settings: Any) -> Iterator[ServiceSession]:
-        """A session of ``model`` (the default model if None), told the ``skill`` the robot runs (a
+        """A session of ``model`` (the default model if None) in recall ``mode`` (None: the model's
+        served mode, offline at 2 Hz and online faster), told the ``skill`` the robot runs (a
         skill memory's; None: it infers the skill); ``settings`` are the protocol's other start
         fields (``threshold``, ``cue_steps``, ``rate_hz``, ``recording_id``). Ended on exit."""
         transport = WebSocketTransport(self.url, self.api_key, self.timeout_s)

@@ -83,7 +83,8 @@ def evaluate(
     normal: str = typer.Argument(..., help="logs of normal episodes the model was not trained or calibrated on"),
     faults: str = typer.Argument(..., help="logs of faulty episodes"),
     mapping: Path = typer.Option(..., help=mapping_help("NORMAL (and FAULTS)")),
-    mode: str = typer.Option("offline", help="recall mode: offline or online"),
+    mode: str | None = typer.Option(None, help="recall mode: offline or online (default: the model's served mode, "
+                                    "offline at 2 Hz and online faster)"),
     fpr: float = typer.Option(0.01, help="false-positive rate of the calibrated threshold"),
     threshold: str = typer.Option("episode", help="threshold kind, as a service session's: episode (the service's "
                                   "default), step or per_step"),
@@ -101,7 +102,7 @@ def evaluate(
     try:
         model = checkpoint.load(model_path)
         result = run(model, read_logs(normal, mapping, model, skip_bad), read_logs(faults, mapping, model, skip_bad),
-                     mode, fpr, threshold)  # type: ignore[arg-type]
+                     model.served_mode if mode is None else mode, fpr, threshold)  # type: ignore[arg-type]
     except (LogError, checkpoint.CheckpointError) as exc:
         raise fail(exc) from None
     for row in result["episodes"]["faults"]:

@@ -152,6 +152,18 @@ class NeuralASM:
         return self.net.obs_size
 
     @property
+    def served_mode(self) -> str:
+        """The recall a session of this model gets when it names none: offline at the paper's
+        2 Hz, online at faster rates (`ScoringConfig.served_mode`), if the model is calibrated for
+        it; else offline, or the one mode it is calibrated for (a checkpoint calibrated before the
+        rule, in one mode, keeps being served as it was)."""
+        preferred = SCORING.served_mode(self.rate_hz)
+        calibrated = sorted({c.mode for c in self.calibrations.values() if c.thresholds})  # modes that can decide
+        if not calibrated or preferred in calibrated:
+            return preferred
+        return "offline" if "offline" in calibrated else calibrated[0]
+
+    @property
     def recall_modes(self) -> tuple[str, ...]:
         """The network's own recall modes, and "plan" where a plan memory was fitted."""
         return recall_.RECALL_MODES if self.plan is not None else recall_.NETWORK_MODES

@@ -149,7 +149,8 @@ def recall(
 def score(
     model_path: Path = typer.Argument(..., help="checkpoint (.safetensors)"),
     data: str = typer.Argument(SYNTHETIC, help=f"sequences to score: {DATA_HELP}"),
-    mode: str = typer.Option("offline", help="recall mode: offline or online"),
+    mode: str | None = typer.Option(None, help="recall mode: offline or online (default: the model's served mode, "
+                                    "offline at 2 Hz and online faster)"),
     cue_steps: int = typer.Option(1, min=1, help="observations the recall is cued from"),
     weighted: bool = typer.Option(True, help="precision-weight the errors (needs a calibration)"),
     as_json: bool = typer.Option(False, "--json", help="print per-step energies as JSON"),
@@ -161,11 +162,12 @@ def score(
 
     from neural_asm.data import read_data
 
-    _check_mode(mode)
+    if mode is not None:
+        _check_mode(mode)
     model = _load_model(model_path)
     seqs = read_data(data, mapping, skip_bad, model)
     try:
-        result = model.score(seqs.data, mode, cue_steps, weighted)
+        result = model.score(seqs.data, model.served_mode if mode is None else mode, cue_steps, weighted)
     except (KeyError, ValueError) as exc:
         raise fail(str(exc.args[0]))
     if as_json:

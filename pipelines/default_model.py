@@ -21,9 +21,6 @@ from neural_asm.sim.config import SIM
 from neural_asm.sim.dataset import set_folder
 
 DEFAULT_NAME = "panda"
-# The recall mode the default model monitors in per rate: at 40 Hz offline recall rolls 300
-# ticks from one cue and drifts off the episode (docs/rate.md), so it is online.
-RATE_MODES: dict[float, str] = {SIM.timing.observation_hz: "offline", 40.0: "online"}
 CALIBRATION_SOURCE = "held-out normal episodes (simulated Panda)"
 
 

@@ -102,11 +102,12 @@ class SessionCreate(Strict):
     """One session scores one episode; open a new one for the next episode."""
 
     model: str | None = Field(None, max_length=128, description="model name; the default model if omitted")
-    mode: RecallMode = Field(
-        "offline",
+    mode: RecallMode | None = Field(
+        None,
         description="offline (the paper's setting): infer from the cue, then roll forward; online: infer from every "
         "observation; plan: the offline recall read out for the skill recognised at the cue, plus the episode's "
-        "departure from it (models with a plan memory)",
+        "departure from it (models with a plan memory). Omitted: the model's served mode, offline at 2 Hz and "
+        "online at faster rates (the session's reply names it)",
     )
     cue_steps: Count = Field(1, ge=1, le=10_000, description="observations the hidden state is inferred from")
     fpr: Fpr | None = Field(

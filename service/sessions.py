@@ -122,6 +122,8 @@ def open_session(
 ) -> Session:
     """Check the recall setting is calibrated (or the skill can be told), then start its stream and recording."""
     name, model = registry.get(params.model)
+    if params.mode is None:  # the model's served mode (offline at 2 Hz, online faster)
+        params = params.model_copy(update={"mode": model.served_mode})
     fpr = settings.default_fpr if params.fpr is None else params.fpr
     if params.rate_hz is not None and not math.isclose(params.rate_hz, model.rate_hz, rel_tol=1e-6):
         raise NotCalibrated(

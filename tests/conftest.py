@@ -77,15 +77,15 @@ def server(model_dir: Path, tmp_path_factory: pytest.TempPathFactory):
 @pytest.fixture(scope="session")
 def servable_model(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Path]:
     """Make a service's model folder: a small network trained on synthetic 25-channel skills
-    (the Panda's channel names), calibrated for ``modes``, its training episodes beside it
-    as ``episodes.npy``."""
+    (the Panda's channel names) at ``rate_hz``, calibrated for ``modes``, its training episodes
+    beside it as ``episodes.npy``."""
     def make(n_skills: int = 1, repetitions: int = 4, steps: int = 6, hidden_size: int = 16, epochs: int = 5,
-             modes: tuple[str, ...] = ("offline",), name: str = "m", seed: int = 0) -> Path:
+             modes: tuple[str, ...] = ("offline",), name: str = "m", seed: int = 0, rate_hz: float = 2.0) -> Path:
         folder = tmp_path_factory.mktemp("models")
         data = make_skills(n_skills=n_skills, repetitions=repetitions, steps=steps, channels=len(CHANNEL_NAMES),
                            seed=seed)
         model = NeuralASM.fit(data.data, CHANNEL_NAMES, FAST.with_(hidden_size=hidden_size, epochs=epochs),
-                              progress=False)
+                              progress=False, rate_hz=rate_hz)
         for mode in modes:
             model.calibrate(data.data, data.data, mode, 1)
         checkpoint.save(model, folder / f"{name}.safetensors")

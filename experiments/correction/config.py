@@ -14,7 +14,6 @@ from neural_asm.experiments.options import option
 from neural_asm.models.config import SCORING
 from neural_asm.models.recall import RECALL_MODES
 from neural_asm.pipelines.compliant import SERVED_MONITOR, MonitorSeeds
-from neural_asm.pipelines.default_model import RATE_MODES
 from neural_asm.sim.config import CONTROLLERS, RATES, SIM, CorrectionGains, ElbowHit
 
 
@@ -69,9 +68,9 @@ class CorrectionConfig:
 
     @property
     def monitor_mode(self) -> str:
-        """`mode`, else the rate's (`RATE_MODES`: offline at 2 Hz, online at 40), so that a
+        """`mode`, else the rate's served one (`ScoringConfig.served_mode`: offline at 2 Hz, online at 40), so that a
         config given another rate monitors as that rate's default does."""
-        return RATE_MODES[self.rate] if self.mode is None else self.mode
+        return SCORING.served_mode(self.rate) if self.mode is None else self.mode
 
     @property
     def test_seeds(self) -> list[int]:

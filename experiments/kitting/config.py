@@ -35,7 +35,7 @@ class KittingConfig:
     few_skills: tuple[str, ...] = ("7", "8", "9")
     fprs: tuple[float, ...] = (0.01, 0.05)
     threshold_folds: int = 5  # the cross-fitted threshold's folds of the training runs (`score_cross_fitted`)
-    recall_mode: str = "offline"  # the service's default
+    recall_mode: str = "offline"  # nasm_one's, the paper's mode (nasm_one_online: what a 20 Hz model is served in)
     lstm_epochs: int = 150
     not_anomalies: tuple[str, ...] = ("false_positive",)  # labelled by the dataset's authors as no anomaly
     whole_runs: bool = True

@@ -7,7 +7,7 @@ import pytest
 from scipy import stats
 
 from neural_asm.models.calibration import Thresholds
-from neural_asm.models.config import SCORING
+from neural_asm.models.config import FAST, SCORING
 from neural_asm.models.conformal import (
     TimeVaryingThreshold,
     binomial_interval,
@@ -161,3 +161,22 @@ def test_the_spread_floor_scales_with_the_observation_period():
     assert SCORING.spread_floor(40.0) == pytest.approx(SCORING.error_std_floor / 20)
     with pytest.raises(ValueError, match="rate_hz"):
         SCORING.spread_floor(0.0)
+
+
+def test_models_are_served_offline_at_the_papers_rate_and_online_faster():
+    assert [SCORING.served_mode(r) for r in (0.5, 2.0, 2.5, 20.0, 40.0)] == \
+        ["offline", "offline", "online", "online", "online"]
+    with pytest.raises(ValueError, match="rate_hz"):
+        SCORING.served_mode(0.0)
+
+
+def test_a_model_calibrated_in_one_mode_is_served_in_it():
+    from neural_asm.models.asm import NeuralASM
+
+    data = np.random.default_rng(0).standard_normal((6, 5, 3))
+    model = NeuralASM.fit(data, ["a", "b", "c"], FAST.with_(hidden_size=8, epochs=2), progress=False, rate_hz=20.0)
+    assert model.served_mode == "online"  # not calibrated yet: the rate's
+    model.calibrate(data, data, "offline", 1)
+    assert model.served_mode == "offline"  # the one mode it can decide in
+    model.calibrate(data, data, "online", 1)
+    assert model.served_mode == "online"

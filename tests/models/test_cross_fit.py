@@ -109,3 +109,13 @@ def test_groups_from_where_episodes_were_read():
         episode_groups(seqs, grouping(r"experiment_at_\w+"))
     with pytest.raises(ValueError, match="'episode', 'file' or a regular expression; '\\[' is none"):
         grouping("[")
+
+
+def test_a_memory_monitors_and_scores_in_its_served_mode_unless_told_another():
+    demos = make_skills(n_skills=2, repetitions=6, steps=8, channels=4, seed=2).data
+    for rate, served in ((2.0, "offline"), (20.0, "online")):
+        memory = SkillMemory.fit(demos, preset=TINY, rate_hz=rate, progress=False)
+        assert memory.served_mode == served
+        np.testing.assert_array_equal(memory.score(demos).energy, memory.score(demos, served).energy)
+        other = "online" if served == "offline" else "offline"
+        assert not np.array_equal(memory.score(demos).energy, memory.score(demos, other).energy)

@@ -76,6 +76,15 @@ def test_a_client_at_another_rate_is_refused_and_the_server_serves_on(client, ep
     assert client.delete(f"/sessions/{info['session_id']}").status_code == 200
 
 
+def test_a_session_naming_no_mode_gets_the_models_served_mode(client, servable_model, tmp_path):
+    assert open_session(client)["mode"] == "offline"  # the 2 Hz model: the paper's setting
+    fast = servable_model(modes=("offline", "online"), name="fast", rate_hz=20.0)
+    with start_embedded(Settings(models_dir=fast, recordings_dir=tmp_path)) as srv, \
+            httpx.Client(base_url=srv.url, timeout=10) as c:
+        assert open_session(c)["mode"] == "online"  # a 20 Hz model: online, where it wins
+        assert open_session(c, mode="offline")["mode"] == "offline"  # a session may still ask
+
+
 def test_session_lifecycle(client):
     info = open_session(client, mode="offline", fpr=0.05, threshold="per_step")
     sid = info["session_id"]
