@@ -15,18 +15,20 @@ from fastapi import Response
 from neural_asm.models.answer import StepAnswer
 from neural_asm.service.runner import StepOutcome
 from neural_asm.service.schemas import SessionInfo
+from neural_asm.models.skill_session import SkillSession
 from neural_asm.service.sessions import Session
 
 
 def session_info(session: Session, idle_expiry_s: float) -> SessionInfo:
-    recording, skilled = session.recording, session.skilled
-    model = session.stream.model if skilled is None else skilled.memory.model  # type: ignore[union-attr]
+    recording, stream = session.recording, session.stream
+    # a skill memory's sessions recall online under each skill's cue, beside each skill's course
+    model, mode, cue_steps = ((stream.memory.model, "online", 1) if isinstance(stream, SkillSession) else
+                              (stream.model, stream.recaller.mode, stream.recaller.cue_steps))
     return SessionInfo(
         session_id=session.id,
         model=session.model_name,
-        # a skill memory's sessions recall online under each skill's cue, beside each skill's course
-        mode="online" if skilled is not None else session.stream.recaller.mode,  # type: ignore[arg-type, union-attr]
-        cue_steps=1 if skilled is not None else session.stream.recaller.cue_steps,  # type: ignore[union-attr]
+        mode=mode,  # type: ignore[arg-type]  # a recaller's mode is one of the schema's RecallMode
+        cue_steps=cue_steps,
         fpr=session.fpr,
         threshold=session.threshold,
         rate_hz=model.rate_hz,

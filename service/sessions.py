@@ -42,34 +42,32 @@ class Session:
 
     @property
     def fpr(self) -> float:
-        fpr = self.skill_fpr if self.skilled is not None else self.stream.fpr  # type: ignore[union-attr]
+        stream = self.stream
+        fpr = self.skill_fpr if isinstance(stream, SkillSession) else stream.fpr
         assert fpr is not None
         return fpr
 
     @property
-    def skilled(self) -> SkillSession | None:
-        """A skill memory's session (stepped alone: its rows are its skills), else None."""
-        return self.stream if isinstance(self.stream, SkillSession) else None
-
-    @property
     def told(self) -> str | None:
         """The skill the session was told (None: not told, or a model without skills)."""
-        skilled = self.skilled
-        return None if skilled is None or skilled.told is None else skilled.memory.skills[skilled.told]
+        stream = self.stream
+        return None if not isinstance(stream, SkillSession) or stream.told is None else stream.memory.skills[stream.told]
 
     @property
     def channel_names(self) -> tuple[str, ...]:
-        skilled = self.skilled
-        return self.stream.model.channel_names if skilled is None else skilled.memory.channel_names  # type: ignore[union-attr]
+        stream = self.stream
+        return stream.memory.channel_names if isinstance(stream, SkillSession) else stream.model.channel_names
 
     @property
     def threshold(self) -> ThresholdKind:
-        return "episode" if self.skilled is not None else self.stream.threshold  # type: ignore[union-attr]
+        stream = self.stream
+        return "episode" if isinstance(stream, SkillSession) else stream.threshold
 
     @property
     def batch_key(self) -> Hashable:
         """Sessions with equal keys step together (`models.asm.step_streams`); a skill memory's alone."""
-        return (id(self),) if self.skilled is not None else self.stream.batch_key  # type: ignore[union-attr]
+        stream = self.stream
+        return (id(self),) if isinstance(stream, SkillSession) else stream.batch_key
 
     def observation(self, req: Observation) -> np.ndarray:
         """The request's observation as a vector in channel order, or a 422 naming the problem (a
@@ -79,9 +77,9 @@ class Session:
             raise SkillRefused(f"skill: session {self.id} {told}, this step names {req.skill!r}; a skill is told at a "
                                f"session's start: open a new session for another skill")
         values = req.observation if req.channels is None else req.channels
-        skilled = self.skilled
+        stream = self.stream
         try:
-            return self.stream.check(values) if skilled is None else skilled.memory.check(values)  # type: ignore[union-attr]
+            return stream.memory.check(values) if isinstance(stream, SkillSession) else stream.check(values)
         except ValueError as exc:
             raise BadObservation(f"model {self.model_name!r}: {exc}") from None
 
