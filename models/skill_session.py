@@ -4,6 +4,7 @@ answers is what `SkillMemory.score` gives for the whole episode (tests/models/te
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Sequence
 
@@ -122,13 +123,14 @@ def step_sessions(streams: Sequence[SkillStream | SkillSession], observations: n
     """One step of sessions sharing a batch key, each on its row of checked raw ``observations``,
     and each answered skill's probability (None but for a skill memory's session): a skill
     memory's session steps alone (its skills are the rows of its own batch), a model's streams in
-    one relaxation (`step_streams`). None where the outputs are not finite. The service's runner
-    and `neural_asm.memory.step_monitors` both step this way."""
+    one relaxation (`step_streams`). None where the outputs are not finite (a model's stream keeps
+    its state; a skill memory's session has taken the step). The service's runner and
+    `neural_asm.memory.step_monitors` both step this way."""
     first = streams[0]
     if isinstance(first, SkillSession):
         result, probability = served_step(first, observations[0])
-        finite = np.isfinite(result.score.energy) and np.isfinite(result.score.prediction).all()
-        return [result if finite else None], [probability]
+        # its prediction is the skill's stored course; what the network adds reaches the energy
+        return [result if math.isfinite(result.score.energy) else None], [probability]
     plain = [s for s in streams if isinstance(s, SkillStream)]
     if len(plain) != len(streams):
         raise ValueError("a skill memory's session steps alone, not batched with other sessions")

@@ -101,9 +101,10 @@ class Monitor:
     def step(self, observation: Observation) -> StepAnswer:
         """Judge one raw observation (a vector in channel order, or a channel -> value mapping);
         a ValueError names what is wrong with it."""
+        step = self.steps
         (answer,) = step_monitors([self], self.check(observation)[None])
         if answer is None:
-            raise FloatingPointError(f"step {self.steps}: the memory's outputs are not finite")
+            raise FloatingPointError(f"step {step}: the memory's outputs are not finite")
         return answer
 
 

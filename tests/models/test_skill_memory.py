@@ -85,3 +85,9 @@ def test_an_uncalibrated_skill_memory_round_trips_and_an_ordinary_network_has_no
     assert loaded.told.calibration is None and np.array_equal(loaded.told.means, memory.told.means)
     plain = SkillMemory.load(SkillMemory(memory.model).save(tmp_path / "plain.safetensors"))
     assert plain.told is None and plain.skills == ()
+
+
+def test_a_step_whose_energy_is_not_finite_is_refused_as_the_service_refuses_it(memory):
+    monitor = memory.monitor()
+    with pytest.warns(RuntimeWarning), pytest.raises(FloatingPointError, match="step 0: .* not finite"):
+        monitor.step(np.full(len(NAMES), 1e300))  # finite, but its squared residuals overflow
