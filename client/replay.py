@@ -25,7 +25,6 @@ from neural_asm.client.summary import EpisodeSummary, summary_line
 from neural_asm.client.transport import served_models
 from neural_asm.logs.errors import LogError
 from neural_asm.logs.sources import check_model, episode_position
-from neural_asm.models.config import SCORING
 from neural_asm.models.sequences import Sequences
 
 
@@ -47,14 +46,13 @@ def replay_logs(seqs: Sequences, episodes: list[int], connection: Connection, op
     """Stream the logged ``episodes`` (numbers in the source; none: every episode) to the service
     at ``connection``, scored by its ``model`` (None: its default) once the logs are checked
     against it, each session told its episode's skill (the mapping's skill or phase tag) with
-    ``tell_skill``, in ``options.mode`` (None: the model's served mode, as the service would pick);
+    ``tell_skill``, in ``options.mode`` (None: the model's served mode, which the service picks);
     stops after an episode the service was lost in."""
     if connection.url is None:
         raise ValueError("a replay streams to a running service: give its URL")
     served = served_model(connection.url, connection.api_key, model)
     check_model(seqs, tuple(served.get("channel_names", [])), served.get("provenance") or {}, same_length=False)
-    mode = SCORING.served_mode(served.get("rate_hz") or seqs.rate_hz) if options.mode is None else options.mode
-    options = replace(options, mode=mode, session={**options.session, "model": served["name"], "rate_hz": seqs.rate_hz})
+    options = replace(options, session={**options.session, "model": served["name"], "rate_hz": seqs.rate_hz})
     picks = [episode_position(seqs, n) for n in episodes] if episodes else list(range(len(seqs.data)))
     summaries = []
     for i in picks:

@@ -40,7 +40,7 @@ class Connection:
 class StreamOptions:
     """How each episode is streamed and recorded."""
 
-    mode: str | None = None  # the session's recall mode (a client run: None is its rate's default)
+    mode: str | None = None  # the session's recall mode (None: the service's choice, its model's served mode)
     out: Path = DEFAULT_DIR  # recordings folder
     session: dict[str, Any] = field(default_factory=dict)  # further session parameters: model, fpr, rate_hz
     realtime: bool = False  # send observation k no sooner than k periods after the first, as a robot would
@@ -58,17 +58,19 @@ class _Stream:
     """One episode's stream: its session (re)opened as needed, every step sent, scored, recorded."""
 
     def __init__(self, episode: StreamedEpisode, connection: Connection, options: StreamOptions) -> None:
-        if connection.url is None or options.mode is None or connection.transport not in TRANSPORTS:
-            raise ValueError(f"a stream needs a service URL, a recall mode and a transport of {list(TRANSPORTS)}")
+        if connection.url is None or connection.transport not in TRANSPORTS:
+            raise ValueError(f"a stream needs a service URL and a transport of {list(TRANSPORTS)}")
         self.episode, self.connection, self.options = episode, connection, options
         recording_id = new_run_id("client")  # the run id, shared with the service session so both files merge
         self.summary = EpisodeSummary(
             episode=episode.number, skill=episode.skill, seed=episode.seed, fault=episode.fault,
-            disturbance=episode.disturbance, mode=options.mode, steps_total=len(episode.observations),
+            disturbance=episode.disturbance, mode=options.mode or "", steps_total=len(episode.observations),
             steps_scored=0, detected=False, first_flag_step=None, first_flag_time_s=None, isolated_joint=None,
             fault_step=episode.fault_step, completed=False, reconnects=0, recording_id=recording_id, recordings={},
             service_recordings={}, **(asdict(episode.outcome) if episode.outcome else {}))
-        self.params = {"mode": options.mode, "cue_steps": 1, "recording_id": recording_id, **options.session}
+        self.params = {"cue_steps": 1, "recording_id": recording_id, **options.session}
+        if options.mode is not None:  # else the service picks, and its reply names the mode
+            self.params["mode"] = options.mode
         self.conn: Transport | None = None  # the session's connection while one is open
 
     def open(self, replay: int) -> Transport:
@@ -77,6 +79,7 @@ class _Stream:
         t = TRANSPORTS[self.connection.transport](self.connection.url, self.connection.api_key)
         try:
             info = t.start(self.params)
+            summary.mode = info.get("mode", summary.mode)
             service_names = tuple(info.get("channel_names", names))
             if service_names != names:
                 raise ServiceError(f"the service's model expects channels {list(service_names)}, "
@@ -114,7 +117,7 @@ class _Stream:
         the client's then does not, so the merged view says each event once."""
         ep, summary = self.episode, self.summary
         metadata = {"source": "client", "skill": ep.skill, "seed": ep.seed, "fault": ep.fault,
-                    "disturbance": ep.disturbance, "mode": self.options.mode, "service_url": self.connection.url,
+                    "disturbance": ep.disturbance, "mode": summary.mode, "service_url": self.connection.url,
                     "transport": self.connection.transport, **(asdict(ep.outcome) if ep.outcome else {})}
         service_logs_events = any(k.split("#")[0] == "rrd" for k in summary.service_recordings)
         return EpisodeRecorder(summary.recording_id, ep.channel_names, folder=self.options.out,

@@ -291,9 +291,9 @@ class SkillMemory:
         among them (every run of it left out) keeps this memory's course and a cue its network never
         saw: the fold memory is not asked to score it (`calibrate` leaves its episodes out)."""
         labels = np.asarray(labels).astype(str)
-        learnt = set(labels.tolist())
-        means = np.stack([mean_courses(demonstrations, labels, [s])[0] if s in learnt else self.means[k]
-                          for k, s in enumerate(self.skills)])
+        learnt = [s for s in self.skills if s in set(labels.tolist())]
+        means = self.means.copy()  # a skill not learnt keeps this memory's course
+        means[[self.index(s) for s in learnt]] = mean_courses(demonstrations, labels, learnt)
         if not network:
             return SkillMemory(self.model, means)
         epochs = int(self.model.provenance.get("kept_epoch", self.model.config.epochs))

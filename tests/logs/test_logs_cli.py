@@ -137,6 +137,7 @@ def test_replay_streams_like_the_live_client(served, logs, tmp_path):
     assert result.exit_code == 0, result.output
     replayed = json.loads(summaries.read_text())
     assert [s["steps_scored"] for s in replayed] == [15, 15] and all(s["completed"] for s in replayed)
+    assert {s["mode"] for s in replayed} == {"offline"}  # no --mode: the 2 Hz model's served mode, as the service said
     assert result.output.count("summary: episode") == 2
     # the first fault episode streamed live by the client's own code gives the same energies
     lock = FaultSpec(joint=2, time_s=3.0, overshoot_deg=15.0)
