@@ -32,6 +32,7 @@ is the served step (`models.skill_session`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Callable, Literal, Mapping, Sequence
 
@@ -156,7 +157,7 @@ class SkillCalibration:
         (all K by default) at ``steps`` (S,; an int: one step) and those skills' log normalisers (R, S), summed over the
         terms scored; and what updates the posterior where it is not those (the same sums over
         `recognised_by`; None: the scored ones). Each term is weighed once."""
-        used = dict.fromkeys((*self.terms, *self.recognised_by))
+        used, own = self._plan
         energy = {t: self.spreads[t].energy(residuals[t], steps, rows) for t in used}
         norm = {t: self.spreads[t].log_normaliser(steps, rows) for t in used}
 
@@ -166,8 +167,14 @@ class SkillCalibration:
                 total, normaliser = total + energy[t], normaliser + norm[t]
             return total, normaliser
 
-        own = bool(self.recognised_by) and set(self.recognised_by) != set(self.terms)
         return (*summed(self.terms), summed(self.recognised_by) if own else None)
+
+    @cached_property
+    def _plan(self) -> tuple[tuple[str, ...], bool]:
+        """The terms `scored` weighs (each once), and whether the posterior has terms of its own:
+        the same at every step of every session."""
+        own = bool(self.recognised_by) and set(self.recognised_by) != set(self.terms)
+        return tuple(dict.fromkeys((*self.terms, *self.recognised_by))), own
 
     def to_parts(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """The calibration as JSON metadata and named arrays, as a checkpoint stores it (no pickle)."""

@@ -69,12 +69,11 @@ class SkillSession:
         if raw.shape != (memory.width,) or not np.isfinite(raw).all():
             raise ValueError(f"observation: expected {memory.width} finite values ({', '.join(memory.channel_names)}), "
                              f"got {raw.tolist()}")
-        return self._advance(raw)
+        return self._advance(memory.normalise(raw))
 
-    def _advance(self, raw: np.ndarray) -> SkillStep:
-        """`step` of a raw observation (D,) float64 already checked (`served_step`'s are)."""
+    def _advance(self, x: np.ndarray) -> SkillStep:
+        """`step` of an observation (D,) already checked and normalised (`served_step` uses it too)."""
         memory, cal, t = self.memory, self.calibration, self.t
-        x = memory.normalise(raw)
         residuals = {}
         if "course" in cal.spreads:
             residuals["course"] = (x - cal.courses[self.picked, min(t, cal.courses.shape[1] - 1)])[:, None]
@@ -104,11 +103,12 @@ def served_step(session: SkillSession, observation: np.ndarray) -> tuple[StreamS
     probability. What it expected is the answered skill's course (told, or the most probable), its
     forecast the course's next step, and each channel's error is divided by that skill's course
     spread (without one: left as is), which isolation ranks."""
-    step = session._advance(observation)
     memory, cal = session.memory, session.calibration
+    x = memory.normalise(observation)
+    step = session._advance(x)
     k, last = memory.index(step.skill), cal.courses.shape[1] - 1
     now, upcoming = min(step.t, last), min(step.t + 1, last)
-    errors = memory.normalise(observation) - cal.courses[k, now]
+    errors = x - cal.courses[k, now]
     course = cal.spreads.get("course")
     weighted = errors if course is None else errors / course.at(step.t, slice(k, k + 1))[0, 0]
     expected, forecast = session.expectations[k, now].copy(), session.expectations[k, upcoming].copy()
