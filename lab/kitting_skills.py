@@ -36,6 +36,10 @@ probable skill's energy, and the paired McNemar table; splits 3-5 were first run
 Round 4's H6 (docs/kitting.md): the rows named "r4: ...", on splits never run before.
 
     python -m lab.kitting_skills "$SCHEME" --splits 9 --splits 10 --splits 11 --seeds 3 --cache DIR --only "r4:" --no-benchmark
+
+Round 5's H7: the "r5: ..." row beside the served defaults ("r4: served defaults ..."), on splits never run before.
+
+    python -m lab.kitting_skills "$SCHEME" --splits 12 --splits 13 --splits 14 --seeds 3 --cache DIR --only "served defaults" --no-benchmark
 """
 
 from __future__ import annotations
@@ -65,7 +69,9 @@ from neural_asm.rivals.templates import PerSkillZScore
 class Variant(NamedTuple):
     """A row of the memory: the terms scored, its course (recalled by the network or the
     demonstrations' "mean"), the terms that recognise the skill (none: the scored ones), the rule,
-    the forgetting; round 2: the terms held to a Student-t (term, ν), and thresholds cross-fitted."""
+    the forgetting; round 2: the terms held to a Student-t (term, ν), and thresholds cross-fitted;
+    round 4: the terms weighed with their channels' correlations; round 5: each skill's energy in its
+    own units, not told."""
 
     terms: tuple[str, ...]
     course: str
@@ -75,6 +81,7 @@ class Variant(NamedTuple):
     tails: tuple[tuple[str, float], ...] = ()
     cross_fitted: bool = False
     correlated: tuple[str, ...] = ()
+    scaled: bool = False
 
 
 DEFAULTS = Variant(("course", "dynamics"), "mean", ("course",), "surprise", 0.0)
@@ -117,6 +124,10 @@ VARIANTS = {
     "r4: served defaults, cross-fitted": DEFAULTS._replace(rule="most_probable", tails=STUDENT, cross_fitted=True),
     "r4: served defaults, the course correlated, cross-fitted": DEFAULTS._replace(
         rule="most_probable", tails=STUDENT, cross_fitted=True, correlated=("course",)),
+    # round 5's H7 (docs/kitting.md, "Round 5"), written before its run on splits 12-14: the served
+    # defaults, not told each step's energy in its skill's own units
+    "r5: served defaults, each skill's own units, cross-fitted": DEFAULTS._replace(
+        rule="most_probable", tails=STUDENT, cross_fitted=True, scaled=True),
 }
 # The report's likelihood template: each skill's mean course and own spreads, the most probable skill.
 TEMPLATE_LIKELIHOOD = Variant(("course",), "mean", (), "most_probable", 0.0)
@@ -181,7 +192,7 @@ def memory_rows(memory: SkillMemory, sets: Sets, w: Windows, config: KittingConf
         v = Variant(*variant)
         cross_fit = folds[any(t == "dynamics" for t in (*v.terms, *v.recognised_by))] if v.cross_fitted else None
         scoring = SkillScoring(tuple(v.terms), v.course, tuple(v.recognised_by), v.forgetting, v.rule, tuple(v.tails),
-                               tuple(v.correlated))
+                               tuple(v.correlated), v.scaled)
         cal = memory.calibrate(sets.precision.data, sets.precision.skills, sets.threshold.data, sets.threshold.skills,
                                sets.threshold.lengths, scoring, config.fprs, cross_fit=cross_fit)
         inferred, posterior = memory.score(sets.test.data)
@@ -261,7 +272,7 @@ def paired_table(by_split: dict[int, dict[str, list[dict]]]) -> str:
     lines = ["| split | memory | rival | memory only right (sum of trainings) | rival only right | p (summed) | "
              "per training: memory only / rival only, p |", "|---|---|---|---|---|---|---|"]
     for split, rows in by_split.items():
-        for name in (r for r in rows if r.startswith(("r2: ", "r4: "))):
+        for name in (r for r in rows if r.startswith(("r2: ", "r4: ", "r5: "))):
             rivals = (("template_likelihood (rival), not told", "template_likelihood (rival), cross-fitted, not told")
                       if name.endswith("not told") else
                       ("template_told (rival), told", "template (the mean course) (rival), cross-fitted, told"))
@@ -274,7 +285,7 @@ def cell(runs: list[dict[str, float]], key: str) -> str:
         return "–"
     values = np.array([r[key] for r in runs], float)
     pct = key in ("detected", "normal_flagged", "recognised", "no_object_as_5")
-    fmt = (lambda v: f"{100 * v:.0f} %") if pct else (lambda v: f"{v:.0f}") if key == "delay_ms" else (lambda v: f"{v:.2f}")
+    fmt = (lambda v: f"{100 * v:.0f} %") if pct else (lambda v: f"{v:.0f}") if key == "delay_ms" else (lambda v: f"{v:.3f}")
     if len(values) == 1 or np.ptp(values) == 0:
         return fmt(values.mean())
     return f"{fmt(values.mean())} ({fmt(values.min())}-{fmt(values.max())})"

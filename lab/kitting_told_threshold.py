@@ -31,13 +31,12 @@ RULES = ("a skill's own from 99 peaks", "pooled")
 def told_pool(memory: SkillMemory, sets, folds: OutOfFold, scoring: SkillScoring) -> np.ndarray:
     """The told peaks `SkillMemory.calibrate` pools: the threshold segments' under the memory, and
     each fold's training segments' under the fold memory that did not learn them."""
-    _, told, _ = memory._peaks(memory._spreads(sets.precision.data, sets.precision.skills, scoring),
-                               sets.threshold.data, sets.threshold.skills, sets.threshold.lengths)
-    pool = [told]
+    pool = [memory._episode_energies(memory._spreads(sets.precision.data, sets.precision.skills, scoring),
+                                     sets.threshold.data, sets.threshold.skills, sets.threshold.lengths).told]
     for k, fold_memory in enumerate(folds.memories):
         out = folds.fold == k
         cal = fold_memory._spreads(sets.precision.data, sets.precision.skills, scoring)
-        pool.append(fold_memory._peaks(cal, folds.demonstrations[out], folds.labels[out], folds.lengths[out])[1])
+        pool.append(fold_memory._episode_energies(cal, folds.demonstrations[out], folds.labels[out], folds.lengths[out]).told)
     return np.concatenate(pool)
 
 

@@ -28,8 +28,8 @@ class SkillStep:
     """What a session answers at each step."""
 
     t: int
-    energy: float  # the fault energy: against the told skill, or the surprise under the skills still plausible
-    energies: dict[str, float]  # each scored skill's own energy (the told one's only, when told)
+    energy: float  # the fault energy: against the told skill, or, not told, as the calibration's rule and scales say
+    energies: dict[str, float]  # each scored skill's own energy, unscaled (the told one's only, when told)
     skill: str  # the told skill, or the most probable one after this step
     probability: float  # its posterior probability (1 when told)
     threshold: float
@@ -86,9 +86,11 @@ class SkillSession:
         energies, norm = energies[:, 0], norm[:, 0]  # (R,) each
         if self.told is None:
             seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
+            before = int(self.posterior.log_p[0].argmax())
             energy = float(self.posterior.step(energies[None], norm, cal.rule, t == 0, seen)[0])
             p = self.posterior.probabilities[0]
             best = int(p.argmax())
+            energy = float(cal.in_units(energy, best if t == 0 else before))  # the scored skill's units
             skill, probability = memory.skills[best], float(p[best])
         else:
             energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0

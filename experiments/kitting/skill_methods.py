@@ -21,7 +21,7 @@ from neural_asm.models.skill_context import OutOfFold, SkillMemory, SkillScoring
 
 # The report's likelihood template (docs/kitting.md, "A memory that knows each skill's course").
 TEMPLATE_LIKELIHOOD = SkillScoring(terms=("course",), course="mean", recognised_by=(), forgetting=0.0,
-                                   rule="most_probable", tails=())
+                                   rule="most_probable", tails=(), scaled=False)
 
 
 def fit_skill_memory(train: Segments, config: KittingConfig, seed: int) -> SkillMemory:

@@ -269,11 +269,40 @@ def test_a_fold_without_a_skill_scores_none_of_its_episodes(memory):
 
 def test_not_told_a_step_is_scored_by_the_skill_most_probable_before_it_by_default(memory):
     x, _ = episodes(1, SKILLS, 13)
-    energies, posterior = memory.score(x)
-    each = np.stack([memory.score(x, told=[str(s)] * len(x))[0] for s in SKILLS], axis=1)  # (N, K, T)
-    before = posterior[:, :, :-1].argmax(axis=1)  # the most probable skill after step t - 1
-    expected = np.take_along_axis(each[:, :, 1:], before[:, None], axis=1)[:, 0]
-    np.testing.assert_allclose(energies[:, 1:], expected, rtol=1e-6)
+    calibrating = (*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
+    try:
+        for scoring in (SkillScoring(), SkillScoring(scaled=True)):  # each skill's energy in its own units: an option
+            cal = memory.calibrate(*calibrating, scoring=scoring)
+            energies, posterior = memory.score(x)
+            each = np.stack([memory.score(x, told=[str(s)] * len(x))[0] for s in SKILLS], axis=1)  # (N, K, T)
+            before = posterior[:, :, :-1].argmax(axis=1)  # the most probable skill after step t - 1
+            expected = np.take_along_axis(each[:, :, 1:], before[:, None], axis=1)[:, 0]
+            scales = np.ones(len(SKILLS)) if cal.scales is None else cal.scales
+            assert (cal.scales is None) == (not scoring.scaled)
+            np.testing.assert_allclose(energies[:, 1:], expected / scales[before], rtol=1e-6)
+    finally:
+        memory.calibrate(*calibrating)
+
+
+def test_each_skills_scale_is_the_median_of_its_threshold_episodes_peaks_told_it(memory, tmp_path):
+    from neural_asm.models import checkpoint
+
+    threshold, labels = episodes(5, SKILLS, 2)  # the fixture's threshold episodes
+    told, _ = memory.score(threshold, told=labels)
+    scaled = SkillScoring(scaled=True)
+    one_each = episodes(5, SKILLS, 1) + (threshold[::5][:2], labels[::5][:2])  # skills 3 and 4 one episode each, 5 none
+    try:
+        cal = memory.calibrate(*episodes(5, SKILLS, 1), threshold, labels, scoring=scaled)
+        for skill in SKILLS:
+            peaks = told[labels == str(skill)].max(axis=1)
+            assert cal.scales[memory.index(str(skill))] == pytest.approx(np.median(peaks))
+        _, loaded = checkpoint.load_memory(checkpoint.save(memory, tmp_path / "m.safetensors"))
+        np.testing.assert_array_equal(loaded.calibration.scales, cal.scales)
+        np.testing.assert_array_equal(loaded.score(threshold[:3])[0], memory.score(threshold[:3])[0])
+        few = memory.calibrate(*one_each, scoring=scaled, fprs=(0.5,))
+        assert (few.scales == few.scales[0]).all()  # fewer than 3 episodes: every skill takes the pooled median
+    finally:
+        memory.calibrate(*episodes(5, SKILLS, 1), *episodes(5, SKILLS, 2))
 
 
 def test_correlated_channels_are_weighed_together():

@@ -79,6 +79,8 @@ def reference(memory: SkillMemory, episode: np.ndarray, told: str | None) -> lis
                 weights = before - normalisers / 2
                 weights = weights - logsumexp(weights)
                 energy = -2 * logsumexp(weights - energies / 2)
+            if cal.scales is not None:  # in the units of the skill most probable before the step (at the first, after)
+                energy = energy / cal.scales[np.argmax(log_p if t == 0 else before)]
             k = int(np.argmax(log_p))
             probability, threshold = float(np.exp(log_p[k])), cal.inferred[SCORING.default_fpr]
         errors = x[t] - cal.courses[k, min(t, last)]
@@ -122,8 +124,9 @@ def check_session(memory: SkillMemory, episode: np.ndarray, told: str | None) ->
 
 
 @pytest.mark.parametrize("scoring", [SkillScoring(), SkillScoring(rule="surprise", tails=()),
-                                     SkillScoring(recognised_by=()), SkillScoring(rule="surprise", correlated=("course",))],
-                         ids=["default", "surprise", "both_terms", "correlated"])
+                                     SkillScoring(recognised_by=()), SkillScoring(rule="surprise", correlated=("course",)),
+                                     SkillScoring(scaled=True)],
+                         ids=["default", "surprise", "both_terms", "correlated", "scaled"])
 def test_served_steps_are_the_definitions(memory, scoring):
     normal, labels = episodes(4, 1)
     memory.calibrate(normal[0::2], labels[0::2], normal[1::2], labels[1::2], scoring=scoring)
