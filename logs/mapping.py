@@ -74,7 +74,8 @@ class Episodes(Section):
     label_topic: str | None = Field(None, description="a std_msgs/msg/String topic whose data names the skill; "
                                     "a bag without it is read, its episodes named after the bag (with a warning)")
     label_tolerance_s: float = Field(0.5, ge=0, description="a label published up to this long before an "
-                                     "episode's first sample still names it")
+                                     "episode's first sample still names it; live, the first step waits "
+                                     "this long of the topics' time for a label")
     stamp: Literal["log", "header"] = Field("log", description="log: the bag's receive time; header: "
                                                    "header.stamp (the log time for messages without a header)")
 

@@ -189,7 +189,7 @@ class MonitorNode:
             self._open(t)
             return
         self.recent_label = (t, str(received.message.data))
-        if self.current is not None and self.current.due == 0:
+        if self.current is not None and self.current.monitor is None:
             self.current.label = self.recent_label[1]  # no step judged yet: the monitor will be told it
 
     def _open(self, lo: int) -> _Episode:
@@ -271,6 +271,8 @@ class MonitorNode:
             elif ep is None or ep.ended:
                 self.due.popleft()
             elif ep.monitor is None:
+                if self._awaits_label(ep):
+                    return None
                 try:
                     self._start(ep)
                 except JUDGING as exc:
@@ -278,6 +280,15 @@ class MonitorNode:
             else:
                 return due
         return None
+
+    def _awaits_label(self, ep: _Episode) -> bool:
+        """Whether the episode's first step waits for its skill: the mapping names a label topic,
+        none has named the episode yet, and its topics have not run ``label_tolerance_s`` past its
+        first sample while it is open. DDS delivers each topic on its own, so the label a robot
+        publishes just before it moves may be taken after the first samples."""
+        if self.label is None or ep.label is not None or self.current is not ep:
+            return False
+        return self.seen_ns is None or self.seen_ns < ep.lo + self.split.label_tolerance_s * NS
 
     def deliver(self, due: Due, answer: StepAnswer | Judging) -> None:
         """A step's answer published (and recorded), or what its monitor raised: the episode ended."""

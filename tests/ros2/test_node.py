@@ -323,10 +323,14 @@ def ticks(lo: float, hi: float, make) -> list[tuple[float, object]]:
 
 def fed(memory, batches: dict[str, list]) -> Noted:
     """A node whose readers of /joint_states, /left_pad/wrench and /right_pad/wrench (taken in that
-    order) hand over ``batches``, spun until they are all taken."""
-    node = Noted(Bus(NAMESPACE, env=LOOPBACK), mapping(), LocalJudge(memory, FPR), None)
+    order, after the label's on /skill when ``batches`` has one) hand over ``batches``, spun until
+    they are all taken."""
+    node = Noted(Bus(NAMESPACE, env=LOOPBACK), mapping("skill" if "skill" in batches else None),
+                 LocalJudge(memory, FPR), None)
     fleet = Fleet(node.bus, [node])
     node.readers = [Scripted(r, batches[r.topic.removeprefix(NAMESPACE + "/")]) for r in node.readers]
+    if node.label is not None:
+        node.label = Scripted(node.label, batches["skill"])
     for _ in range(max(len(b) for b in batches.values()) + 1):
         fleet.spin_once(0)
     return node
@@ -349,6 +353,23 @@ def test_a_silence_inside_what_is_taken_at_once_is_a_warn_naming_it(memory):
                         "right_pad/wrench": [ticks(1.0, 1.0, wrench) + ticks(1.5, 2.0, wrench)]})
     assert len(node.warned) == 1
     assert "/right_pad/wrench" in node.warned[0] and "silent for 0.400 s" in node.warned[0]
+
+
+def test_the_first_step_waits_for_a_label_taken_after_it_up_to_the_tolerance(skill_memory):
+    """DDS delivers each topic on its own: a label taken after the episode's first samples (0.2 s
+    of them) is told, one taken after its topics ran past label_tolerance_s (0.5 s) is not."""
+    state = lambda sec, ns: joint_state(STATE, sec, ns)  # noqa: E731
+    skill = skill_memory.skills[1]
+    label = [(1.0, m.STORE.types[m.STRING](data=skill))]
+    for first, told in ((1.2, skill), (1.6, None)):
+        node = fed(skill_memory, {"skill": [[], label],
+                                  **{t: [ticks(1.0, first, make), ticks(first + 0.1, 2.0, make)]
+                                     for t, make in (("joint_states", state), ("left_pad/wrench", wrench),
+                                                     ("right_pad/wrench", wrench))}})
+        assert node.warned == [] and node.current.label == told
+        assert [a.step for _, a in node.answers] == [0, 1]  # at 1.0 and 1.5 s
+        if told:
+            assert all(a.skill == skill and a.skill_probability == 1 for _, a in node.answers)
 
 
 def test_the_command_refuses_a_mapping_of_another_source_in_one_line(tmp_path, small_panda_model):
