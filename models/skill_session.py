@@ -5,8 +5,7 @@ answers is what `SkillMemory.score` gives for the whole episode (tests/models/te
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, NamedTuple, Sequence
 
 import numpy as np
 
@@ -23,9 +22,9 @@ if TYPE_CHECKING:
     from neural_asm.models.skill_context import SkillMemory
 
 
-@dataclass(frozen=True)
-class SkillStep:
-    """What a session answers at each step."""
+class SkillStep(NamedTuple):
+    """What a session answers at each step (a named tuple: built at every served step, it costs a
+    third of a frozen dataclass)."""
 
     t: int
     energy: float  # the fault energy: against the told skill, or, not told, as the calibration's rule and scales say
@@ -57,10 +56,12 @@ class SkillSession:
         self.posterior = SkillPosterior(1, len(self.rows), cal.forgetting)
         self.t = 0
         self.names = tuple(memory.skills[r] for r in self.rows)  # each row's skill
-        # each row's cue as the network reads it (normalised), the same at every step
         normaliser, width = memory.model.normaliser, memory.width
         cues = with_cue(np.zeros((len(self.rows), width)), self.rows, len(memory.skills))[:, width:]
-        self.cues = Normaliser(normaliser.mean[width:], normaliser.std[width:]).normalise(cues)
+        # each row's input to the network (what with_cue gives, normalised, in float32): its cue, the
+        # same at every step, and the step's observation, written in at each step
+        self.cued = np.empty((len(self.rows), width + len(memory.skills)), np.float32)
+        self.cued[:, width:] = Normaliser(normaliser.mean[width:], normaliser.std[width:]).normalise(cues)
         self.expectations = memory.observed.denormalise(cal.courses)  # (K, T, D) each skill's course, raw: what a served step expected
 
     def step(self, observation: Sequence[float] | np.ndarray) -> SkillStep:
@@ -78,19 +79,19 @@ class SkillSession:
         if "course" in cal.spreads:
             residuals["course"] = (x - cal.courses[self.picked, min(t, cal.courses.shape[1] - 1)])[:, None]
         if self.recaller is not None:
-            cued = np.empty((len(self.rows), memory.width + len(memory.skills)), np.float32)  # what with_cue gives, normalised
-            cued[:, : memory.width], cued[:, memory.width:] = x, self.cues  # x as the network reads it, in float32
-            expected = self.recaller.step(cued)
+            self.cued[:, : memory.width] = x
+            expected = self.recaller.step(self.cued)  # (it keeps no reference to its input)
             residuals["dynamics"] = (x - expected[:, : memory.width])[:, None]
         energies, norm, evidence = cal.scored(residuals, t, self.picked)
         energies, norm = energies[:, 0], norm[:, 0]  # (R,) each
         if self.told is None:
             seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
-            before = int(self.posterior.log_p[0].argmax())
+            before = None if cal.scales is None else int(self.posterior.log_p[0].argmax())
             energy = float(self.posterior.step(energies[None], norm, cal.rule, t == 0, seen)[0])
             p = self.posterior.probabilities[0]
             best = int(p.argmax())
-            energy = float(cal.in_units(energy, best if t == 0 else before))  # the scored skill's units
+            if before is not None:  # in the units of the skill it is the energy of
+                energy = float(cal.in_units(energy, best if t == 0 else before))
             skill, probability = memory.skills[best], float(p[best])
         else:
             energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0
