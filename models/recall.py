@@ -109,6 +109,15 @@ class Recaller:
         may differ from the transposed view's in the last float32 bits."""
         self.hidden_t = self.net.W_H.T.contiguous().numpy()  # torch's transposing copy: ~35 us against numpy's ~60
 
+    def state(self) -> tuple:
+        """What a step changes, to `restore` it: references, since stepping replaces these arrays
+        rather than writing into them."""
+        return self.t, self.zhat, self.drive, self.past, self.next_prior, self.next_expected
+
+    def restore(self, state: tuple) -> None:
+        """Back to a `state`: the steps since undone."""
+        self.t, self.zhat, self.drive, self.past, self.next_prior, self.next_expected = state
+
     @property
     def infers_now(self) -> bool:
         return self.t < self.cue_steps or self.mode == "online"

@@ -73,8 +73,12 @@ class SkillSession:
         return self._advance(memory.normalise(raw))
 
     def _advance(self, x: np.ndarray) -> SkillStep:
-        """`step` of an observation (D,) already checked and normalised (`served_step` uses it too)."""
+        """`step` of an observation (D,) already checked and normalised (`served_step` uses it too).
+        A step whose energy or posterior is not finite (a finite observation whose squared residuals
+        overflow) is answered, for its caller to refuse, and undone: the session goes on as if it had
+        not come, as a model's stream does."""
         memory, cal, t = self.memory, self.calibration, self.t
+        saved = self.posterior.log_p, None if self.recaller is None else self.recaller.state()
         residuals = {}
         if "course" in cal.spreads:
             residuals["course"] = (x - cal.courses[self.picked, min(t, cal.courses.shape[1] - 1)])[:, None]
@@ -95,7 +99,12 @@ class SkillSession:
             skill, probability = memory.skills[best], float(p[best])
         else:
             energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0
-        self.t += 1
+        if math.isfinite(energy) and math.isfinite(probability):
+            self.t += 1
+        else:
+            self.posterior.log_p = saved[0]
+            if self.recaller is not None:
+                self.recaller.restore(saved[1])
         return SkillStep(t, energy, dict(zip(self.names, energies.tolist())), skill, probability, self.threshold,
                          energy > self.threshold)
 
@@ -126,8 +135,8 @@ def step_sessions(streams: Sequence[SkillStream | SkillSession], observations: n
     """One step of sessions sharing a batch key, each on its row of checked raw ``observations``,
     and each answered skill's probability (None but for a skill memory's session): a skill
     memory's session steps alone (its skills are the rows of its own batch), a model's streams in
-    one relaxation (`step_streams`). None where the outputs are not finite (a model's stream keeps
-    its state; a skill memory's session has taken the step). The service's runner and
+    one relaxation (`step_streams`). None where the outputs are not finite (the stream or session
+    keeps its state). The service's runner and
     `neural_asm.memory.step_monitors` both step this way."""
     first = streams[0]
     if isinstance(first, SkillSession):
