@@ -124,6 +124,7 @@ class MonitorNode:
         self.before: list[int | None] = [None] * len(self.groups)  # ``seen_ns`` before each reader's last take
         self.due: deque[Due] = deque()  # what the judge has to do, in order
         self.answers: deque[tuple[int, StepAnswer]] = deque(maxlen=ANSWERS_KEPT)
+        self.lost_said: dict[str, int] = {}  # each topic's messages lost on their way, as last said
 
     @property
     def all_readers(self) -> list[Reader]:
@@ -159,6 +160,7 @@ class MonitorNode:
             waiting += taken
         for t, g, received in sorted(waiting, key=lambda w: w[0]):  # in time order across topics
             self._sample(g, t, received)
+        self._say_lost()
         ep, gap = self.current, self.split.gap_s
         if ep is not None:
             try:
@@ -168,6 +170,17 @@ class MonitorNode:
         ep = self.current
         if ep is not None and self.split.split == "gap" and gap and time.monotonic() - ep.last_rx > gap:
             self.close(None)  # every topic silent for gap_s: the episode is over
+
+    def _say_lost(self) -> None:
+        """A WARN naming each topic DDS has lost messages of since it was last said (best effort
+        drops them when the receiving socket overflows): the steps around them are interpolated,
+        or, past ``max_gap_s``, the episode ends on the silence."""
+        for reader in self.all_readers:
+            lost, said = reader.lost(), self.lost_said.get(reader.topic, 0)
+            if lost > said:
+                self.lost_said[reader.topic] = lost
+                self._warn(f"{reader.topic}: {lost - said} message(s) lost on their way ({lost} since the node "
+                           f"started): the steps around them are interpolated", self.current)
 
     def _check_type(self, topic: str, typename: str) -> None:
         """A publisher of a mapped topic with another type (DDS never matches it: its messages

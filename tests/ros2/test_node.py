@@ -295,13 +295,17 @@ def test_a_topic_silent_longer_than_max_gap_s_inside_an_episode_is_a_warn_naming
 
 class Scripted:
     """A reader whose takes hand over the given batches of (stamp s, message), one a take, as DDS
-    would have received them by then."""
+    would have received them by then; ``lost``: the messages DDS had lost by each take."""
 
-    def __init__(self, reader, batches: list[list[tuple[float, object]]]) -> None:
-        self.topic, self.msgtype, self.batches = reader.topic, reader.msgtype, batches
+    def __init__(self, reader, batches: list[list[tuple[float, object]]], lost: list[int] | None = None) -> None:
+        self.topic, self.msgtype, self.batches, self.losses, self.taken = reader.topic, reader.msgtype, batches, lost, 0
 
     def take(self) -> list[Received]:
+        self.taken += 1
         return [Received(message, round(t * 1e9)) for t, message in (self.batches.pop(0) if self.batches else [])]
+
+    def lost(self) -> int:
+        return 0 if not self.losses else self.losses[min(self.taken, len(self.losses)) - 1]
 
 
 class Noted(MonitorNode):
@@ -321,14 +325,15 @@ def ticks(lo: float, hi: float, make) -> list[tuple[float, object]]:
     return [(t / 10, make(int(t // 10), (t % 10) * 100_000_000)) for t in range(round(lo * 10), round(hi * 10) + 1)]
 
 
-def fed(memory, batches: dict[str, list]) -> Noted:
+def fed(memory, batches: dict[str, list], lost: dict[str, list[int]] | None = None) -> Noted:
     """A node whose readers of /joint_states, /left_pad/wrench and /right_pad/wrench (taken in that
     order, after the label's on /skill when ``batches`` has one) hand over ``batches``, spun until
-    they are all taken."""
+    they are all taken; ``lost``: a topic's messages DDS had lost by each take."""
     node = Noted(Bus(NAMESPACE, env=LOOPBACK), mapping("skill" if "skill" in batches else None),
                  LocalJudge(memory, FPR), None)
     fleet = Fleet(node.bus, [node])
-    node.readers = [Scripted(r, batches[r.topic.removeprefix(NAMESPACE + "/")]) for r in node.readers]
+    name = lambda r: r.topic.removeprefix(NAMESPACE + "/")  # noqa: E731
+    node.readers = [Scripted(r, batches[name(r)], (lost or {}).get(name(r))) for r in node.readers]
     if node.label is not None:
         node.label = Scripted(node.label, batches["skill"])
     for _ in range(max(len(b) for b in batches.values()) + 1):
@@ -345,6 +350,17 @@ def test_a_backlog_is_not_silence(memory):
                         "right_pad/wrench": [ticks(1.0, 2.0, wrench), ticks(2.1, 2.1, wrench)]})
     assert node.warned == [] and node.current is not None and node.number == 1  # episode 0 goes on
     assert [(e, a.step) for e, a in node.answers] == [(0, 0), (0, 1)]  # steps at 1.0 and 1.5 s
+
+
+def test_messages_dds_lost_are_a_warn_naming_their_topic_and_the_episode_goes_on(memory):
+    state = lambda sec, ns: joint_state(STATE, sec, ns)  # noqa: E731
+    node = fed(memory, {"joint_states": [ticks(1.0, 1.5, state), ticks(1.6, 2.1, state)],
+                        "left_pad/wrench": [ticks(1.0, 1.5, wrench), ticks(1.6, 2.1, wrench)],
+                        "right_pad/wrench": [ticks(1.0, 1.5, wrench), ticks(1.6, 2.1, wrench)]},
+               lost={"left_pad/wrench": [0, 2, 2]})
+    assert node.warned == [f"{NAMESPACE}/left_pad/wrench: 2 message(s) lost on their way (2 since the node started): "
+                           "the steps around them are interpolated"]
+    assert node.current is not None and [a.step for _, a in node.answers] == [0, 1, 2]
 
 
 def test_a_silence_inside_what_is_taken_at_once_is_a_warn_naming_it(memory):
