@@ -171,6 +171,7 @@ class SkillPosterior:
             raise ValueError(f"forgetting must be in [0, 1), got {forgetting}")
         self.forgetting = forgetting
         self.log_p = np.full((batch, skills), -np.log(skills))
+        self.rows = np.arange(batch)  # for picking each row's skill
 
     def carried(self) -> np.ndarray:
         """(B, K) log posterior carried to the next step: the forgetting applied."""
@@ -184,7 +185,7 @@ class SkillPosterior:
         (K,) or (B, K), before the step updates the posterior (the module's docstring)."""
         prior = self.carried()
         if rule == "most_probable":
-            return energies[np.arange(len(energies)), prior.argmax(axis=1)]
+            return energies[self.rows, prior.argmax(axis=1)]
         weights = prior - log_normaliser / 2
         weights = weights - _logsumexp(weights, keepdims=True)
         return -2 * _logsumexp(weights - energies / 2)
@@ -198,7 +199,7 @@ class SkillPosterior:
         evidence = (energies, log_normaliser) if evidence is None else evidence
         if first and rule == "most_probable":
             self.update(*evidence)
-            return energies[np.arange(len(energies)), self.log_p.argmax(axis=1)]
+            return energies[self.rows, self.log_p.argmax(axis=1)]
         energy = self.energy(energies, log_normaliser, rule)
         self.update(*evidence)
         return energy

@@ -92,11 +92,11 @@ class SkillSession:
             seen = None if evidence is None else (evidence[0][None, :, 0], evidence[1][:, 0])
             before = None if cal.scales is None else int(self.posterior.log_p[0].argmax())
             energy = float(self.posterior.step(energies[None], norm, cal.rule, t == 0, seen)[0])
-            p = self.posterior.probabilities[0]
-            best = int(p.argmax())
+            log_p = self.posterior.log_p[0]
+            best = int(log_p.argmax())
             if before is not None:  # in the units of the skill it is the energy of
                 energy = float(cal.in_units(energy, best if t == 0 else before))
-            skill, probability = memory.skills[best], float(p[best])
+            skill, probability = memory.skills[best], math.exp(log_p[best])
         else:
             energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0
         if math.isfinite(energy) and math.isfinite(probability):
