@@ -50,9 +50,11 @@ from neural_asm.runtime.version import __version__
 # optional W_D (direct pathways); 7: optional mean errors per skill and step in calibrations (a reader
 # that ignored them would weigh a 40 Hz model's errors uncentred against centred thresholds); 8: an
 # optional plan memory (a reader that ignored it would refuse its "plan" calibration's sessions); 9: an
-# optional skill memory (a reader that ignored it would serve its cue channels as observations).
-FORMAT_VERSION = 9
-READABLE_VERSIONS = (2, 3, 4, 5, 6, 7, 8, 9)  # older files simply have no precision matrices, context input, digest, rate,
+# optional skill memory (a reader that ignored it would serve its cue channels as observations); 10: a
+# skill calibration's optional precision matrices and energy scales (a reader that ignored them would
+# hold energies weighed otherwise to thresholds calibrated with them).
+FORMAT_VERSION = 10
+READABLE_VERSIONS = (2, 3, 4, 5, 6, 7, 8, 9, 10)  # older files simply have no precision matrices, context input, digest, rate,
 # W_D or mean errors
 HEADER_KEY = "neural_asm"
 # No trained weight comes near this; a corrupted exponent byte does (values of 1e28 were seen).
@@ -261,7 +263,8 @@ def _skill_memory(model: NeuralASM, meta: dict[str, Any], tensors: dict[str, tor
         precisions = [s.precision.shape for s in cal.spreads.values() if s.precision is not None]
         if any(len(shape) != 3 or shape[::2] != (k, width) for shape in shapes) or \
                 any(len(shape) != 3 or shape[1:] != (width, width) for shape in precisions) or \
-                any(t.shape != (k,) for t in cal.told.values()):
+                any(t.shape != (k,) for t in cal.told.values()) or \
+                (cal.scales is not None and cal.scales.shape != (k,)):
             raise ValueError(f"its skill calibration does not fit {k} skills of {width} channels")
         memory.calibration = cal
     return memory

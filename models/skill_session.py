@@ -75,8 +75,9 @@ class SkillSession:
     def _advance(self, x: np.ndarray) -> SkillStep:
         """`step` of an observation (D,) already checked and normalised (`served_step` uses it too).
         A step whose energy or posterior is not finite (a finite observation whose squared residuals
-        overflow) is answered, for its caller to refuse, and undone: the session goes on as if it had
-        not come, as a model's stream does."""
+        overflow, or beyond what the network reads in float32) is undone and answered with a NaN
+        energy, for its caller to refuse: the session goes on as if it had not come, as a model's
+        stream does."""
         memory, cal, t = self.memory, self.calibration, self.t
         saved = self.posterior.log_p, None if self.recaller is None else self.recaller.state()
         residuals = {}
@@ -99,12 +100,15 @@ class SkillSession:
             skill, probability = memory.skills[best], math.exp(log_p[best])
         else:
             energy, skill, probability = float(energies[0]), memory.skills[self.told], 1.0
-        if math.isfinite(energy) and math.isfinite(probability):
+        # an observation beyond float32's range reaches the network as inf: its state would not be finite
+        read = self.recaller is None or math.isfinite(float(np.add.reduce(self.cued[0])))
+        if math.isfinite(energy) and math.isfinite(probability) and read:
             self.t += 1
-        else:
+        else:  # undone, and answered as not finite: its callers refuse it
             self.posterior.log_p = saved[0]
             if self.recaller is not None:
                 self.recaller.restore(saved[1])
+            energy = math.nan
         return SkillStep(t, energy, dict(zip(self.names, energies.tolist())), skill, probability, self.threshold,
                          energy > self.threshold)
 

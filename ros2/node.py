@@ -124,7 +124,7 @@ class MonitorNode:
         self.before: list[int | None] = [None] * len(self.groups)  # ``seen_ns`` before each reader's last take
         self.due: deque[Due] = deque()  # what the judge has to do, in order
         self.answers: deque[tuple[int, StepAnswer]] = deque(maxlen=ANSWERS_KEPT)
-        self.lost_said: dict[str, int] = {}  # each topic's messages lost on their way, as last said
+        self.lost_said: dict[int, int] = {}  # each reader's messages lost on their way, as last said
 
     @property
     def all_readers(self) -> list[Reader]:
@@ -176,11 +176,13 @@ class MonitorNode:
         drops them when the receiving socket overflows): the steps around them are interpolated,
         or, past ``max_gap_s``, the episode ends on the silence."""
         for reader in self.all_readers:
-            lost, said = reader.lost(), self.lost_said.get(reader.topic, 0)
+            lost, said = reader.lost(), self.lost_said.get(id(reader), 0)
             if lost > said:
-                self.lost_said[reader.topic] = lost
+                self.lost_said[id(reader)] = lost
+                what = ("the steps around them are interpolated" if reader in self.readers
+                        else "an episode's skill or start may have gone with them")
                 self._warn(f"{reader.topic}: {lost - said} message(s) lost on their way ({lost} since the node "
-                           f"started): the steps around them are interpolated", self.current)
+                           f"started): {what}", self.current)
 
     def _check_type(self, topic: str, typename: str) -> None:
         """A publisher of a mapped topic with another type (DDS never matches it: its messages
@@ -202,8 +204,9 @@ class MonitorNode:
             self._open(t)
             return
         self.recent_label = (t, str(received.message.data))
-        if self.current is not None and self.current.monitor is None:
-            self.current.label = self.recent_label[1]  # no step judged yet: the monitor will be told it
+        ep, tolerance = self.current, self.split.label_tolerance_s * NS
+        if ep is not None and ep.monitor is None and ep.lo - tolerance <= t <= ep.lo + tolerance:
+            ep.label = self.recent_label[1]  # no step judged yet: the monitor will be told it
 
     def _open(self, lo: int) -> _Episode:
         label = None
@@ -296,12 +299,15 @@ class MonitorNode:
 
     def _awaits_label(self, ep: _Episode) -> bool:
         """Whether the episode's first step waits for its skill: the mapping names a label topic,
-        none has named the episode yet, and its topics have not run ``label_tolerance_s`` past its
-        first sample while it is open. DDS delivers each topic on its own, so the label a robot
-        publishes just before it moves may be taken after the first samples."""
+        none has named the episode yet, and, while it is open, neither have its topics run
+        ``label_tolerance_s`` past its first sample nor been silent that long. DDS delivers each
+        topic on its own, so the label a robot publishes just before it moves may be taken after
+        the first samples."""
         if self.label is None or ep.label is not None or self.current is not ep:
             return False
-        return self.seen_ns is None or self.seen_ns < ep.lo + self.split.label_tolerance_s * NS
+        tolerance = self.split.label_tolerance_s
+        return (self.seen_ns is None or self.seen_ns < ep.lo + tolerance * NS) and \
+            time.monotonic() - ep.last_rx <= tolerance
 
     def deliver(self, due: Due, answer: StepAnswer | Judging) -> None:
         """A step's answer published (and recorded), or what its monitor raised: the episode ended."""

@@ -88,13 +88,14 @@ def test_an_uncalibrated_skill_memory_round_trips_and_an_ordinary_network_has_no
 
 
 @pytest.mark.parametrize("skill", [None, "4"])
-def test_a_step_whose_energy_is_not_finite_is_refused_and_the_monitor_goes_on_without_it(memory, skill):
+@pytest.mark.parametrize("size", [1e300, 1e45])  # finite, but its squared residuals overflow; beyond float32's range
+def test_a_step_whose_energy_is_not_finite_is_refused_and_the_monitor_goes_on_without_it(memory, skill, size):
     run, _ = episodes(1, ("4",), 8)
     monitor = memory.monitor(skill=skill)
     first = monitor.step(run[0][0])
     for _ in range(2):
         with pytest.warns(RuntimeWarning), pytest.raises(FloatingPointError, match="step 1: .* not finite"):
-            monitor.step(np.full(len(NAMES), 1e300))  # finite, but its squared residuals overflow
+            monitor.step(np.full(len(NAMES), size))
     rest = [monitor.step(v) for v in run[0][1:]]
     _, _, unbroken = peaks(memory, run[0], skill)  # the same run, the refused steps never sent
     assert [a.step for a in rest] == list(range(1, STEPS))

@@ -128,8 +128,9 @@ def check_session(memory: SkillMemory, episode: np.ndarray, told: str | None) ->
                                      SkillScoring(scaled=True)],
                          ids=["default", "surprise", "both_terms", "correlated", "scaled"])
 def test_served_steps_are_the_definitions(memory, scoring):
-    normal, labels = episodes(4, 1)
-    memory.calibrate(normal[0::2], labels[0::2], normal[1::2], labels[1::2], scoring=scoring)
+    normal, labels = episodes(6, 1)  # 3 threshold episodes a skill: a skill's own energy scale (scaled)
+    cal = memory.calibrate(normal[0::2], labels[0::2], normal[1::2], labels[1::2], scoring=scoring)
+    assert cal.scales is None or len(set(cal.scales.tolist())) == len(cal.scales)
     held, _ = episodes(1, 2)
     off = held[1] + np.where(np.arange(STEPS)[:, None] >= 12, [0, 0, 0.6, 0, 0, 0], 0)  # joint2 off its course
     faults = [check_session(memory, episode, told) for told in (None, "4")

@@ -74,11 +74,16 @@ class Scripted:
 
 
 class Noted(MonitorNode):
-    """A node that keeps what it warned of."""
+    """A node that keeps what it warned of, and the skill each episode's monitor was told."""
 
     def __init__(self, *args) -> None:
         super().__init__(*args)
         self.warned: list[str] = []
+        self.told: list[str | None] = []
+
+    def _start(self, ep) -> None:
+        self.told.append(ep.label)
+        super()._start(ep)
 
     def _warn(self, why, ep) -> None:
         self.warned.append(why)
@@ -96,7 +101,7 @@ def fed(memory, batches: dict[str, list], lost: dict[str, list[int]] | None = No
     they are all taken; ``lost``: a topic's messages DDS had lost by each take."""
     node = Noted(Bus(NAMESPACE, env=LOOPBACK), mapping("skill" if "skill" in batches else None),
                  LocalJudge(memory, FPR), None)
-    fleet = Fleet(node.bus, [node])
+    node.fleet = fleet = Fleet(node.bus, [node])  # to spin it again
     name = lambda r: r.topic.removeprefix(NAMESPACE + "/")  # noqa: E731
     node.readers = [Scripted(r, batches[name(r)], (lost or {}).get(name(r))) for r in node.readers]
     if node.label is not None:
@@ -147,10 +152,33 @@ def test_the_first_step_waits_for_a_label_taken_after_it_up_to_the_tolerance(ski
                                   **{t: [ticks(1.0, first, make), ticks(first + 0.1, 2.0, make)]
                                      for t, make in (("joint_states", state), ("left_pad/wrench", wrench),
                                                      ("right_pad/wrench", wrench))}})
-        assert node.warned == [] and node.current.label == told
+        assert node.warned == [] and node.told == [told]
         assert [a.step for _, a in node.answers] == [0, 1]  # at 1.0 and 1.5 s
         if told:
             assert all(a.skill == skill and a.skill_probability == 1 for _, a in node.answers)
+
+
+def test_an_episode_whose_topics_fall_silent_waits_no_longer_for_its_label(skill_memory):
+    state = lambda sec, ns: joint_state(STATE, sec, ns)  # noqa: E731
+    node = fed(skill_memory, {"skill": [[]], **{t: [ticks(1.0, 1.2, make)] for t, make in (
+        ("joint_states", state), ("left_pad/wrench", wrench), ("right_pad/wrench", wrench))}})
+    assert node.told == [] and node.current is not None  # step 0 complete, waiting
+    node.current.last_rx -= 0.6  # its topics silent for longer than label_tolerance_s (0.5 s) since
+    node.fleet.spin_once(0)
+    assert node.told == [None] and [a.step for _, a in node.answers] == [0]
+
+
+def test_a_label_for_the_next_episode_is_not_told_to_the_one_before(skill_memory):
+    """An unlabelled episode (1.0-1.2 s) still waiting for its label is not told the next one's,
+    stamped at 5.0 s and taken before the sample that ends it on the gap (gap_s 2 s)."""
+    state = lambda sec, ns: joint_state(STATE, sec, ns)  # noqa: E731
+    skill = skill_memory.skills[1]
+    node = fed(skill_memory, {"skill": [[], [(5.0, m.STORE.types[m.STRING](data=skill))]],
+                              **{t: [ticks(1.0, 1.2, make), ticks(5.0, 6.0, make)]
+                                 for t, make in (("joint_states", state), ("left_pad/wrench", wrench),
+                                                 ("right_pad/wrench", wrench))}})
+    assert node.warned == [] and node.told == [None, skill]
+    assert [(e, a.step) for e, a in node.answers] == [(0, 0), (1, 0), (1, 1)]
 
 
 def test_the_command_refuses_a_mapping_of_another_source_in_one_line(tmp_path, small_panda_model):
