@@ -21,7 +21,7 @@ from lab.kitting_probe import setup
 from lab.kitting_skills import out_of_fold, skill_memory, template_told
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.methods import Scored
-from neural_asm.models.skill_context import SkillScoring
+from neural_asm.models.skill_calibration import SkillScoring
 
 SHARES = (0.01, 0.02)
 

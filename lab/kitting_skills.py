@@ -61,7 +61,8 @@ from neural_asm.models import checkpoint
 from neural_asm.models.asm import NeuralASM
 from neural_asm.models.conformal import mcnemar_exact
 from neural_asm.models.normaliser import Normaliser
-from neural_asm.models.skill_context import OutOfFold, SkillMemory, SkillScoring, mean_courses
+from neural_asm.models.skill_calibration import SkillScoring
+from neural_asm.models.skill_context import OutOfFold, SkillMemory, mean_courses
 from neural_asm.rivals.templates import PerSkillZScore
 
 

@@ -23,7 +23,8 @@ from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.methods import Scored, score_template_told_cross_fitted
 from neural_asm.models.calibration import conformal_episode_threshold
 from neural_asm.models.conformal import mcnemar_exact
-from neural_asm.models.skill_context import OutOfFold, SkillMemory, SkillScoring
+from neural_asm.models.skill_calibration import SkillScoring
+from neural_asm.models.skill_context import OutOfFold, SkillMemory
 
 RULES = ("a skill's own from 99 peaks", "pooled")
 

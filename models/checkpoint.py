@@ -41,7 +41,8 @@ from neural_asm.models.calibration import Calibration
 from neural_asm.models.config import DEFAULT_RATE_HZ, TPCConfig
 from neural_asm.models.normaliser import Normaliser
 from neural_asm.models.plan import PlanMemory
-from neural_asm.models.skill_context import SkillCalibration, SkillMemory
+from neural_asm.models.skill_calibration import SkillCalibration
+from neural_asm.models.skill_context import SkillMemory
 from neural_asm.models.tpc import TemporalPC
 from neural_asm.runtime.version import __version__
 

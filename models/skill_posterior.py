@@ -48,9 +48,6 @@ FORGETTING = 0.0
 # The weight, counted in episodes, of the pooled spread in each skill's spread: a skill with
 # one or two calibration episodes borrows most of its spread from every skill's.
 PRIOR_EPISODES = 2.0
-# The normal episodes a skill needs for its own energy scale (`skill_scales`); with fewer it takes
-# every skill's.
-MIN_SCALE_EPISODES = 3
 Rule = Literal["surprise", "most_probable"]
 
 
@@ -219,15 +216,6 @@ def most_probable_before(after: np.ndarray) -> np.ndarray:
     (N, K, T); at the first step, which nothing came before, after it: the skill whose energy
     ``rule="most_probable"`` scores (forgetting keeps the order of the skills)."""
     return np.concatenate([after[:, :, :1], after[:, :, :-1]], axis=2).argmax(axis=1)
-
-
-def skill_scales(peaks: np.ndarray, skills: np.ndarray, n_skills: int, minimum: int = MIN_SCALE_EPISODES) -> np.ndarray:
-    """(K,) each skill's normal energy scale: the median of its normal episodes' peaks told their
-    skill (``peaks``, ``skills`` their rows), or of every episode's for a skill with fewer than
-    ``minimum``."""
-    pooled = float(np.median(peaks))
-    return np.array([float(np.median(peaks[skills == k])) if (skills == k).sum() >= minimum else pooled
-                     for k in range(n_skills)])
 
 
 def infer(energies: np.ndarray, log_normaliser: np.ndarray, forgetting: float = FORGETTING,

@@ -17,7 +17,8 @@ import numpy as np
 from neural_asm.experiments.kitting.config import KittingConfig
 from neural_asm.experiments.kitting.data import COLUMNS, Segments, kitting_mapping
 from neural_asm.experiments.kitting.methods import RATE_HZ, Scored, Sets
-from neural_asm.models.skill_context import OutOfFold, SkillMemory, SkillScoring
+from neural_asm.models.skill_calibration import SkillScoring
+from neural_asm.models.skill_context import OutOfFold, SkillMemory
 
 # The report's likelihood template (docs/kitting.md, "A memory that knows each skill's course").
 TEMPLATE_LIKELIHOOD = SkillScoring(terms=("course",), course="mean", recognised_by=(), forgetting=0.0,

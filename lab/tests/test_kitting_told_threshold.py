@@ -8,7 +8,8 @@ import pytest
 from lab.kitting_told_threshold import told_pool
 from neural_asm.models.calibration import conformal_episode_threshold
 from neural_asm.models.config import FAST
-from neural_asm.models.skill_context import OutOfFold, SkillMemory, SkillScoring
+from neural_asm.models.skill_calibration import SkillScoring
+from neural_asm.models.skill_context import OutOfFold, SkillMemory
 
 
 def segments(n: int, rng: np.random.Generator) -> SimpleNamespace:

@@ -6,7 +6,8 @@ import pytest
 
 from kitting_fixtures import skill_curve
 from neural_asm.models.config import FAST
-from neural_asm.models.skill_context import SkillMemory, SkillScoring, skills_of
+from neural_asm.models.skill_calibration import SkillScoring
+from neural_asm.models.skill_context import SkillMemory, skills_of
 from neural_asm.models.skill_posterior import SkillPosterior, SkillSpreads, infer
 
 SKILLS = (3, 4, 5)

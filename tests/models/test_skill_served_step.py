@@ -12,7 +12,8 @@ import pytest
 
 from kitting_fixtures import skill_curve
 from neural_asm.models.config import FAST, SCORING
-from neural_asm.models.skill_context import SkillMemory, SkillScoring
+from neural_asm.models.skill_calibration import SkillScoring
+from neural_asm.models.skill_context import SkillMemory
 from neural_asm.models.skill_session import served_step
 
 SKILLS = (3, 4, 5)
